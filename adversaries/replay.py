@@ -1,0 +1,20 @@
+"""``replay``: the logged adversary, unperturbed (the reference every other generator is compared with)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from envs.behaviors import ReplayBehavior
+from envs.rollout import Rollout
+
+from adversaries.base import AdversaryGenerator, Generation, register
+from seal.scenario import Scenario
+
+
+@register("replay")
+class ReplayGenerator(AdversaryGenerator):
+    """Returns the adversary's logged track; ignores the roll-out history."""
+
+    def _generate(self, scenario: Scenario, history: Sequence[Rollout], rng: np.random.Generator) -> Generation:
+        return Generation(behavior=ReplayBehavior(scenario.track(scenario.adv_id)))

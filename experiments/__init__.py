@@ -1,0 +1,1 @@
+"""Experiments: ego training, evaluation protocol, reports, benchmarks, YAML presets, the demo."""

@@ -1,0 +1,247 @@
+"""The ``seal`` command line.
+
+Each subcommand imports its implementation lazily, so ``seal --help`` is instant and the core package does not
+import the simulator, the adversaries or the experiments at module load.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+LAYOUTS = ("highway", "merge", "intersection", "roundabout")
+
+
+class CliError(Exception):
+    """A user error: printed without a traceback, exit status 2."""
+
+
+def _positive_int(name: str) -> Callable[[str], int]:
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be an integer, got {text!r}") from None
+        if value <= 0:
+            raise argparse.ArgumentTypeError(f"{name} must be positive, got {value}")
+        return value
+
+    return parse
+
+
+def _share(name: str) -> Callable[[str], float]:
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
+        if not 0.0 <= value <= 1.0:
+            raise argparse.ArgumentTypeError(f"{name} must be in [0, 1], got {value}")
+        return value
+
+    return parse
+
+
+def _layouts(text: str) -> list[str]:
+    names = [t.strip() for t in text.replace(",", " ").split() if t.strip()]
+    unknown = [n for n in names if n not in LAYOUTS]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"unknown layout(s) {unknown}; choose from {', '.join(LAYOUTS)}")
+    return names
+
+
+# ------------------------------------------------------------------------------------------- handlers
+def cmd_data_generate(args: argparse.Namespace) -> int:
+    from envs.generate import generate_dataset
+
+    layouts = [name for group in args.layouts for name in group]
+    ds = generate_dataset(
+        args.out, n=args.n, seed=args.seed, layouts=layouts, workers=args.workers,
+        inattentive_share=args.inattentive_share, aggressive_share=args.aggressive_share,
+        overwrite=args.overwrite, progress=not args.no_progress,
+    )
+    print(f"wrote {len(ds)} scenarios to {ds.root}")
+    _print_info(ds.root, as_json=False)
+    return 0
+
+
+def _print_info(root: Path, as_json: bool) -> None:
+    from scoring.proximity import pool_proximity
+    from seal.dataset import Dataset, summarize
+
+    ds = Dataset.open(root)
+    scenarios = ds.load()
+    info = summarize(scenarios)
+    split_of = {sid: name for name, ids in ds.splits.items() for sid in ids}
+    per_split: dict[str, dict[str, int]] = {}
+    for s in scenarios:
+        row = per_split.setdefault(split_of.get(s.scenario_id, "unsplit"), {})
+        row[s.layout] = row.get(s.layout, 0) + 1
+    info["per_split_layout"] = per_split
+    info["proximity"] = pool_proximity(scenarios)
+    info["provenance"] = ds.manifest["provenance"]
+    if as_json:
+        print(json.dumps(info, indent=2, sort_keys=True))
+        return
+    print(f"dataset {root}: {info['scenarios']} scenarios")
+    layouts = sorted(info["per_layout"])
+    print(f"  {'split':<10}" + "".join(f"{name:>14}" for name in layouts) + f"{'total':>10}")
+    for split, row in sorted(per_split.items()):
+        cells = "".join(f"{row.get(name, 0):>14}" for name in layouts)
+        print(f"  {split:<10}{cells}{sum(row.values()):>10}")
+    for key, label in (("agents_per_scenario", "agents per scenario"), ("track_length_steps", "valid steps/track")):
+        st = info[key]
+        print(f"  {label:<22} mean {st['mean']:.1f}  min {st['min']:.0f}  median {st['p50']:.0f}  max {st['max']:.0f}")
+    p = info["proximity"]
+    print(
+        f"  (ego, adv) pair: within 2 m {p['pair_within_2m']:.1%}, within 5 m {p['pair_within_5m']:.1%}, "
+        f"collision {p['pair_collision']:.1%}; scenarios with any collision {p['any_collision']:.1%}"
+    )
+
+
+def cmd_data_info(args: argparse.Namespace) -> int:
+    _print_info(Path(args.dir), as_json=args.json)
+    return 0
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    from envs.render import render_episode
+
+    from seal.dataset import Dataset
+
+    out = Path(args.out)
+    if out.suffix.lower() not in (".mp4", ".gif"):
+        raise CliError(f"--out must end in .mp4 or .gif, got {out.name!r}")
+    scenario = Dataset.open(args.dataset).get(args.scenario)
+    summary = render_episode(scenario, out, fps=args.fps)
+    print(json.dumps({"out": str(out), **summary}, default=str))
+    return 0
+
+
+def cmd_bench_env(args: argparse.Namespace) -> int:
+    from experiments.bench_env import run_env_bench
+
+    result = run_env_bench(args.dataset, n_steps=args.steps, seed=args.seed)
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        for key, value in result.items():
+            print(f"{key:>32}: {value}")
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from experiments.demo import run_demo
+
+    run_demo(Path(args.out), n_scenarios=args.n, n_rollouts=args.rollouts, seed=args.seed, overwrite=args.overwrite)
+    return 0
+
+
+# ------------------------------------------------------------------------------------------- parser
+def build_parser() -> argparse.ArgumentParser:
+    from seal import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="seal",
+        description="Closed-loop adversarial driving scenarios: build/inspect scenario datasets, roll out and "
+        "render scenarios, benchmark the environment.",
+    )
+    parser.add_argument("--version", action="version", version=f"seal {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    demo = sub.add_parser(
+        "demo", help="the main job on the embedded default: build a small dataset, roll out, video, table",
+        description="Build a small base-scenario dataset from highway-env traffic, roll a few scenarios out with "
+        "the heuristic ego against the replayed adversary, write a video and a summary table into --out.",
+    )
+    demo.add_argument("--out", default="runs/demo", help="output folder (default: runs/demo)")
+    demo.add_argument("--n", type=_positive_int("--n"), default=40, help="scenarios to generate (default 40)")
+    demo.add_argument("--rollouts", type=_positive_int("--rollouts"), default=12, help="scenarios to roll out")
+    demo.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    demo.add_argument("--overwrite", action="store_true", help="replace an existing --out folder")
+    demo.set_defaults(func=cmd_demo)
+
+    data = sub.add_parser("data", help="build and inspect scenario datasets", description="Scenario datasets.")
+    data_sub = data.add_subparsers(dest="data_command", metavar="SUBCOMMAND", required=True)
+
+    gen = data_sub.add_parser(
+        "generate", help="generate base scenarios from highway-env traffic",
+        description="Run highway-env traffic (randomised IDM + MOBIL drivers, a share of inattentive and "
+        "aggressive ones) on several layouts, log every vehicle at 10 Hz and cut 9.1 s scenarios around "
+        "interacting (ego, adversary) pairs. Deterministic for a seed; an interrupted build resumes when the "
+        "same command is run again.",
+    )
+    gen.add_argument("--out", required=True, help="dataset directory to create")
+    gen.add_argument("--n", type=_positive_int("--n"), required=True, help="number of scenarios")
+    gen.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    gen.add_argument(
+        "--layouts", type=_layouts, nargs="+", default=[list(LAYOUTS)],
+        help=f"layouts to use, space or comma separated (default: all of {', '.join(LAYOUTS)})",
+    )
+    gen.add_argument("--workers", type=_positive_int("--workers"), default=None, help="processes (default: all cores)")
+    gen.add_argument("--inattentive-share", type=_share("--inattentive-share"), default=0.15,
+                     help="share of inattentive drivers in [0, 1] (default 0.15)")
+    gen.add_argument("--aggressive-share", type=_share("--aggressive-share"), default=0.15,
+                     help="share of aggressive drivers in [0, 1] (default 0.15)")
+    gen.add_argument("--overwrite", action="store_true", help="replace an existing dataset or unfinished build")
+    gen.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    gen.set_defaults(func=cmd_data_generate)
+
+    info = data_sub.add_parser(
+        "info", help="counts per layout and split, agents per scenario, track lengths",
+        description="Print counts per layout and split, agents per scenario, track length statistics and how "
+        "close the logged (ego, adversary) pairs come.",
+    )
+    info.add_argument("dir", help="dataset directory")
+    info.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    info.set_defaults(func=cmd_data_info)
+
+    render = sub.add_parser(
+        "render", help="top-down video of a scenario roll-out",
+        description="Roll a scenario out (heuristic ego, replayed adversary and traffic) and write a top-down "
+        "video; the ego is green, the adversary red, other traffic blue.",
+    )
+    render.add_argument("--dataset", required=True, help="dataset directory")
+    render.add_argument("--scenario", required=True, help="scenario id (see `seal data info --json` or manifest)")
+    render.add_argument("--out", required=True, help="output file, .mp4 or .gif")
+    render.add_argument("--fps", type=_positive_int("--fps"), default=10, help="frames per second (default 10)")
+    render.set_defaults(func=cmd_render)
+
+    bench = sub.add_parser("bench", help="benchmarks (ratios against a reference measured in the same run)",
+                           description="Benchmarks.")
+    bench_sub = bench.add_subparsers(dest="bench_command", metavar="SUBCOMMAND", required=True)
+    benv = bench_sub.add_parser(
+        "env", help="ScenarioEnv steps/s vs highway-env highway-v0 (10 vehicles, lidar, 10 Hz)",
+        description="Measure ScenarioEnv steps/s (full observation, replayed traffic, one process) and, in the "
+        "same run, highway-env's highway-v0 with 10 vehicles, LidarObservation, 10 Hz; print both and the ratio.",
+    )
+    benv.add_argument("--dataset", default=None, help="dataset directory (default: generate a small one in memory)")
+    benv.add_argument("--steps", type=_positive_int("--steps"), default=3000, help="env steps per measurement")
+    benv.add_argument("--seed", type=int, default=0, help="random seed")
+    benv.add_argument("--json", action="store_true", help="print JSON")
+    benv.set_defaults(func=cmd_bench_env)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    from seal.dataset import DatasetError
+    from seal.road import RoadError
+    from seal.scenario import ScenarioError
+
+    try:
+        return int(args.func(args) or 0)
+    except (CliError, DatasetError, ScenarioError, RoadError, FileNotFoundError, ValueError) as exc:
+        print(f"seal: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("seal: interrupted (an unfinished dataset build resumes when re-run)", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

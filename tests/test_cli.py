@@ -1,0 +1,51 @@
+"""The command line: --help everywhere, clear errors for bad options and bad datasets."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from seal.cli import build_parser, main
+
+COMMANDS = [[], ["demo"], ["data"], ["data", "generate"], ["data", "info"], ["render"], ["bench"], ["bench", "env"]]
+
+
+@pytest.mark.parametrize("words", COMMANDS, ids=lambda w: " ".join(w) or "seal")
+def test_help_on_every_command(words: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main([*words, "--help"])
+    assert exc.value.code == 0
+    assert "usage: seal" in capsys.readouterr().out
+
+
+def test_every_subcommand_is_covered() -> None:
+    parser = build_parser()
+    seen: list[list[str]] = []
+
+    def walk(p, prefix: list[str]) -> None:
+        seen.append(prefix)
+        for action in p._actions:
+            if action.__class__.__name__ == "_SubParsersAction":
+                for name, child in action.choices.items():
+                    walk(child, [*prefix, name])
+
+    walk(parser, [])
+    assert sorted(map(tuple, seen)) == sorted(map(tuple, COMMANDS))
+
+
+def test_bad_options_name_the_option(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["data", "generate", "--out", "x", "--n", "3", "--layouts", "moon"])
+    assert "--layouts" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["data", "generate", "--out", "x", "--n", "-3"])
+    assert "--n must be positive" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["data", "generate", "--out", "x", "--n", "3", "--aggressive-share", "1.5"])
+    assert "--aggressive-share must be in [0, 1]" in capsys.readouterr().err
+
+
+def test_info_on_a_missing_dataset_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["data", "info", str(tmp_path / "nope")]) == 2
+    assert "not a seal dataset" in capsys.readouterr().err
