@@ -1,0 +1,42 @@
+"""Gymnasium environments on highway-env roads: ScenarioEnv, observation, behaviours, heuristic driver,
+rendering and base-scenario generation.
+
+Importing ``envs`` registers ``seal/Scenario-v0`` (entry point ``envs.scenario_env:ScenarioEnv``) with
+Gymnasium; heavy modules load only when used (``envs.ScenarioEnv`` is resolved lazily).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium
+
+ENV_ID = "seal/Scenario-v0"
+
+if ENV_ID not in gymnasium.registry:
+    gymnasium.register(id=ENV_ID, entry_point="envs.scenario_env:ScenarioEnv")
+
+_LAZY = {
+    "ScenarioEnv": "envs.scenario_env",
+    "DEFAULT_CONFIG": "envs.scenario_env",
+    "Rollout": "envs.rollout",
+    "AdversaryBehavior": "envs.behaviors",
+    "BehaviorOutput": "envs.behaviors",
+    "ReplayBehavior": "envs.behaviors",
+    "TrackingBehavior": "envs.behaviors",
+    "PolicyBehavior": "envs.behaviors",
+    "HeuristicDriver": "envs.heuristic",
+    "ObservationBuilder": "envs.observation",
+    "AgentState": "envs.kinematics",
+}
+
+__all__ = ["ENV_ID", *_LAZY]
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'envs' has no attribute {name!r}")
+    import importlib
+
+    return getattr(importlib.import_module(module), name)

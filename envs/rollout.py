@@ -1,0 +1,78 @@
+"""`Rollout`: the executed record of one `ScenarioEnv` episode (what generators keep, K = 5 per scenario)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from seal.scenario import CURRENT_STEP, VALID
+
+
+@dataclass
+class Rollout:
+    """Executed tracks and events of one episode. Plain data: picklable, numpy + builtins only.
+
+    Attributes:
+        scenario_id: the scenario played.
+        tracks: ``[A, T, 8]`` float32 in the scenario track layout, ``T = CURRENT_STEP + 1 + horizon_steps``;
+            column ``t`` is scenario step ``t``: steps ``0..CURRENT_STEP`` are copied from the log, later
+            steps hold the executed states (valid = 0 where an agent was absent or the episode had ended).
+        agent_ids: ``[A]`` int64, same order as the scenario.
+        ego_id, adv_id: the ego and adversary ids.
+        last_step: the last executed scenario step (``CURRENT_STEP + number of env steps``).
+        outcome: ``"success"``, ``"crash"``, ``"out_of_road"`` or ``"timeout"`` (the reason the episode ended;
+            a crash in an episode that continued past it is still in `ego_crashes`).
+        ego_crashes: ``(step, other_agent_id)`` for every step where the ego overlapped another agent.
+        adv_crashes: ``(step, other_agent_id)`` where the adversary overlapped an agent other than the ego.
+        out_of_road_step: step where the ego left the road, else None.
+        success_step: step where the ego arrived, else None.
+        route_completion: ego route completion at the end (share of the logged route, see `ScenarioEnv`).
+        episode_return: sum of rewards.
+        adversary: name of the adversary behaviour class.
+    """
+
+    scenario_id: str
+    tracks: np.ndarray
+    agent_ids: np.ndarray
+    ego_id: int
+    adv_id: int
+    last_step: int = CURRENT_STEP
+    outcome: str = "timeout"
+    ego_crashes: list[tuple[int, int]] = field(default_factory=list)
+    adv_crashes: list[tuple[int, int]] = field(default_factory=list)
+    out_of_road_step: int | None = None
+    success_step: int | None = None
+    route_completion: float = 0.0
+    episode_return: float = 0.0
+    adversary: str = ""
+
+    def index_of(self, agent_id: int) -> int:
+        return int(np.flatnonzero(self.agent_ids == agent_id)[0])
+
+    @property
+    def ego_track(self) -> np.ndarray:
+        """``[T, 8]`` executed ego track."""
+        return self.tracks[self.index_of(self.ego_id)]
+
+    @property
+    def adv_track(self) -> np.ndarray:
+        """``[T, 8]`` executed adversary track."""
+        return self.tracks[self.index_of(self.adv_id)]
+
+    @property
+    def crashed(self) -> bool:
+        return bool(self.ego_crashes)
+
+    @property
+    def first_crash_step(self) -> int | None:
+        return self.ego_crashes[0][0] if self.ego_crashes else None
+
+    @property
+    def n_steps(self) -> int:
+        """Number of executed env steps."""
+        return self.last_step - CURRENT_STEP
+
+    def valid(self) -> np.ndarray:
+        """``[A, T]`` bool validity."""
+        return self.tracks[:, :, VALID] > 0.5

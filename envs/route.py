@@ -1,0 +1,167 @@
+"""A route: the polyline a vehicle is asked to follow (the logged track of the ego, or of the adversary).
+
+Arc length ``s`` (m) is measured from the first route point. For projection and navigation the polyline is
+extended by `EXTENSION_M` straight metres before its start and after its end (so ``s`` may be negative or
+beyond `length`); route completion only counts the original polyline.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from seal.scenario import CURRENT_STEP, VALID, VX, VY, X, Y
+
+EXTENSION_M = 50.0
+MIN_ROUTE_M = 1.0
+"""Routes shorter than this (a logged agent that stands still) are extended along its heading."""
+_DEDUP_M = 0.05
+_WINDOW_BACK = 8
+_WINDOW_AHEAD = 40
+
+
+@dataclass(frozen=True, slots=True)
+class RouteProjection:
+    """Where a point lies relative to a route.
+
+    Attributes:
+        s: arc length of the closest route point (m).
+        lateral: signed distance to the route (m), positive when the point is left of the route.
+        heading: route tangent direction at ``s`` (rad).
+        segment: index of the closest segment (pass it back as the next ``hint``).
+    """
+
+    s: float
+    lateral: float
+    heading: float
+    segment: int
+
+
+class Route:
+    """A polyline route with per-vertex reference speeds.
+
+    Args:
+        points: ``[P, 2]`` route points in driving order (m).
+        speeds: ``[P]`` reference speed at each point (m/s), e.g. the logged speed; default 0.
+        start_index: index of the point where the episode starts (its ``s`` is `start_s`).
+    """
+
+    def __init__(self, points: np.ndarray, speeds: np.ndarray | None = None, start_index: int = 0) -> None:
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        spd = np.zeros(len(pts)) if speeds is None else np.asarray(speeds, dtype=np.float64).reshape(-1)
+        if len(pts) == 0:
+            raise ValueError("a route needs at least one point")
+        # Drop repeated points (a stopped vehicle): zero-length segments have no direction.
+        keep = np.ones(len(pts), dtype=bool)
+        last = pts[0]
+        for i in range(1, len(pts)):
+            if math.hypot(pts[i, 0] - last[0], pts[i, 1] - last[1]) < _DEDUP_M:
+                keep[i] = False
+            else:
+                last = pts[i]
+        # The start point maps to the last kept point at or before it.
+        start_index = int(np.clip(start_index, 0, len(pts) - 1))
+        start_kept = int(np.count_nonzero(keep[: start_index + 1]) - 1)
+        pts, spd = pts[keep], spd[keep]
+        if len(pts) == 1:
+            pts = np.vstack([pts, pts + [MIN_ROUTE_M, 0.0]])
+            spd = np.concatenate([spd, spd])
+        length = float(np.sum(np.hypot(*np.diff(pts, axis=0).T)))
+        if length < MIN_ROUTE_M:
+            d = pts[-1] - pts[0]
+            d = d / max(np.hypot(*d), 1e-9)
+            pts = np.vstack([pts, pts[-1] + d * (MIN_ROUTE_M - length)])
+            spd = np.concatenate([spd, spd[-1:]])
+        self.points = pts
+        t0 = pts[1] - pts[0]
+        t1 = pts[-1] - pts[-2]
+        t0 /= np.hypot(*t0)
+        t1 /= np.hypot(*t1)
+        ext = np.vstack([pts[0] - EXTENSION_M * t0, pts, pts[-1] + EXTENSION_M * t1])
+        seg = np.diff(ext, axis=0)
+        seg_len = np.hypot(seg[:, 0], seg[:, 1])
+        cum = np.concatenate([[0.0], np.cumsum(seg_len)]) - EXTENSION_M
+        self._ext = ext
+        self._cum = cum  # s of every extended vertex
+        self._cum_list = cum.tolist()
+        self._x_list, self._y_list = ext[:, 0].tolist(), ext[:, 1].tolist()
+        self._spd = np.concatenate([spd[:1], spd, spd[-1:]])
+        self._spd_list = self._spd.tolist()
+        self._a = ext[:-1]
+        self._e = seg
+        self._len2 = seg_len**2
+        self._seg_s0 = cum[:-1]
+        self._seg_len = seg_len
+        self._seg_heading = np.arctan2(seg[:, 1], seg[:, 0])
+        self.length = float(cum[-2])
+        """Length of the route polyline without extensions (m)."""
+        self.start_s = float(cum[start_kept + 1])
+        """Arc length of the episode start point (m)."""
+        self.start_segment = start_kept + 1
+
+    @classmethod
+    def from_track(cls, track: np.ndarray, start_step: int = CURRENT_STEP) -> Route:
+        """Route through all valid steps of a ``[T, 8]`` track; the episode starts at ``start_step``."""
+        valid = np.flatnonzero(track[:, VALID] > 0.5)
+        pts = track[valid][:, [X, Y]]
+        speeds = np.hypot(track[valid, VX], track[valid, VY])
+        start_index = int(np.searchsorted(valid, start_step))
+        return cls(pts, speeds, start_index=min(start_index, len(valid) - 1))
+
+    @property
+    def n_segments(self) -> int:
+        return len(self._seg_len)
+
+    @property
+    def end_s(self) -> float:
+        return self.length
+
+    def completion(self, s: float) -> float:
+        """Share of the route from `start_s` to its end covered at arc length ``s`` (may be < 0 or > 1)."""
+        return (s - self.start_s) / max(self.length - self.start_s, 1e-6)
+
+    def project(self, x: float, y: float, hint: int | None = None) -> RouteProjection:
+        """Closest route point to (x, y); with ``hint`` (a previous segment index) only nearby segments count,
+        so routes that come back near themselves (loops, U-turns) do not make the projection jump."""
+        if hint is None:
+            lo, hi = 0, self.n_segments
+        else:
+            lo, hi = max(0, hint - _WINDOW_BACK), min(self.n_segments, hint + _WINDOW_AHEAD)
+        a = self._a[lo:hi]
+        e = self._e[lo:hi]
+        px, py = x - a[:, 0], y - a[:, 1]
+        t = np.clip((px * e[:, 0] + py * e[:, 1]) / self._len2[lo:hi], 0.0, 1.0)
+        dx, dy = px - t * e[:, 0], py - t * e[:, 1]
+        k = int(np.argmin(dx * dx + dy * dy))
+        i = lo + k
+        tk = float(t[k])
+        ex, ey = float(e[k, 0]), float(e[k, 1])
+        lateral = (ex * float(py[k]) - ey * float(px[k])) / float(self._seg_len[i])
+        return RouteProjection(
+            s=float(self._seg_s0[i] + tk * self._seg_len[i]),
+            lateral=lateral,
+            heading=float(self._seg_heading[i]),
+            segment=i,
+        )
+
+    def points_at(self, s: np.ndarray) -> np.ndarray:
+        """Positions ``[K, 2]`` at arc lengths ``s`` ``[K]`` (clamped to the extended route)."""
+        return np.stack([np.interp(s, self._cum, self._ext[:, 0]), np.interp(s, self._cum, self._ext[:, 1])], -1)
+
+    def point_at(self, s: float) -> tuple[float, float]:
+        """Position at one arc length ``s`` (clamped to the extended route); pure Python, for per-step use."""
+        cum = self._cum_list
+        i = min(max(bisect.bisect_right(cum, s) - 1, 0), len(cum) - 2)
+        u = min(1.0, max(0.0, (s - cum[i]) / (cum[i + 1] - cum[i])))
+        xs, ys = self._x_list, self._y_list
+        return xs[i] + u * (xs[i + 1] - xs[i]), ys[i] + u * (ys[i + 1] - ys[i])
+
+    def speed_at(self, s: float) -> float:
+        """Reference speed at arc length ``s`` (m/s), linear between route points."""
+        cum = self._cum_list
+        i = min(max(bisect.bisect_right(cum, s) - 1, 0), len(cum) - 2)
+        u = min(1.0, max(0.0, (s - cum[i]) / (cum[i + 1] - cum[i])))
+        return self._spd_list[i] + u * (self._spd_list[i + 1] - self._spd_list[i])

@@ -1,0 +1,411 @@
+"""`ScenarioEnv`: closed-loop replay of a `Scenario` with a policy-driven ego and a behaviour-driven adversary.
+
+Episode: starts at ``CURRENT_STEP`` (10) with every agent at its logged state. Each ``step(action)`` advances
+scenario time by one 10 Hz step:
+
+1. the ego integrates the policy's action ``[steering, acceleration]`` in ``[-1, 1]^2`` with the kinematic
+   bicycle (`envs.kinematics`: +-pi/3 rad steering, +-6 m/s^2, speed clipped to [0, 40] m/s);
+2. the adversary moves as its `AdversaryBehavior` says (default: `ReplayBehavior` of its log);
+3. every other agent is placed at its logged state of the new step (present while ``valid``; after its log
+   ends - the 91 logged steps - it is gone);
+4. collisions (oriented-box overlap), road checks, reward and the ego's observation are computed.
+
+Route: the logged ego track (all valid steps) as a polyline. ``route_completion`` = arc-length progress from the
+ego's start position (step 10) divided by the distance from there to the end of the logged track.
+
+Reward (CAT / MetaDrive defaults): ``progress_reward`` (1) per metre of progress along the route (negative when
+going back); on a step where something happens it is replaced by, in this priority, ``-out_of_road_penalty``
+(-10), ``-crash_penalty`` (-1, on every step the ego overlaps another agent), ``+success_reward`` (+10).
+
+Termination (``terminated``): success when ``route_completion > success_completion`` (0.95) on a step without
+crash or out-of-road; out of road when an ego box corner leaves the drivable area (union of lane polygons) by
+more than ``offroad_tolerance_m`` (0.5 m: where consecutive lanes meet at an angle, e.g. roundabout entries,
+their polygons leave a notch that logged vehicles cut by up to ~0.4 m; road edges painted ``continuous`` end
+the episode at the line anyway), the box crosses a ``continuous`` line (except those the logged ego itself
+crosses, so a route through a painted-solid junction is drivable), or the ego is more than ``max_lateral_m``
+(10 m) from the route; a crash when ``terminate_on_crash`` (default True; when False the episode goes on and
+every step in contact costs ``crash_penalty``). ``truncated`` after ``horizon_steps`` (default 90 = the 80
+logged future steps + 1 s of grace for an ego that is slower than the log; agents without log beyond step 90
+are gone by then).
+
+``info`` on every step: ``is_success``, ``crashed``, ``out_of_road``, ``route_completion``, ``crash_agent_id``
+(id of an agent the ego overlaps, -1 if none), ``crashed_with_adversary``, ``adversary_crashed`` (the adversary
+overlaps a third agent), ``scenario_id``, ``step`` (scenario step). On the last step also ``rollout``
+(`envs.rollout.Rollout`) and ``outcome``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from envs.behaviors import AdversaryBehavior, BehaviorOutput, ReplayBehavior
+from envs.kinematics import AgentState, bicycle_step
+from envs.observation import ObservationBuilder, observation_space
+from envs.road_geometry import RoadGeometry, get_road_geometry
+from envs.rollout import Rollout
+from envs.route import Route, RouteProjection
+from seal.scenario import CURRENT_STEP, N_STEPS, VALID, Scenario
+
+DEFAULT_CONFIG: dict[str, Any] = {
+    "horizon_steps": 90,
+    "terminate_on_crash": True,
+    "success_completion": 0.95,
+    "max_lateral_m": 10.0,
+    "progress_reward": 1.0,
+    "success_reward": 10.0,
+    "out_of_road_penalty": 10.0,
+    "crash_penalty": 1.0,
+    "check_continuous_lines": True,
+    "offroad_tolerance_m": 0.5,
+    "split": None,
+}
+"""Config keys (see the module docstring):
+
+* ``horizon_steps``: env steps before ``truncated`` (90 = 8 s of log + 1 s grace).
+* ``terminate_on_crash``: end the episode on an ego crash (evaluation) or go on with the penalty (CAT training).
+* ``success_completion``: route completion above which the ego has arrived (0.95).
+* ``max_lateral_m``: distance from the route beyond which the ego is out of road (10 m).
+* ``progress_reward``, ``success_reward``, ``out_of_road_penalty``, ``crash_penalty``: reward terms (1, 10, 10, 1).
+* ``check_continuous_lines``: crossing a ``continuous`` line is out of road (True).
+* ``offroad_tolerance_m``: how far a box corner may stick out of the drivable area (0.5 m).
+* ``split``: dataset split to load when ``scenarios`` is a dataset path (None = all).
+"""
+
+AdversarySpec = AdversaryBehavior | Callable[[Scenario, np.random.Generator], AdversaryBehavior] | None
+"""An adversary for every episode: a behaviour (reset each episode), a factory ``(scenario, rng) -> behaviour``
+called at each reset (e.g. a generator with a curriculum), or None for `ReplayBehavior` of the log."""
+
+_SL = np.array([0.5, 0.5, -0.5, -0.5])
+_SW = np.array([0.5, -0.5, -0.5, 0.5])
+
+
+def _corners(x: float, y: float, h: float, length: float, width: float) -> tuple[np.ndarray, np.ndarray]:
+    c, s = math.cos(h), math.sin(h)
+    return x + _SL * (length * c) - _SW * (width * s), y + _SL * (length * s) + _SW * (width * c)
+
+
+def _overlaps(state: AgentState, boxes: np.ndarray) -> np.ndarray:
+    """Separating-axis overlap of one box with ``[N, >=7]`` track-layout boxes -> bool ``[N]``.
+
+    Axes: both boxes' headings and normals; a box's projection radius on a unit axis u is
+    ``l/2 |u.heading| + w/2 |u.normal|``, written with the relative angle to avoid recomputing dot products.
+    """
+    c, s = math.cos(state.heading), math.sin(state.heading)
+    co, so = np.cos(boxes[:, 2]), np.sin(boxes[:, 2])
+    dx, dy = boxes[:, 0] - state.x, boxes[:, 1] - state.y
+    hl, hw = state.length / 2, state.width / 2
+    ol, ow = boxes[:, 5] / 2, boxes[:, 6] / 2
+    cosd = np.abs(c * co + s * so)
+    sind = np.abs(c * so - s * co)
+    sep = np.abs(dx * c + dy * s) > hl + ol * cosd + ow * sind
+    sep |= np.abs(dy * c - dx * s) > hw + ol * sind + ow * cosd
+    sep |= np.abs(dx * co + dy * so) > ol + hl * cosd + hw * sind
+    sep |= np.abs(dy * co - dx * so) > ow + hl * sind + hw * cosd
+    return ~sep
+
+
+class ScenarioEnv(gym.Env):
+    """Gymnasium env over a set of scenarios (see the module docstring).
+
+    Args:
+        scenarios: scenarios to play, a single scenario, or a dataset directory (loaded with `seal.dataset`,
+            ``config["split"]`` selecting a split).
+        config: overrides of `DEFAULT_CONFIG`.
+        adversary: see `AdversarySpec`; change it later with `set_adversary`, or for one episode with
+            ``reset(options={"adversary": behavior})``.
+        render_mode: None or ``"rgb_array"`` (top-down frame following the ego, `envs.render`).
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(
+        self,
+        scenarios: Sequence[Scenario] | Scenario | str | Path,
+        config: dict[str, Any] | None = None,
+        adversary: AdversarySpec = None,
+        render_mode: str | None = None,
+    ) -> None:
+        super().__init__()
+        unknown = set(config or {}) - set(DEFAULT_CONFIG)
+        if unknown:
+            raise ValueError(f"unknown ScenarioEnv config keys {sorted(unknown)}; known: {sorted(DEFAULT_CONFIG)}")
+        self.config = {**DEFAULT_CONFIG, **(config or {})}
+        if isinstance(scenarios, str | Path):
+            from seal.dataset import load_scenarios
+
+            scenarios = load_scenarios(scenarios, split=self.config["split"])
+        elif isinstance(scenarios, Scenario):
+            scenarios = [scenarios]
+        self.scenarios: list[Scenario] = list(scenarios)
+        if not self.scenarios:
+            raise ValueError("ScenarioEnv needs at least one scenario")
+        self._by_id = {s.scenario_id: s for s in self.scenarios}
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self.render_mode = render_mode
+        self.observation_space = observation_space()
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+        self._adversary: AdversarySpec = adversary
+        self._exempt_cache: dict[tuple[str, int], np.ndarray] = {}
+        self._renderer: Any = None
+        self.scenario: Scenario | None = None
+        self.rollout: Rollout | None = None
+        """The `Rollout` of the last finished episode."""
+
+    # ----------------------------------------------------------------------------------------- public API
+    @property
+    def scenario_ids(self) -> list[str]:
+        return [s.scenario_id for s in self.scenarios]
+
+    def set_adversary(self, adversary: AdversarySpec) -> None:
+        """Adversary used from the next reset on (see `AdversarySpec`)."""
+        self._adversary = adversary
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        options = options or {}
+        sid = options.get("scenario_id")
+        if sid is not None:
+            if sid not in self._by_id:
+                raise KeyError(f"ScenarioEnv has no scenario {sid!r}")
+            scenario = self._by_id[sid]
+        else:
+            scenario = self.scenarios[int(self.np_random.integers(len(self.scenarios)))]
+        adversary = options.get("adversary")
+        if adversary is None:
+            spec = self._adversary
+            if spec is None:
+                adversary = ReplayBehavior()
+            elif isinstance(spec, AdversaryBehavior):
+                adversary = spec
+            else:
+                adversary = spec(scenario, self.np_random)
+        self._setup(scenario, adversary)
+        obs = self._observe()
+        return obs, self._info(crashed=False, crash_id=-1, adv_crashed=False, out_of_road=False, success=False)
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if self._done:
+            raise RuntimeError("step() called on a finished episode; call reset()")
+        cfg = self.config
+        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        t = self._t
+        ego = bicycle_step(self._ego, float(a[0]), float(a[1]))
+        adv = self._move_adversary(t)
+        t += 1
+        self._t = t
+        self._ego, self._adv = ego, adv
+        self._place_agents(t)
+
+        # Collisions (centre-distance pre-filter, then exact box overlap).
+        cur, present = self._cur, self._present
+        crash_id, crashed = -1, False
+        others = self._others_ego
+        cand = self._near(ego, others)
+        if cand.size:
+            hits = cand[_overlaps(ego, cur[cand])]
+            if hits.size:
+                crashed = True
+                ids = self._agent_ids[hits]
+                adv_hit = np.flatnonzero(hits == self._adv_idx)
+                crash_id = int(self._agent_ids[self._adv_idx]) if adv_hit.size else int(ids[0])
+                self._ego_crashes.extend((t, int(i)) for i in ids)
+        adv_crashed = False
+        if adv is not None:
+            others_adv = np.flatnonzero(present & self._not_ego_adv)
+            cand = self._near(adv, others_adv)
+            if cand.size:
+                hits = cand[_overlaps(adv, cur[cand])]
+                if hits.size:
+                    adv_crashed = True
+                    self._adv_crashes.extend((t, int(i)) for i in self._agent_ids[hits])
+
+        # Route progress and road checks.
+        proj = self._route.project(ego.x, ego.y, self._proj.segment)
+        progress = proj.s - self._proj.s
+        self._proj = proj
+        completion = self._route.completion(proj.s)
+        cx, cy = _corners(ego.x, ego.y, ego.heading, ego.length, ego.width)
+        out_of_road = (
+            abs(proj.lateral) > cfg["max_lateral_m"]
+            or not self._geom.on_road(cx, cy, cfg["offroad_tolerance_m"])
+            or (
+                cfg["check_continuous_lines"]
+                and self._geom.crosses_continuous(ego.x, ego.y, ego.heading, ego.length, ego.width, self._exempt)
+            )
+        )
+        success = completion > cfg["success_completion"] and not crashed and not out_of_road
+
+        if out_of_road:
+            reward = -cfg["out_of_road_penalty"]
+            self._out_of_road_step = t
+        elif crashed:
+            reward = -cfg["crash_penalty"]
+        elif success:
+            reward = cfg["success_reward"]
+            self._success_step = t
+        else:
+            reward = cfg["progress_reward"] * progress
+        terminated = bool(out_of_road or success or (crashed and cfg["terminate_on_crash"]))
+        truncated = bool(not terminated and t - CURRENT_STEP >= cfg["horizon_steps"])
+        self._return += reward
+
+        obs = self._observe()
+        info = self._info(crashed, crash_id, adv_crashed, out_of_road, success)
+        if terminated or truncated:
+            self._done = True
+            if out_of_road:
+                outcome = "out_of_road"
+            elif crashed:
+                outcome = "crash"
+            elif success:
+                outcome = "success"
+            else:
+                outcome = "timeout"
+            self.rollout = Rollout(
+                scenario_id=self.scenario.scenario_id,
+                tracks=self._roll,
+                agent_ids=self._agent_ids.copy(),
+                ego_id=self.scenario.ego_id,
+                adv_id=self.scenario.adv_id,
+                last_step=t,
+                outcome=outcome,
+                ego_crashes=self._ego_crashes,
+                adv_crashes=self._adv_crashes,
+                out_of_road_step=self._out_of_road_step,
+                success_step=self._success_step,
+                route_completion=float(completion),
+                episode_return=float(self._return),
+                adversary=self._behavior.name,
+            )
+            info["rollout"] = self.rollout
+            info["outcome"] = outcome
+        return obs, float(reward), terminated, truncated, info
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode != "rgb_array":
+            return None
+        from envs.render import FrameRenderer
+
+        if self._renderer is None or self._renderer.road is not self.scenario.road:
+            self._renderer = FrameRenderer(self.scenario.road)
+        return self._renderer.draw_state(
+            self._cur, self._ego_idx, self._adv_idx, follow=(self._ego.x, self._ego.y),
+            text=f"step {self._t}  speed {self._ego.speed:.1f} m/s",
+        )
+
+    # ----------------------------------------------------------------------------------------- internals
+    def _setup(self, scenario: Scenario, behavior: AdversaryBehavior) -> None:
+        self.scenario = scenario
+        self._geom: RoadGeometry = get_road_geometry(scenario.road)
+        self._builder = ObservationBuilder(self._geom)
+        self._log = scenario.tracks.astype(np.float64)
+        n_agents = scenario.n_agents
+        self._agent_ids = scenario.agent_ids
+        self._ego_idx = scenario.ego_index
+        self._adv_idx = scenario.adv_index
+        idx = np.arange(n_agents)
+        self._not_ego = idx != self._ego_idx
+        self._not_ego_adv = self._not_ego & (idx != self._adv_idx)
+        ego_track = self._log[self._ego_idx]
+        self._route = Route.from_track(ego_track, CURRENT_STEP)
+        self._exempt = self._exempt_for(scenario, ego_track) if self.config["check_continuous_lines"] else None
+
+        self._behavior = behavior
+        behavior.reset(scenario, self.np_random)
+        self._adv_route: Route | None = behavior.make_route(scenario) if behavior.needs_observation else None
+        self._adv_hint: int | None = None
+
+        t = CURRENT_STEP
+        self._t = t
+        self._ego = AgentState.from_track_row(self._log[self._ego_idx, t])
+        self._adv: AgentState | None = AgentState.from_track_row(self._log[self._adv_idx, t])
+        self._proj: RouteProjection = self._route.project(self._ego.x, self._ego.y, self._route.start_segment)
+        if self._adv_route is not None:
+            self._adv_hint = self._adv_route.project(self._adv.x, self._adv.y).segment
+
+        n_cols = CURRENT_STEP + 1 + int(self.config["horizon_steps"])
+        self._roll = np.zeros((n_agents, n_cols, 8), dtype=np.float32)
+        self._roll[:, : t + 1] = scenario.tracks[:, : t + 1]
+        self._cur = self._log[:, t].copy()
+        self._present = self._cur[:, VALID] > 0.5
+        self._others_ego = np.flatnonzero(self._present & self._not_ego)
+        self._ego_crashes: list[tuple[int, int]] = []
+        self._adv_crashes: list[tuple[int, int]] = []
+        self._out_of_road_step: int | None = None
+        self._success_step: int | None = None
+        self._return = 0.0
+        self._done = False
+
+    def _exempt_for(self, scenario: Scenario, ego_track: np.ndarray) -> np.ndarray | None:
+        """Solid-line segments the logged ego box crosses (cached per scenario and road)."""
+        key = (scenario.scenario_id, id(self._geom))
+        hit = self._exempt_cache.get(key)
+        if hit is None:
+            v = ego_track[:, VALID] > 0.5
+            hit = self._geom.continuous_hits_along(ego_track[v][:, [0, 1, 2, 5, 6]])
+            if len(self._exempt_cache) > 4096:
+                self._exempt_cache.clear()
+            self._exempt_cache[key] = hit
+        return hit if hit.any() else None
+
+    def _move_adversary(self, t: int) -> AgentState | None:
+        behavior, adv = self._behavior, self._adv
+        obs = None
+        if behavior.needs_observation and adv is not None:
+            proj = self._adv_route.project(adv.x, adv.y, self._adv_hint)
+            self._adv_hint = proj.segment
+            others = self._cur[self._present & (np.arange(len(self._cur)) != self._adv_idx), :7]
+            obs = self._builder.build(adv, self._adv_route, others, proj)
+        out: BehaviorOutput = behavior.step(t, adv, obs)
+        if out.action is not None:
+            return None if adv is None else bicycle_step(adv, out.action[0], out.action[1])
+        return out.state
+
+    def _place_agents(self, t: int) -> None:
+        cur = self._log[:, t].copy() if t < N_STEPS else np.zeros((self._log.shape[0], 8))
+        e = self._ego
+        cur[self._ego_idx] = (e.x, e.y, e.heading, e.vx, e.vy, e.length, e.width, 1.0)
+        a = self._adv
+        cur[self._adv_idx] = (a.x, a.y, a.heading, a.vx, a.vy, a.length, a.width, 1.0) if a is not None else 0.0
+        self._cur = cur
+        self._present = cur[:, VALID] > 0.5
+        self._others_ego = np.flatnonzero(self._present & self._not_ego)
+        if t < self._roll.shape[1]:
+            self._roll[:, t] = cur
+
+    def _near(self, state: AgentState, idx: np.ndarray) -> np.ndarray:
+        """Indices in ``idx`` whose centre is close enough to ``state`` for their boxes to touch."""
+        if idx.size == 0:
+            return idx
+        b = self._cur[idx]
+        reach = 0.5 * (math.hypot(state.length, state.width) + np.hypot(b[:, 5], b[:, 6]))
+        d2 = (b[:, 0] - state.x) ** 2 + (b[:, 1] - state.y) ** 2
+        return idx[d2 < reach * reach]
+
+    def _observe(self) -> np.ndarray:
+        return self._builder.build(self._ego, self._route, self._cur[self._others_ego, :7], self._proj)
+
+    def _info(
+        self, crashed: bool, crash_id: int, adv_crashed: bool, out_of_road: bool, success: bool
+    ) -> dict[str, Any]:
+        return {
+            "is_success": bool(success),
+            "crashed": bool(crashed),
+            "out_of_road": bool(out_of_road),
+            "route_completion": float(self._route.completion(self._proj.s)),
+            "crash_agent_id": int(crash_id),
+            "crashed_with_adversary": bool(crashed and crash_id == int(self._agent_ids[self._adv_idx])),
+            "adversary_crashed": bool(adv_crashed),
+            "scenario_id": self.scenario.scenario_id,
+            "step": int(self._t),
+        }

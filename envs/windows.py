@@ -1,0 +1,286 @@
+"""Cut 9.1 s scenario windows around interacting vehicle pairs out of a logged traffic run.
+
+An *event* is a moment where two vehicles interact: their bodies come within `EVENT_GAP_M` (a local minimum of
+the box gap, or a collision), or their paths cross with less than `CONFLICT_DT_S` between their passages of
+the crossing point (one yields to the other). For each event a window start ``t0`` is drawn so that the event
+falls in steps 25..75 of the window (an adversary then has time to act before it and the ego time to react).
+A window is kept when both vehicles exist over the whole window, both move (mean speed > 2 m/s and more than
+10 m travelled) and, in the future part (steps 10..90), their gap falls below `EVENT_GAP_M` or their paths
+cross (within `CONFLICT_DT_S`); oncoming vehicles merely passing each other in their own lanes do not count.
+Windows are ranked by the closest approach plus the smallest time to collision of the future part (so that a
+collision course ranks above driving side by side; with a little noise so that not only crashes win) and at
+most ``cap`` are taken per run, each with a distinct pair and each vehicle in at most two of them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from envs.traffic import RunLog
+from seal.geometry import box_corners, box_gap
+from seal.scenario import CURRENT_STEP, N_STEPS
+
+EVENT_GAP_M = 5.0
+"""Bodies closer than this (m) interact."""
+CONFLICT_DIST_M = 1.5
+"""Paths cross where they pass within this distance (m) of each other."""
+CONFLICT_DT_S = 2.5
+"""A crossing is a conflict when both pass it within this many seconds."""
+CONTEXT_M = 80.0
+"""Other vehicles within this distance (m) of the ego or the adversary are part of the scenario."""
+EVENT_STEPS = (25, 75)
+"""Preferred window steps for the closest approach / conflict."""
+MIN_MEAN_SPEED = 2.0
+MIN_DISPLACEMENT_M = 10.0
+MAX_PER_VEHICLE = 2
+TTC_CAP_S = 6.0
+
+
+@dataclass(frozen=True)
+class Window:
+    """One scenario window: steps ``t0 .. t0 + 90`` of the run, with the pair and context rows of the log."""
+
+    t0: int
+    ego: int
+    adv: int
+    others: tuple[int, ...]
+    min_gap_m: float
+    pair_collision: bool
+    any_collision: bool
+
+
+def _corners(log: RunLog, row: int, steps: slice | np.ndarray) -> np.ndarray:
+    """Box corners ``[K, 4, 2]`` of vehicle ``row`` at ``steps``."""
+    s = log.states[row, steps]
+    return box_corners(s[..., 0], s[..., 1], s[..., 2], s[..., 4], s[..., 5])
+
+
+NEAR_M = 30.0
+"""Pairs farther apart than this (m) all the time cannot interact."""
+
+
+@dataclass(frozen=True)
+class _Pairs:
+    """Vehicle pairs ``(i[p], j[p])``, i < j, that come within `NEAR_M`; ``dist`` ``[P, T]`` centre distances
+    (m), inf where one of them does not exist."""
+
+    i: np.ndarray
+    j: np.ndarray
+    dist: np.ndarray
+
+
+def _near_pairs(log: RunLog) -> _Pairs:
+    x = np.where(log.valid, log.states[..., 0], np.nan)
+    y = np.where(log.valid, log.states[..., 1], np.nan)
+    # Coarse pass on every 10th step; vehicles move at most ~2 x 5 steps x 4 m between samples.
+    stride = 10
+    dc = np.hypot(x[:, None, ::stride] - x[None, :, ::stride], y[:, None, ::stride] - y[None, :, ::stride])
+    cand = np.triu(np.nan_to_num(dc, nan=np.inf).min(axis=-1) < NEAR_M + 40.0, 1)
+    ii, jj = np.nonzero(cand)
+    d = np.nan_to_num(np.hypot(x[ii] - x[jj], y[ii] - y[jj]), nan=np.inf)
+    keep = d.min(axis=1) < NEAR_M
+    return _Pairs(ii[keep], jj[keep], d[keep])
+
+
+def _pair_gaps(log: RunLog, pairs: _Pairs) -> dict[tuple[int, int], np.ndarray]:
+    """Box gap (m) over time of every pair that ever comes within `EVENT_GAP_M`; inf where farther/absent."""
+    t = log.valid.shape[1]
+    diag = np.hypot(log.states[..., 4], log.states[..., 5])
+    diag = np.nanmax(np.where(log.valid, diag, np.nan), axis=1)
+    close = pairs.dist < ((diag[pairs.i] + diag[pairs.j]) / 2 + EVENT_GAP_M)[:, None]
+    out: dict[tuple[int, int], np.ndarray] = {}
+    for p in np.flatnonzero(close.any(axis=1)):
+        i, j = int(pairs.i[p]), int(pairs.j[p])
+        steps = np.flatnonzero(close[p])
+        g = np.full(t, np.inf)
+        g[steps] = box_gap(_corners(log, i, steps), _corners(log, j, steps))
+        out[(i, j)] = g
+    return out
+
+
+def _conflicts(log: RunLog, i: int, j: int, lo: int, hi: int) -> list[tuple[int, float]]:
+    """Path crossings of ``i`` and ``j`` in steps ``lo..hi-1``: (step when the second passes, dt in s)."""
+    stride = 2
+    steps = np.arange(lo, hi, stride)
+    vi, vj = log.valid[i, steps], log.valid[j, steps]
+    if not vi.any() or not vj.any():
+        return []
+    pi, pj = log.states[i, steps, :2], log.states[j, steps, :2]
+    d = np.linalg.norm(pi[:, None] - pj[None], axis=-1)
+    dt = np.abs(steps[:, None] - steps[None]) * 0.1
+    heading_diff = np.abs(
+        (log.states[i, steps, 2][:, None] - log.states[j, steps, 2][None] + np.pi) % (2 * np.pi) - np.pi
+    )
+    # Following in the same lane is not a crossing: require the headings to differ there.
+    hit = (
+        (d < CONFLICT_DIST_M)
+        & (dt <= CONFLICT_DT_S)
+        & (heading_diff > np.radians(15))
+        & vi[:, None]
+        & vj[None]
+    )
+    out = []
+    for a, b in zip(*np.nonzero(hit), strict=True):
+        out.append((int(max(steps[a], steps[b])), float(dt[a, b])))
+    return out
+
+
+def _events(log: RunLog, gaps: dict[tuple[int, int], np.ndarray], pairs: _Pairs) -> list[tuple[int, ...]]:
+    """(i, j, event step) for gap minima below `EVENT_GAP_M`, collisions and path conflicts."""
+    events: list[tuple[int, int, int]] = []
+    for (i, j), g in gaps.items():
+        below = g < EVENT_GAP_M
+        if not below.any():
+            continue
+        # Local minimum of each contiguous stretch below the threshold.
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], below.astype(np.int8), [0]])))
+        for a, b in zip(edges[::2], edges[1::2], strict=True):
+            events.append((i, j, int(a + np.argmin(g[a:b]))))
+    for step, i, j in log.collisions:
+        events.append((min(i, j), max(i, j), int(step)))
+    # Path conflicts among the other near pairs while they head different ways.
+    head = log.states[..., 2]
+    for p in range(len(pairs.i)):
+        i, j = int(pairs.i[p]), int(pairs.j[p])
+        if (i, j) in gaps and (gaps[(i, j)] < EVENT_GAP_M).any():
+            continue  # already an event pair
+        common = np.flatnonzero(np.isfinite(pairs.dist[p]))
+        turn = np.abs((head[i, common] - head[j, common] + np.pi) % (2 * np.pi) - np.pi)
+        if not (turn > np.radians(15)).any():
+            continue
+        hits = _conflicts(log, i, j, int(common[0]), int(common[-1]) + 1)
+        if hits:
+            events.append((i, j, min(hits, key=lambda h: h[1])[0]))
+    return events
+
+
+def _min_ttc(log: RunLog, i: int, j: int, steps: slice) -> float:
+    """Smallest time to collision (s) over ``steps`` at constant velocities: the time to the closest point of
+    approach when the centres then pass closer than half the two widths plus 0.5 m (a collision course)."""
+    a, b = log.states[i, steps], log.states[j, steps]
+    dp = b[:, :2] - a[:, :2]
+    dv = b[:, 3:4] * np.stack([np.cos(b[:, 2]), np.sin(b[:, 2])], 1) - a[:, 3:4] * np.stack(
+        [np.cos(a[:, 2]), np.sin(a[:, 2])], 1
+    )
+    vv = np.maximum((dv * dv).sum(1), 1e-6)
+    t_cpa = -(dp * dv).sum(1) / vv
+    miss = np.linalg.norm(dp + dv * t_cpa[:, None], axis=1)
+    contact = t_cpa - (a[:, 4] + b[:, 4]) / 2 / np.sqrt(vv)  # the boxes touch about half a length earlier
+    course = (t_cpa > 0) & (miss < (a[:, 5] + b[:, 5]) / 2 + 0.5)
+    return float(np.maximum(contact[course], 0.0).min()) if course.any() else np.inf
+
+
+def _moving(log: RunLog, row: int, t0: int) -> bool:
+    s = log.states[row, t0 : t0 + N_STEPS]
+    return (
+        float(s[:, 3].mean()) > MIN_MEAN_SPEED
+        and float(np.hypot(*(s[-1, :2] - s[0, :2]))) > MIN_DISPLACEMENT_M
+    )
+
+
+def _span(valid: np.ndarray) -> tuple[int, int]:
+    idx = np.flatnonzero(valid)
+    return int(idx[0]), int(idx[-1])
+
+
+def find_windows(log: RunLog, rng: np.random.Generator, cap: int, min_t0: int = 0) -> list[Window]:
+    """Up to ``cap`` scenario windows of the run (module docstring); ego/adv roles drawn with ``rng``."""
+    n_steps = log.valid.shape[1]
+    if n_steps < N_STEPS:
+        return []
+    pairs = _near_pairs(log)
+    gaps = _pair_gaps(log, pairs)
+    collided = {(min(a, b), max(a, b)): s for s, a, b in log.collisions}
+    candidates: list[tuple[float, int, int, int, float, bool, int]] = []
+    seen: set[tuple[int, int, int]] = set()
+    for i, j, t_ev in sorted(_events(log, gaps, pairs)):
+        lo = max(_span(log.valid[i])[0], _span(log.valid[j])[0], min_t0)
+        hi = min(_span(log.valid[i])[1], _span(log.valid[j])[1]) - (N_STEPS - 1)
+        a, b = max(lo, t_ev - EVENT_STEPS[1]), min(hi, t_ev - EVENT_STEPS[0])
+        if a > b:  # fall back to any future step for the event
+            a, b = max(lo, t_ev - (N_STEPS - 2)), min(hi, t_ev - CURRENT_STEP - 2)
+            if a > b:
+                continue
+        t0 = int(rng.integers(a, b + 1))
+        if (i, j, t0) in seen or not (_moving(log, i, t0) and _moving(log, j, t0)):
+            continue
+        seen.add((i, j, t0))
+        fut = slice(t0 + CURRENT_STEP, t0 + N_STEPS)
+        g = box_gap(_corners(log, i, fut), _corners(log, j, fut))
+        min_gap = float(g.min())
+        t_min = int(np.argmin(g)) + CURRENT_STEP
+        conflict = bool(_conflicts(log, i, j, t0 + CURRENT_STEP, t0 + N_STEPS))
+        if min_gap >= EVENT_GAP_M and not conflict:
+            continue
+        pair_collision = (i, j) in collided and t0 <= collided[(i, j)] < t0 + N_STEPS
+        # Rank: closest approach plus time to collision (so being on a collision course beats passing side by
+        # side or oncoming), noise so near-misses compete with crashes, events outside the preferred steps
+        # penalised.
+        ttc = _min_ttc(log, i, j, fut)
+        turn = np.abs((log.states[i, fut, 2] - log.states[j, fut, 2] + np.pi) % (2 * np.pi) - np.pi)
+        if np.median(turn) > 2.4 and min_gap > 1.0 and not conflict:
+            continue  # oncoming traffic passing in its own lane is not an interaction
+        score = min_gap + 0.5 * min(ttc, TTC_CAP_S) + float(rng.uniform(0.0, 1.5))
+        if not EVENT_STEPS[0] <= t_min <= EVENT_STEPS[1]:
+            score += 2.0
+        candidates.append((score, i, j, t0, min_gap, pair_collision, t_min))
+    candidates.sort(key=lambda c: (c[0], c[1], c[2], c[3]))
+
+    chosen: list[Window] = []
+    used_pairs: set[tuple[int, int]] = set()
+    uses: dict[int, int] = {}
+    for _, i, j, t0, min_gap, pair_collision, _ in candidates:
+        if len(chosen) >= cap:
+            break
+        if (i, j) in used_pairs or uses.get(i, 0) >= MAX_PER_VEHICLE or uses.get(j, 0) >= MAX_PER_VEHICLE:
+            continue
+        used_pairs.add((i, j))
+        uses[i] = uses.get(i, 0) + 1
+        uses[j] = uses.get(j, 0) + 1
+        ego, adv = (i, j) if rng.random() < 0.5 else (j, i)
+        others = _context(log, ego, adv, t0)
+        members = {ego, adv, *others}
+        any_collision = any(
+            a in members and b in members and t0 <= s < t0 + N_STEPS for s, a, b in log.collisions
+        )
+        chosen.append(Window(t0, ego, adv, tuple(others), min_gap, bool(pair_collision), bool(any_collision)))
+    return chosen
+
+
+def _context(log: RunLog, ego: int, adv: int, t0: int) -> list[int]:
+    """Rows valid in the window that come within `CONTEXT_M` of the ego or the adversary."""
+    win = slice(t0, t0 + N_STEPS)
+    valid = log.valid[:, win]
+    pos = log.states[:, win, :2]
+    near = np.zeros(valid.shape[0], dtype=bool)
+    for focal in (ego, adv):
+        d = np.linalg.norm(pos - pos[focal][None], axis=-1)
+        near |= (valid & (d < CONTEXT_M)).any(axis=1)
+    near[[ego, adv]] = False
+    return [int(r) for r in np.flatnonzero(near)]
+
+
+def window_tracks(log: RunLog, w: Window) -> tuple[np.ndarray, np.ndarray]:
+    """(tracks ``[A, 91, 8]`` float32, `seal.scenario.TRACK_FIELDS` order; agent ids ``[A]``): ego, adv,
+    then the others."""
+    rows = np.array([w.ego, w.adv, *w.others], dtype=np.int64)
+    s = log.states[rows, w.t0 : w.t0 + N_STEPS]
+    valid = log.valid[rows, w.t0 : w.t0 + N_STEPS]
+    speed = s[..., 3]
+    tracks = np.stack(
+        [
+            s[..., 0],
+            s[..., 1],
+            s[..., 2],
+            speed * np.cos(s[..., 2]),
+            speed * np.sin(s[..., 2]),
+            s[..., 4],
+            s[..., 5],
+            valid.astype(np.float64),
+        ],
+        axis=-1,
+    )
+    tracks[~valid] = 0.0
+    return tracks.astype(np.float32), rows

@@ -1,0 +1,263 @@
+"""Lane projection (Frenet s, d) and lane chains on a `seal.road.RoadDescription`, vectorised with numpy.
+
+`RoadIndex` flattens all lane centre polylines into one array of segments so that many points are projected at
+once: for every point the closest segment among the lanes whose direction is compatible with the agent's heading
+gives the lane, the arc length ``s`` along that lane and the signed lateral offset ``d`` (m, left of the driving
+direction positive).
+
+Projection uses polylines simplified to 5 cm (the dense arcs of generated roads have ~1 m spacing; simplifying
+cuts the point x segment matrix several-fold at a lateral error below 5 cm). Lane chains for the
+future-extrapolated tracks use the original polylines.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+
+from scoring.neighbours import close_pairs
+from seal.geometry import wrap_angle
+from seal.road import RoadDescription
+
+SIMPLIFY_TOL_M = 0.05
+MAX_HEADING_DIFF_RAD = np.pi / 3
+"""A lane is a candidate for an agent only if its direction is within 60 deg of the agent's heading, so that
+opposite or crossing lanes that overlap in space (intersections, roundabouts) are not picked."""
+MAX_LANE_DIST_WIDTHS = 1.0
+"""Points farther than one lane width from every compatible lane get no lane (-1)."""
+_SAMPLE_SPACING_M = 4.0
+
+
+@dataclass(frozen=True)
+class Projection:
+    """Result of `RoadIndex.project` for ``N`` points (all arrays ``[N]``).
+
+    Attributes:
+        lane: lane index into `RoadIndex.lane_ids`, -1 where no compatible lane is close enough.
+        s: arc length (m) along the lane's (simplified) centre line; NaN where ``lane == -1``.
+        d: signed lateral offset (m), left positive; NaN where ``lane == -1``.
+        in_lane: the point lies within half a lane width of the centre line of its lane.
+    """
+
+    lane: np.ndarray
+    s: np.ndarray
+    d: np.ndarray
+    in_lane: np.ndarray
+
+
+class RoadIndex:
+    """Segment arrays, lane attributes and connectivity of one road (build once per road, reuse per agent)."""
+
+    def __init__(self, road: RoadDescription) -> None:
+        self.road = road
+        self.lane_ids: tuple[str, ...] = tuple(lane.lane_id for lane in road.lanes)
+        index = {lid: k for k, lid in enumerate(self.lane_ids)}
+        self.centerlines: list[np.ndarray] = [lane.centerline for lane in road.lanes]
+        self.widths = np.array([lane.width_m for lane in road.lanes], dtype=np.float64)
+        self.lane_lengths = np.array([_polyline_length(c) for c in self.centerlines])
+        self.speed_limits = np.array([lane.speed_limit_mps for lane in road.lanes], dtype=np.float64)
+        self.successors: list[list[int]] = [[index[s] for s in lane.successors] for lane in road.lanes]
+        n = len(self.lane_ids)
+        # connected[a, b]: same lane or one continues into the other (used for "same lane" in THW / TTC / DRAC).
+        # Row / column n stands for "no lane" and is never connected.
+        conn = np.zeros((n + 1, n + 1), dtype=bool)
+        conn[np.arange(n), np.arange(n)] = True
+        for a, succ in enumerate(self.successors):
+            for b in succ:
+                conn[a, b] = conn[b, a] = True
+        self.connected = conn
+
+        a_list, b_list, lane_list, s0_list = [], [], [], []
+        for k, pts in enumerate(self.centerlines):
+            simple = np.asarray(shapely.simplify(shapely.LineString(pts), SIMPLIFY_TOL_M).coords)
+            if simple.shape[0] < 2:  # degenerate (zero-length) lane: keep the raw polyline
+                simple = pts
+            seg = np.diff(simple, axis=0)
+            seg_len = np.linalg.norm(seg, axis=1)
+            keep = seg_len > 1e-9
+            a_list.append(simple[:-1][keep])
+            b_list.append(simple[1:][keep])
+            lane_list.append(np.full(int(keep.sum()), k))
+            s0_list.append((np.concatenate([[0.0], np.cumsum(seg_len)[:-1]]))[keep])
+        self.seg_a = np.concatenate(a_list)
+        self.seg_d = np.concatenate(b_list) - self.seg_a
+        self.seg_len2 = np.maximum((self.seg_d**2).sum(1), 1e-12)
+        self.seg_len = np.sqrt(self.seg_len2)
+        self.seg_lane = np.concatenate(lane_list)
+        self.seg_s0 = np.concatenate(s0_list)
+        self.seg_heading = np.arctan2(self.seg_d[:, 1], self.seg_d[:, 0])
+        self._seg_cos, self._seg_sin = self.seg_d[:, 0] / self.seg_len, self.seg_d[:, 1] / self.seg_len
+        n_samples = np.ceil(self.seg_len / _SAMPLE_SPACING_M).astype(np.int64) + 1
+        self._sample_seg = np.repeat(np.arange(self.seg_len.size), n_samples)
+        frac = (np.arange(self._sample_seg.size) - np.repeat(np.cumsum(n_samples) - n_samples, n_samples)) / np.repeat(
+            n_samples - 1, n_samples
+        )
+        self._samples = self.seg_a[self._sample_seg] + frac[:, None] * self.seg_d[self._sample_seg]
+        self._search_radius = MAX_LANE_DIST_WIDTHS * float(self.widths.max()) + 0.5 * _SAMPLE_SPACING_M + 1e-6
+        self._conflict_points: np.ndarray | None = None
+        self._chains: dict[int, tuple[Polyline, np.ndarray, bool]] = {}
+
+    @property
+    def n_lanes(self) -> int:
+        return len(self.lane_ids)
+
+    @property
+    def conflict_points(self) -> np.ndarray:
+        """``[C, 2]`` lane conflict points (m), see `scoring.conflict_points` (computed on first use)."""
+        if self._conflict_points is None:
+            from scoring.conflict_points import lane_conflict_points
+
+            self._conflict_points = lane_conflict_points(self)
+        return self._conflict_points
+
+    # ------------------------------------------------------------------------------------------ projection
+    def project(self, xy: np.ndarray, heading: np.ndarray | None = None) -> Projection:
+        """Project points ``xy [N, 2]`` (m) with headings ``[N]`` (rad, optional) onto the closest compatible lane."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        n = xy.shape[0]
+        lane = np.full(n, -1, dtype=np.int64)
+        s = np.full(n, np.nan)
+        d = np.full(n, np.nan)
+        in_lane = np.zeros(n, dtype=bool)
+        # Candidate (point, segment) pairs from a grid search against points sampled every <= 4 m along the
+        # segments: any segment within the assignment distance of a point has a sample within the search radius,
+        # and a point only meets the few segments around it instead of all of them.
+        ip, isamp = close_pairs(xy, self._samples, self._search_radius)
+        if ip.size == 0:
+            return Projection(lane=lane, s=s, d=d, in_lane=in_lane)
+        seg = self._sample_seg[isamp]  # duplicates (several samples of one segment) are harmless
+        a, sd = self.seg_a[seg], self.seg_d[seg]
+        rx, ry = xy[ip, 0] - a[:, 0], xy[ip, 1] - a[:, 1]
+        t = np.clip((rx * sd[:, 0] + ry * sd[:, 1]) / self.seg_len2[seg], 0.0, 1.0)
+        ex, ey = rx - t * sd[:, 0], ry - t * sd[:, 1]
+        dist2 = ex * ex + ey * ey
+        if heading is not None:
+            h = np.asarray(heading, dtype=np.float64).reshape(-1)[ip]
+            # Compatible direction: cos(heading - segment heading) >= cos(max difference).
+            cos_diff = np.cos(h) * self._seg_cos[seg] + np.sin(h) * self._seg_sin[seg]
+            dist2 = np.where(cos_diff < np.cos(MAX_HEADING_DIFF_RAD), np.inf, dist2)
+        order = np.lexsort((dist2, ip))  # per point (ip sorted), closest candidate first
+        first = order[np.concatenate([[True], ip[order][1:] != ip[order][:-1]])]
+        pt, k, best2 = ip[first], seg[first], dist2[first]
+        best = np.sqrt(np.where(np.isfinite(best2), best2, 0.0))
+        seg_lane = self.seg_lane[k]
+        ok = np.isfinite(best2) & (best <= MAX_LANE_DIST_WIDTHS * self.widths[seg_lane])
+        cross = (sd[first, 0] * ry[first] - sd[first, 1] * rx[first]) / self.seg_len[k]
+        lane[pt] = np.where(ok, seg_lane, -1)
+        s[pt] = np.where(ok, self.seg_s0[k] + t[first] * self.seg_len[k], np.nan)
+        # Past a lane's end the closest point is the end point: the lateral offset is then the full distance.
+        d[pt] = np.where(ok, np.sign(cross) * best, np.nan)
+        in_lane[pt] = ok & (best <= 0.5 * self.widths[seg_lane])
+        return Projection(lane=lane, s=s, d=d, in_lane=in_lane)
+
+    # ------------------------------------------------------------------------------------------ lane chains
+    def chain(self, lane: int, min_length_m: float) -> tuple[Polyline, np.ndarray]:
+        """Centre polyline starting with ``lane`` and continuing through successors for at least ``min_length_m``
+        metres (or until a lane has none), plus the lane index of each of its segments ``[P-1]``. Cached per lane.
+
+        Where a lane has several successors the straightest one is taken: the counterfactual driver keeps going.
+        """
+        hit = self._chains.get(lane)
+        # A cached chain serves if it is long enough or ended at a dead end (it cannot grow).
+        if hit is not None and (hit[0].length >= min_length_m or hit[2]):
+            return hit[0], hit[1]
+        # Build generously (8 s at 50 m/s past the lane) so that one build serves every agent on the lane.
+        target = max(min_length_m, float(self.lane_lengths[lane]) + 400.0)
+        pts = [self.centerlines[lane]]
+        seg_lane = [np.full(pts[0].shape[0] - 1, lane)]
+        total = float(self.lane_lengths[lane])
+        current = lane
+        seen = {lane}
+        dead_end = False
+        while total < target:
+            end_dir = _end_direction(self.centerlines[current])
+            best, best_turn = -1, np.inf
+            for cand in self.successors[current]:
+                turn = abs(float(wrap_angle(_start_direction(self.centerlines[cand]) - end_dir)))
+                if cand not in seen and turn < best_turn:
+                    best, best_turn = cand, turn
+            if best < 0:
+                dead_end = True
+                break
+            nxt = self.centerlines[best]
+            if np.hypot(*(nxt[0] - pts[-1][-1])) < 1e-6:  # shared joint point: do not repeat it
+                nxt = nxt[1:]
+            pts.append(nxt)
+            seg_lane.append(np.full(nxt.shape[0], best))  # each appended point closes one segment
+            total += float(self.lane_lengths[best])
+            current = best
+            seen.add(best)
+        result = (Polyline(np.concatenate(pts)), np.concatenate(seg_lane), dead_end)
+        self._chains[lane] = result
+        return result[0], result[1]
+
+
+def _polyline_length(pts: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
+
+
+def _start_direction(pts: np.ndarray) -> float:
+    v = pts[1] - pts[0]
+    return float(np.arctan2(v[1], v[0]))
+
+
+def _end_direction(pts: np.ndarray) -> float:
+    v = pts[-1] - pts[-2]
+    return float(np.arctan2(v[1], v[0]))
+
+
+class Polyline:
+    """A polyline ``[P, 2]`` (m) with arc lengths and tangents precomputed, for Frenet <-> Cartesian."""
+
+    def __init__(self, points: np.ndarray) -> None:
+        self.points = np.asarray(points, dtype=np.float64)
+        seg = np.diff(self.points, axis=0)
+        self.seg_len = np.maximum(np.hypot(seg[:, 0], seg[:, 1]), 1e-12)
+        self.tang = seg / self.seg_len[:, None]
+        self.cum = np.concatenate([[0.0], np.cumsum(self.seg_len)])
+        # Vertex tangents: average of the adjacent segments' tangents (ends: the end segment's), so that an offset
+        # path along a curve stays smooth instead of kinking at every vertex.
+        vt = np.concatenate([self.tang[:1], self.tang[:-1] + self.tang[1:], self.tang[-1:]])
+        self.vertex_tang = vt / np.maximum(np.hypot(vt[:, 0], vt[:, 1]), 1e-12)[:, None]
+
+    @property
+    def length(self) -> float:
+        return float(self.cum[-1])
+
+    def project(self, xy: np.ndarray) -> tuple[float, float, np.ndarray]:
+        """Arc length ``s`` (m), signed lateral offset ``d`` (m, left positive) of point ``xy [2]`` and the unit
+        tangent ``[2]`` of the closest segment."""
+        a = self.points[:-1]
+        rx, ry = xy[0] - a[:, 0], xy[1] - a[:, 1]
+        t = np.clip((rx * self.tang[:, 0] + ry * self.tang[:, 1]) / self.seg_len, 0.0, 1.0)
+        ex, ey = rx - t * self.seg_len * self.tang[:, 0], ry - t * self.seg_len * self.tang[:, 1]
+        dist2 = ex * ex + ey * ey
+        k = int(np.argmin(dist2))
+        cross = self.tang[k, 0] * ry[k] - self.tang[k, 1] * rx[k]
+        return float(self.cum[k] + t[k] * self.seg_len[k]), float(np.sign(cross) * np.sqrt(dist2[k])), self.tang[k]
+
+    def at(self, s: np.ndarray, d: float) -> tuple[np.ndarray, np.ndarray]:
+        """Points ``[K, 2]`` at arc lengths ``s [K]`` shifted ``d`` metres to the left, and their headings ``[K]``.
+
+        Beyond the ends the first / last segment is extended as a straight line.
+        """
+        s = np.asarray(s, dtype=np.float64)
+        cum = self.cum
+        inside = np.clip(s, 0.0, cum[-1])
+        x = np.interp(inside, cum, self.points[:, 0])
+        y = np.interp(inside, cum, self.points[:, 1])
+        tx = np.interp(inside, cum, self.vertex_tang[:, 0])
+        ty = np.interp(inside, cum, self.vertex_tang[:, 1])
+        over = s - inside
+        outside = over != 0
+        if outside.any():
+            end_t = np.where((s > cum[-1])[:, None], self.tang[-1], self.tang[0])
+            x = x + over * end_t[:, 0]
+            y = y + over * end_t[:, 1]
+            tx = np.where(outside, end_t[:, 0], tx)
+            ty = np.where(outside, end_t[:, 1], ty)
+        norm = np.maximum(np.hypot(tx, ty), 1e-12)
+        tx, ty = tx / norm, ty / norm
+        return np.stack([x - d * ty, y + d * tx], axis=1), np.arctan2(ty, tx)

@@ -1,0 +1,292 @@
+"""Social (agent-pair) SafeShift features and the social score (thesis eq. 3.2, SafeShift code), vectorised over
+pairs.
+
+A pair is (agent ``I[p]`` of track set ``a``, agent ``J[p]`` of track set ``b``): the same set for the GT / FE
+variants, FE for i and GT for j in the asymmetric one. Only steps where both are valid count. Pairs are skipped
+(all features 0) when both agents are stationary (mean speed <= 0.25 m/s) or never within 50 m.
+
+Features (larger = more safety-relevant; the inverse of a time is 0 when the time is undefined):
+
+* ``inv_thw`` (1/s): max of 1/THW, THW = bumper gap / follower speed;
+* ``inv_ttc`` (1/s): max of 1/TTC, TTC = bumper gap / closing speed (follower faster than leader);
+* ``drac`` (m/s^2): max of closing speed^2 / (2 bumper gap);
+  these three only at steps where both are in the same or directly connected lanes with headings within 45 deg;
+  the leader is the one ahead along the other's heading; bumper gap = centre distance - half of both lengths
+  (floored at 0.1 m; SafeShift uses centre distances, bumper gaps make a 2 m tailgater count as one);
+* ``inv_mttcp_map`` (1/s): 1 / min over the lane conflict points both pass within 5 m of, over the steps up to
+  the first of their closest approaches, of |time to the point of i - time to it of j| (time = distance / speed;
+  a stationary agent's time is 0, it is already there);
+* ``inv_mttcp_agents`` (1/s): the same with the points where i's path comes within 1 m of j's path (at any two
+  steps), the point being i's position there;
+* ``collisions`` (steps): number of steps where the per-step motion segments of the two centres intersect or
+  the centres are within 0.25 m (SafeShift's centre-based definition; no boxes);
+* ``pair_anomaly``: distance of the pair's motion to the clustered pair primitives.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from scoring.frenet import RoadIndex
+from scoring.neighbours import close_pairs
+from scoring.primitives import Primitives, pair_anomaly
+from scoring.tracks import AgentTracks
+
+SOCIAL_FEATURES = (
+    "inv_thw", "inv_ttc", "drac", "inv_mttcp_map", "inv_mttcp_agents", "collisions", "pair_anomaly",
+)
+STATIONARY_MPS = 0.25
+PAIR_DIST_M = 50.0
+HEADING_MAX_RAD = np.deg2rad(45.0)
+MAP_CP_DIST_M = 5.0
+AGENT_CP_DIST_M = 1.0
+COLLISION_DIST_M = 0.25
+MIN_GAP_M = 0.1
+MIN_TIME_S = 1e-3
+SPEED_EPS = 1e-3
+
+
+class TrackContext:
+    """Per-track-set arrays reused by every pair: speeds, coordinate planes, collapsed path points and distances
+    to the road's conflict points."""
+
+    def __init__(self, tracks: AgentTracks, index: RoadIndex) -> None:
+        self.tracks = tracks
+        self.speed = tracks.speed
+        # Separate x / y planes: hypot on [.., T] arrays is much faster than norms over a trailing axis of 2.
+        self.x, self.y = np.ascontiguousarray(tracks.pos[..., 0]), np.ascontiguousarray(tracks.pos[..., 1])
+        # float32 copies for the per-row time-to-conflict-point arrays (memory bound; cm precision is plenty).
+        self.x32, self.y32 = self.x.astype(np.float32), self.y.astype(np.float32)
+        self.speed32 = self.speed.astype(np.float32)
+        # Path points for conflict search. A standing agent repeats its position up to 91 times, which would
+        # make the neighbour search quadratic; runs of consecutive positions in the same 1 cm grid cell are
+        # collapsed to one point: the last step of the run where the agent is "i" (the latest conflict step gives
+        # the longest window, hence the smallest time difference) and the first where it is "j" (SafeShift takes
+        # j's first close step). A grid cell (not "within 1 cm of the previous step") keeps slow drifts apart.
+        valid = tracks.valid
+        q = np.floor(tracks.pos / 0.01).astype(np.int64)
+        same = (q[:, 1:] == q[:, :-1]).all(-1) & valid[:, 1:] & valid[:, :-1]  # [A, T-1]: t+1 repeats t
+        first = valid.copy()
+        first[:, 1:] &= ~same
+        last = valid.copy()
+        last[:, :-1] &= ~same
+        # Both masks enumerate the same runs in the same (agent, step) order, so entry k of the first_* and
+        # last_* arrays is one run: its first and last step.
+        self.last_agent, self.last_step = np.nonzero(last)
+        self.last_points = tracks.pos[self.last_agent, self.last_step]  # [N, 2]
+        self.first_agent, self.first_step = np.nonzero(first)
+        self.first_points = tracks.pos[self.first_agent, self.first_step]
+        self.last_run_start = self.first_step  # run k's first step, aligned with last_* (same run order)
+        self.first_run_end = self.last_step
+        n_steps = valid.shape[1]
+        self.valid_start = np.argmax(valid, axis=1)
+        self.valid_end = n_steps - 1 - np.argmax(valid[:, ::-1], axis=1)
+        cps = index.conflict_points
+        if cps.shape[0]:
+            d = np.hypot(self.x[..., None] - cps[:, 0], self.y[..., None] - cps[:, 1])  # [A, T, C]
+            self.cp_dist = np.where(tracks.valid[..., None], d, np.inf)
+            self.cp_near = (self.cp_dist < MAP_CP_DIST_M).any(axis=1)  # [A, C]
+            self.cp_argmin = np.argmin(self.cp_dist, axis=1)  # [A, C] step of closest approach
+        else:
+            self.cp_dist = np.zeros(tracks.valid.shape + (0,))
+            self.cp_near = np.zeros((tracks.n_agents, 0), dtype=bool)
+            self.cp_argmin = np.zeros((tracks.n_agents, 0), dtype=np.int64)
+
+
+def social_features(
+    ca: TrackContext, cb: TrackContext, I: np.ndarray, J: np.ndarray, index: RoadIndex,
+    prim: Primitives | None = None,
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Features ``[P]`` named `SOCIAL_FEATURES` for pairs ``(I[p] in a, J[p] in b)`` and the active mask ``[P]``."""
+    a, b = ca.tracks, cb.tracks
+    n = I.size
+    out = {k: np.zeros(n) for k in SOCIAL_FEATURES}
+    if n == 0:
+        return out, np.zeros(0, dtype=bool)
+    mask = a.valid[I] & b.valid[J]
+    n_both = mask.sum(1)
+    si, sj = ca.speed[I], cb.speed[J]
+    mean_i = (si * mask).sum(1) / np.maximum(n_both, 1)
+    mean_j = (sj * mask).sum(1) / np.maximum(n_both, 1)
+    dist = np.hypot(ca.x[I] - cb.x[J], ca.y[I] - cb.y[J])
+    min_dist = np.where(mask, dist, np.inf).min(1)
+    active = (n_both > 0) & ~((mean_i <= STATIONARY_MPS) & (mean_j <= STATIONARY_MPS)) & (min_dist < PAIR_DIST_M)
+    act = np.flatnonzero(active)
+    if act.size == 0:
+        return out, active
+    I, J, mask, si, sj, dist = I[act], J[act], mask[act], si[act], sj[act], dist[act]
+    st_i, st_j = mean_i[act] <= STATIONARY_MPS, mean_j[act] <= STATIONARY_MPS
+    pi, pj = a.pos[I], b.pos[J]
+
+    out["collisions"][act] = _collisions(pi, pj, dist, mask)
+    thw, ttc, drac = _following(a, b, I, J, pi, pj, si, sj, dist, mask, index)
+    out["inv_thw"][act], out["inv_ttc"][act], out["drac"][act] = thw, ttc, drac
+    out["inv_mttcp_agents"][act] = _agent_mttcp(ca, cb, I, J, st_i, st_j, mask)
+    out["inv_mttcp_map"][act] = _map_mttcp(ca, cb, I, J, si, sj, st_i, st_j, mask)
+    out["pair_anomaly"][act] = pair_anomaly(prim, pi, a.heading[I], a.valid[I], pj, b.heading[J], b.valid[J])
+    return out, active
+
+
+def social_score(f: dict[str, np.ndarray]) -> np.ndarray:
+    """``[P]`` social score, weights of the SafeShift code."""
+    return (
+        np.minimum(2.0, f["inv_thw"])
+        + np.minimum(4.0, f["inv_mttcp_map"])
+        + np.minimum(4.0, f["inv_mttcp_agents"])
+        + np.minimum(2.0, f["inv_ttc"])
+        + np.minimum(2.0, f["drac"] / 5.0)
+        + f["collisions"]
+        + np.minimum(5.0, 0.1 * f["pair_anomaly"])
+    )
+
+
+# ------------------------------------------------------------------------------------------------ measures
+def segments_intersect(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+    """Whether segments ``p0-p1`` and ``q0-q1`` (``[..., 2]``, broadcast) intersect (touching counts)."""
+
+    def orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+        return (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0])
+
+    def on_segment(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:  # c within the box of a-b
+        return (
+            (np.minimum(a[..., 0], b[..., 0]) <= c[..., 0]) & (c[..., 0] <= np.maximum(a[..., 0], b[..., 0]))
+            & (np.minimum(a[..., 1], b[..., 1]) <= c[..., 1]) & (c[..., 1] <= np.maximum(a[..., 1], b[..., 1]))
+        )
+
+    d1, d2 = orient(q0, q1, p0), orient(q0, q1, p1)
+    d3, d4 = orient(p0, p1, q0), orient(p0, p1, q1)
+    proper = (((d1 > 0) & (d2 < 0)) | ((d1 < 0) & (d2 > 0))) & (((d3 > 0) & (d4 < 0)) | ((d3 < 0) & (d4 > 0)))
+    touch = (
+        ((d1 == 0) & on_segment(q0, q1, p0)) | ((d2 == 0) & on_segment(q0, q1, p1))
+        | ((d3 == 0) & on_segment(p0, p1, q0)) | ((d4 == 0) & on_segment(p0, p1, q1))
+    )
+    return proper | touch
+
+
+def _collisions(pi: np.ndarray, pj: np.ndarray, dist: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    hit = (dist <= COLLISION_DIST_M) & mask
+    # Motion segments can only cross if the centres are closer than the two step lengths together: test exactly
+    # only those (pair, step) candidates (few), not all P x T.
+    step_i = np.hypot(*(pi[:, 1:] - pi[:, :-1]).transpose(2, 0, 1))
+    step_j = np.hypot(*(pj[:, 1:] - pj[:, :-1]).transpose(2, 0, 1))
+    reach = step_i + step_j + 1e-6
+    cand = mask[:, 1:] & mask[:, :-1] & ((dist[:, 1:] <= reach) | (dist[:, :-1] <= reach))
+    p, t = np.nonzero(cand)
+    if p.size:
+        seg_hit = segments_intersect(pi[p, t], pi[p, t + 1], pj[p, t], pj[p, t + 1])
+        hit[p[seg_hit], t[seg_hit] + 1] = True
+    return hit.sum(1).astype(np.float64)
+
+
+def _following(a, b, I, J, pi, pj, si, sj, dist, mask, index: RoadIndex):
+    n = I.size
+    n_lanes = index.n_lanes
+    li = np.where(a.lane[I] >= 0, a.lane[I], n_lanes)
+    lj = np.where(b.lane[J] >= 0, b.lane[J], n_lanes)
+    ok = mask & index.connected[li, lj]
+    out = np.zeros((3, n))
+    rows = np.flatnonzero(ok.any(1))  # most pairs never share a lane: skip them early
+    if rows.size == 0:
+        return out
+    ok, pi, pj, si, sj, dist = ok[rows], pi[rows], pj[rows], si[rows], sj[rows], dist[rows]
+    hi, hj = a.heading[I[rows]], b.heading[J[rows]]
+    ok &= np.abs((hi - hj + np.pi) % (2 * np.pi) - np.pi) < HEADING_MAX_RAD
+    rel_x, rel_y = pj[..., 0] - pi[..., 0], pj[..., 1] - pi[..., 1]
+    j_leads = rel_x * np.cos(hi) + rel_y * np.sin(hi) > 0
+    v_f = np.where(j_leads, si, sj)
+    v_l = np.where(j_leads, sj, si)
+    gap = np.maximum(dist - 0.5 * (a.length[I[rows]] + b.length[J[rows]])[:, None], MIN_GAP_M)
+    closing = np.maximum(v_f - v_l, 0.0)
+    out[0, rows] = np.where(ok, v_f / gap, 0.0).max(1)
+    out[1, rows] = np.where(ok, closing / gap, 0.0).max(1)
+    out[2, rows] = np.where(ok, closing**2 / (2.0 * gap), 0.0).max(1)
+    return out
+
+
+def _min_time_difference(d_i, d_j, v_i, v_j, st_i, st_j, window) -> np.ndarray:
+    """``[R]`` min over the window of |d_i / v_i - d_j / v_j| (rows ``[R, T]``); stationary agents take 0 s."""
+    t_i = d_i / (v_i + SPEED_EPS)
+    t_i[st_i] = 0.0
+    t_j = d_j / (v_j + SPEED_EPS)
+    t_j[st_j] = 0.0
+    diff = np.abs(t_i - t_j)
+    diff[~window] = np.inf
+    return diff.min(1).astype(np.float64)
+
+
+def _buckets(t_end: np.ndarray, t_steps: int, width: int = 16) -> list[tuple[int, int]]:
+    """Column ranges ``(lo, hi]`` of window lengths, in steps of ``width``, that contain rows."""
+    edges = np.unique(np.minimum(-(-t_end // width) * width, t_steps))
+    return list(zip(np.concatenate([[0], edges[:-1]]).tolist(), edges.tolist(), strict=True))
+
+
+def _rows_min(values: np.ndarray, rows: np.ndarray, n: int) -> np.ndarray:
+    """Per-pair minimum of row values (inf where a pair has no row), inverted to 1/time."""
+    best = np.full(n, np.inf)
+    np.minimum.at(best, rows, values)
+    return np.where(np.isfinite(best), 1.0 / np.maximum(best, MIN_TIME_S), 0.0)
+
+
+def _agent_mttcp(ca: TrackContext, cb: TrackContext, I, J, st_i, st_j, mask) -> np.ndarray:
+    n, t_steps = mask.shape
+    # Path points of i (set a) within 1 m of path points of j (set b), at any two steps: grid neighbour search
+    # over all agents at once, then keep the (i, j) combinations that are active pairs.
+    ia, ib = close_pairs(ca.last_points, cb.first_points, AGENT_CP_DIST_M)
+    pair_of = np.full((ca.tracks.n_agents, cb.tracks.n_agents), -1, dtype=np.int64)
+    pair_of[I, J] = np.arange(n)
+    ai, bj = ca.last_agent[ia], cb.first_agent[ib]
+    p = pair_of[ai, bj]
+    keep = p >= 0
+    p, ia, ib, ai, bj = p[keep], ia[keep], ib[keep], ai[keep], bj[keep]
+    # Latest step of i's run where j is valid too, earliest step of j's run where i is valid too (validity is
+    # one block per agent): the steps the uncollapsed rows would have used.
+    ti = np.minimum(ca.last_step[ia], cb.valid_end[bj])
+    tj = np.maximum(cb.first_step[ib], ca.valid_start[ai])
+    keep = (ti >= np.maximum(ca.last_run_start[ia], cb.valid_start[bj])) & (
+        tj <= np.minimum(cb.first_run_end[ib], ca.valid_end[ai])
+    )
+    p, ti, tj = p[keep], ti[keep], tj[keep]
+    if p.size == 0:
+        return np.zeros(n)
+    # Each step of i with a conflict is one row; j's step is the first one close to it (as in SafeShift).
+    first_j = np.full((n, t_steps), t_steps, dtype=np.int64)
+    np.minimum.at(first_j, (p, ti), tj)
+    rp, ti = np.nonzero(first_j < t_steps)
+    tj = first_j[rp, ti]
+    ri, rj = I[rp], J[rp]
+    t_end = np.minimum(ti, tj) + 1  # rows only look at steps before the first of the two reaches the point
+    vals = np.empty(rp.size)
+    # Bucket rows by window length so that short windows do not pay for all T steps.
+    for lo, hi in _buckets(t_end, t_steps):
+        sel = np.flatnonzero((t_end > lo) & (t_end <= hi))
+        if sel.size == 0:
+            continue
+        a_, b_, r_ = ri[sel], rj[sel], rp[sel]
+        cx = ca.x32[a_, ti[sel]][:, None]  # conflict point = i's position at the conflict step
+        cy = ca.y32[a_, ti[sel]][:, None]
+        d_i = np.hypot(ca.x32[a_, :hi] - cx, ca.y32[a_, :hi] - cy)  # [R, hi]
+        d_j = np.hypot(cb.x32[b_, :hi] - cx, cb.y32[b_, :hi] - cy)
+        window = (np.arange(hi)[None, :] < t_end[sel][:, None]) & mask[r_, :hi]
+        vals[sel] = _min_time_difference(
+            d_i, d_j, ca.speed32[a_, :hi], cb.speed32[b_, :hi], st_i[r_], st_j[r_], window
+        )
+    return _rows_min(vals, rp, n)
+
+
+def _map_mttcp(ca: TrackContext, cb: TrackContext, I, J, si, sj, st_i, st_j, mask) -> np.ndarray:
+    n, t_steps = mask.shape
+    if ca.cp_near.shape[1] == 0:
+        return np.zeros(n)
+    shared = ca.cp_near[I] & cb.cp_near[J]  # [P, C]
+    rp, rc = np.nonzero(shared)
+    if rp.size == 0:
+        return np.zeros(n)
+    ai, aj = I[rp], J[rp]
+    d_i = ca.cp_dist[ai, :, rc]  # [R, T]
+    d_j = cb.cp_dist[aj, :, rc]
+    t_min = np.minimum(ca.cp_argmin[ai, rc], cb.cp_argmin[aj, rc])
+    window = (np.arange(t_steps)[None, :] <= t_min[:, None]) & mask[rp]
+    d_i = np.where(window, d_i, 0.0)  # inf outside the valid steps; masked anyway
+    d_j = np.where(window, d_j, 0.0)
+    vals = _min_time_difference(d_i, d_j, si[rp], sj[rp], st_i[rp], st_j[rp], window)
+    return _rows_min(vals, rp, n)
