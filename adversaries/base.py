@@ -14,9 +14,9 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
+
 from envs.behaviors import AdversaryBehavior
 from envs.rollout import Rollout
-
 from seal.scenario import Scenario
 
 K_ROLLOUTS = 5

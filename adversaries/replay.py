@@ -5,10 +5,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from envs.behaviors import ReplayBehavior
-from envs.rollout import Rollout
 
 from adversaries.base import AdversaryGenerator, Generation, register
+from envs.behaviors import ReplayBehavior
+from envs.rollout import Rollout
 from seal.scenario import Scenario
 
 

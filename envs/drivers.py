@@ -25,11 +25,12 @@ import numpy as np
 from highway_env.road.road import LaneIndex
 from highway_env.vehicle.behavior import IDMVehicle
 
+from seal.scenario import DT_S
+
 if TYPE_CHECKING:
     from envs.traffic import TrafficRoad
 
 DRIVER_KINDS = ("normal", "inattentive", "aggressive")
-DT_S = 0.1
 
 
 @dataclass(frozen=True, slots=True)

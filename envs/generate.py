@@ -26,7 +26,6 @@ import numpy as np
 from tqdm import tqdm
 
 import seal
-from envs.drivers import DRIVER_KINDS
 from envs.layouts import LAYOUTS, describe_network, sample_params
 from envs.traffic import Simulation
 from envs.windows import find_windows, window_tracks
@@ -172,6 +171,14 @@ def _map_runs(tasks: list[RunTask], pool: Any) -> Iterator[list[Scenario]]:
         yield results[k]
 
 
+def _make_pool(workers: int) -> Any:
+    """A process pool. Fork where available: workers start at once with everything imported, and scripts
+    calling `generate_dataset` without a ``__main__`` guard still work (workers use numpy/highway-env).
+    """
+    methods = mp.get_all_start_methods()
+    return mp.get_context("fork" if "fork" in methods else None).Pool(workers)
+
+
 def _versions() -> dict[str, str]:
     return {
         "seal": seal.__version__,
@@ -212,8 +219,8 @@ def generate_dataset(
     """
     layouts = _check_args(n, seed, layouts, workers, inattentive_share, aggressive_share)
     n, seed = int(n), int(seed)
+    # P(normal, inattentive, aggressive), in `DRIVER_KINDS` order.
     shares = (1.0 - inattentive_share - aggressive_share, float(inattentive_share), float(aggressive_share))
-    assert len(shares) == len(DRIVER_KINDS)
     params = {
         "generator": SOURCE,
         "version": GENERATOR_VERSION,
@@ -246,8 +253,7 @@ def generate_dataset(
             if _stop_after_chunks is not None and built >= _stop_after_chunks:
                 raise GenerationInterrupted(f"stopped after {built} chunks (test hook)")
             if pool is None and workers > 1:
-                ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else mp.get_context()
-                pool = ctx.Pool(workers)
+                pool = _make_pool(workers)
             if bar is None:
                 bar = tqdm(
                     total=n, initial=min(total, n), unit="scenario", desc="generate", disable=not progress

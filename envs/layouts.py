@@ -514,7 +514,12 @@ def _sides(network: RoadNetwork) -> dict[LaneIndex, list[str]]:
 
 
 def describe_network(network: RoadNetwork, layout: str, params: dict[str, Any]) -> RoadDescription:
-    """Every lane of ``network`` as a `LaneSpec` (curved lanes sampled every ~1 m), plus layout and params."""
+    """Every lane of ``network`` as a `LaneSpec` (curved lanes sampled every ~1 m), plus layout and params.
+
+    The description is in the map frame (x right, y up, angles counter-clockwise) while highway-env draws with
+    y down: y is mirrored so that highway-env's right-hand traffic stays right-hand (the ramp of ``merge``
+    joins from the right, as in real logs). Mirroring swaps each lane's left and right borders.
+    """
     successors = successor_map(network)
     sides = _sides(network)
     default_limit = float(params.get("speed_limit", 30.0))
@@ -525,9 +530,9 @@ def describe_network(network: RoadNetwork, layout: str, params: dict[str, Any]) 
         lanes.append(
             LaneSpec(
                 lane_id=lane_id(index),
-                centerline=_centerline(lane),
+                centerline=_centerline(lane) * np.array([1.0, -1.0]),
                 width_m=float(lane.width_at(0.0)),
-                line_types=(sides[index][0], sides[index][1]),
+                line_types=(sides[index][1], sides[index][0]),  # mirrored: highway-env's left is our right
                 speed_limit_mps=float(limit),
                 successors=tuple(lane_id(s) for s in successors[index]),
             )

@@ -8,9 +8,10 @@ bucketed per road, and collision pairs are prefiltered with numpy before highway
 
 Vehicles enter at the road starts / intersection and roundabout entries (Poisson arrivals, only when the
 entry is clear), the network starts populated, and vehicles are removed when they reach the end of an exit
-road or 8 s after a crash. At intersections and roundabouts lanes carry priorities and, every 0.5 s, the
-lower-priority vehicle of each predicted conflict (boxes overlapping within 3 s at constant speed, as in
-highway-env's `RegulatedRoad`) is told to yield; aggressive and distracted drivers sometimes do not.
+road or 8 s after a crash. At intersections and roundabouts lanes carry priorities and, every 0.3 s, one
+vehicle of each predicted conflict (boxes overlapping within 3 s at constant speed, after highway-env's
+`RegulatedRoad`; see `TrafficRoad.enforce_road_rules`) is told to yield; aggressive and distracted drivers
+sometimes do not.
 """
 
 from __future__ import annotations
@@ -26,8 +27,8 @@ from highway_env.road.road import LaneIndex, Road, RoadNetwork
 from envs.drivers import DRIVER_KINDS, Driver, sample_profile
 from envs.layouts import lane_indices, make_network, predecessor_map, successor_map
 from seal.geometry import box_corners, boxes_overlap
+from seal.scenario import DT_S
 
-DT_S = 0.1
 AHEAD_M = 80.0
 """Leaders are searched along the lane and its successors up to this distance (m)."""
 BEHIND_M = 40.0
@@ -37,7 +38,7 @@ CRASH_REMOVE_STEPS = 80
 GO_SPEED = 3.0
 """Speed (m/s) at which the road rules assume a waiting vehicle would drive off."""
 REGULATION_EVERY = 3
-"""Road rules are re-evaluated every 3 steps (highway-env's RegulatedRoad: 2 Hz)."""
+"""Road rules are re-evaluated every 3 steps (highway-env's RegulatedRoad: 2 Hz; faster reacts in time)."""
 CONFLICT_MARGIN_S = 1.0
 MAX_WAIT_S = 4.0
 """Two vehicles conflict when they would occupy the same place less than this many seconds apart."""

@@ -20,7 +20,7 @@ import numpy as np
 
 from envs.traffic import RunLog
 from seal.geometry import box_corners, box_gap
-from seal.scenario import CURRENT_STEP, N_STEPS
+from seal.scenario import CURRENT_STEP, DT_S, N_STEPS
 
 EVENT_GAP_M = 5.0
 """Bodies closer than this (m) interact."""
@@ -109,7 +109,7 @@ def _conflicts(log: RunLog, i: int, j: int, lo: int, hi: int) -> list[tuple[int,
         return []
     pi, pj = log.states[i, steps, :2], log.states[j, steps, :2]
     d = np.linalg.norm(pi[:, None] - pj[None], axis=-1)
-    dt = np.abs(steps[:, None] - steps[None]) * 0.1
+    dt = np.abs(steps[:, None] - steps[None]) * DT_S
     heading_diff = np.abs(
         (log.states[i, steps, 2][:, None] - log.states[j, steps, 2][None] + np.pi) % (2 * np.pi) - np.pi
     )
@@ -263,19 +263,22 @@ def _context(log: RunLog, ego: int, adv: int, t0: int) -> list[int]:
 
 
 def window_tracks(log: RunLog, w: Window) -> tuple[np.ndarray, np.ndarray]:
-    """(tracks ``[A, 91, 8]`` float32, `seal.scenario.TRACK_FIELDS` order; agent ids ``[A]``): ego, adv,
-    then the others."""
+    """(tracks ``[A, 91, 8]`` float32, `seal.scenario.TRACK_FIELDS` order, in the map frame (y mirrored, see
+    `envs.layouts.describe_network`); agent ids ``[A]``): ego, adv, then the others."""
     rows = np.array([w.ego, w.adv, *w.others], dtype=np.int64)
     s = log.states[rows, w.t0 : w.t0 + N_STEPS]
     valid = log.valid[rows, w.t0 : w.t0 + N_STEPS]
     speed = s[..., 3]
+    # highway-env's frame has y pointing down (its traffic keeps right on screen); scenarios use the map frame
+    # (y up, heading counter-clockwise), so y and heading are mirrored: right-hand traffic like real logs.
+    heading = -s[..., 2]
     tracks = np.stack(
         [
             s[..., 0],
-            s[..., 1],
-            s[..., 2],
-            speed * np.cos(s[..., 2]),
-            speed * np.sin(s[..., 2]),
+            -s[..., 1],
+            heading,
+            speed * np.cos(heading),
+            speed * np.sin(heading),
             s[..., 4],
             s[..., 5],
             valid.astype(np.float64),

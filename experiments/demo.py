@@ -17,12 +17,12 @@ from typing import Any
 
 import numpy as np
 import yaml
+from tqdm import tqdm
+
 from envs.generate import generate_dataset
 from envs.heuristic import HeuristicDriver
 from envs.render import render_episode
 from envs.scenario_env import ScenarioEnv
-from tqdm import tqdm
-
 from scoring.proximity import pair_proximity
 from seal.atomic import atomic_write_bytes
 from seal.dataset import MANIFEST, Dataset

@@ -6,11 +6,19 @@ pairs is ``P x T x T`` work, while the grid only visits points in neighbouring c
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 
-def close_pairs(a: np.ndarray, b: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """Indices ``(ia, ib)`` of all point pairs with ``|a[ia] - b[ib]| <= radius``; ``a [Na, 2]``, ``b [Nb, 2]``."""
+def close_pairs(
+    a: np.ndarray, b: np.ndarray, radius: float, allowed: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Indices ``(ia, ib)`` of all point pairs with ``|a[ia] - b[ib]| <= radius``; ``a [Na, 2]``, ``b [Nb, 2]``.
+
+    ``allowed(ia, ib) -> bool mask`` drops candidate pairs before the exact distance test (cheaper when most
+    neighbours are of no interest, e.g. points of the same agent).
+    """
     empty = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
     if a.shape[0] == 0 or b.shape[0] == 0:
         return empty
@@ -39,7 +47,12 @@ def close_pairs(a: np.ndarray, b: np.ndarray, radius: float) -> tuple[np.ndarray
     run_start = np.repeat(start, count)
     within = np.arange(total) - np.repeat(np.cumsum(count) - count, count)
     ib = order[run_start + within]
-    dx, dy = a[ia, 0] - b[ib, 0], a[ia, 1] - b[ib, 1]
+    if allowed is not None:
+        keep = allowed(ia, ib)
+        ia, ib = ia[keep], ib[keep]
+    ax, ay = np.ascontiguousarray(a[:, 0]), np.ascontiguousarray(a[:, 1])  # 1-D gathers are the fast kind
+    bx, by = np.ascontiguousarray(b[:, 0]), np.ascontiguousarray(b[:, 1])
+    dx, dy = ax[ia] - bx[ib], ay[ia] - by[ib]
     d2 = dx * dx + dy * dy
     keep = d2 <= radius * radius
     return ia[keep], ib[keep]

@@ -1,11 +1,11 @@
 """Clustered motion primitives and the trajectory (pair) anomaly features (SafeShift, after [51] in the thesis).
 
-A *primitive* is a 2 s window of motion (21 steps; 5 windows spread evenly over the 91 steps: starting at steps
-0, 18, 35, 52, 70, so that they cover the whole scenario with little overlap) in the
-frame of the agent at the window start (translated to its position, rotated by its heading), sampled every 4
-steps (0.4 s): 5 points = 10 numbers (m). A *pair primitive* adds the other agent's 6 positions (start included)
-in the same frame: 22 numbers. Only windows where the agent(s) are valid throughout count, and pair windows only when
-the two start within 50 m.
+A *primitive* is a 2 s window of motion (21 steps; 5 windows spread evenly over the 91 steps, starting at steps
+0, 18, 35, 52, 70, so that they cover the whole scenario with little overlap) in the frame of the agent at the
+window start (translated to its position, rotated by its heading), sampled every 4 steps (0.4 s): 5 points = 10
+numbers (m). A *pair primitive* adds the other agent's 6 positions (start included) in the same frame: 22
+numbers. Only windows where the agent(s) are valid throughout count, and pair windows only when the two start
+within 50 m.
 
 `fit_primitives` z-scores each dimension and runs k-means (k-means++, seeded) on a dataset's logged windows. The
 anomaly of a window is its RMS distance (z units per dimension, the distance divided by sqrt(dim), as in the
@@ -62,32 +62,50 @@ def _window_ok(valid: np.ndarray, starts: np.ndarray) -> np.ndarray:
     return (c[..., starts + WINDOW_STEPS + 1] - c[..., starts]) == WINDOW_STEPS + 1
 
 
-def _to_frame(points: np.ndarray, origin: np.ndarray, heading: np.ndarray) -> np.ndarray:
-    """Points ``[..., K, 2]`` in the frame at ``origin [..., 2]`` with ``heading [...]``."""
-    c, s = np.cos(heading)[..., None], np.sin(heading)[..., None]
-    rel = points - origin[..., None, :]
+@dataclass(frozen=True)
+class AgentWindows:
+    """Every agent's windows of one track set, computed once and shared by the single and pair features.
+
+    Attributes (``A`` agents, ``W`` windows): ``origin [A, W, 2]`` and ``cos`` / ``sin [A, W]`` of each window's
+    frame, ``own [A, W, 10]`` the agent's single-window features, ``pts [A, W, 6, 2]`` its positions at the pair
+    sample steps (world frame), ``ok [A, W]`` valid over the whole window.
+    """
+
+    origin: np.ndarray
+    cos: np.ndarray
+    sin: np.ndarray
+    own: np.ndarray
+    pts: np.ndarray
+    ok: np.ndarray
+
+
+def agent_windows(pos: np.ndarray, heading: np.ndarray, valid: np.ndarray) -> AgentWindows:
+    """`AgentWindows` of positions ``[A, T, 2]`` (m), headings ``[A, T]`` (rad) and validity ``[A, T]``."""
+    starts = window_starts(valid.shape[1])
+    origin = pos[:, starts]
+    c, s = np.cos(heading[:, starts]), np.sin(heading[:, starts])
+    own = _rotate(pos[:, starts[:, None] + _OFFSETS[None, :]] - origin[:, :, None, :], c, s)
+    return AgentWindows(
+        origin=origin, cos=c, sin=s, own=own.reshape(*own.shape[:2], -1),
+        pts=pos[:, starts[:, None] + _PAIR_OFFSETS[None, :]], ok=_window_ok(valid, starts),
+    )
+
+
+def _rotate(rel: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Vectors ``[..., K, 2]`` rotated by minus the angle with cosine / sine ``c``, ``s [...]``."""
+    c, s = c[..., None], s[..., None]
     return np.stack([c * rel[..., 0] + s * rel[..., 1], -s * rel[..., 0] + c * rel[..., 1]], axis=-1)
 
 
-def single_windows(pos: np.ndarray, heading: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Features ``[A, W, 10]`` (m) and ok mask ``[A, W]`` of every agent's windows."""
-    starts = window_starts(valid.shape[1])
-    idx = starts[:, None] + _OFFSETS[None, :]
-    feats = _to_frame(pos[:, idx], pos[:, starts], heading[:, starts])
-    return feats.reshape(pos.shape[0], starts.size, -1), _window_ok(valid, starts)
-
-
-def pair_windows(
-    pos_i: np.ndarray, head_i: np.ndarray, valid_i: np.ndarray, pos_j: np.ndarray, valid_j: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Pair features ``[P, W, 22]`` (m) in agent i's window frame, ok mask ``[P, W]``; inputs are per pair."""
-    starts = window_starts(valid_i.shape[1])
-    origin, head = pos_i[:, starts], head_i[:, starts]
-    own = _to_frame(pos_i[:, starts[:, None] + _OFFSETS[None, :]], origin, head)
-    other = _to_frame(pos_j[:, starts[:, None] + _PAIR_OFFSETS[None, :]], origin, head)
-    feats = np.concatenate([own.reshape(*own.shape[:2], -1), other.reshape(*other.shape[:2], -1)], axis=-1)
-    close = np.linalg.norm(pos_j[:, starts] - origin, axis=-1) < PAIR_MAX_DIST_M
-    return feats, _window_ok(valid_i, starts) & _window_ok(valid_j, starts) & close
+def pair_features(wf: AgentWindows, f: np.ndarray, wo: AgentWindows, o: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pair features ``[P, W, 22]`` (m) of agents ``o`` (windows ``wo``) seen from agents ``f`` (windows ``wf``)
+    and the ok mask ``[P, W]`` (both valid over the window, within 50 m at its start)."""
+    origin = wf.origin[f]
+    rel = wo.pts[o] - origin[:, :, None, :]
+    other = _rotate(rel, wf.cos[f], wf.sin[f])
+    feats = np.concatenate([wf.own[f], other.reshape(*other.shape[:2], -1)], axis=-1)
+    close = np.hypot(rel[:, :, 0, 0], rel[:, :, 0, 1]) < PAIR_MAX_DIST_M  # sample 0 is the window start
+    return feats, wf.ok[f] & wo.ok[o] & close
 
 
 def _nearest_rms(z: np.ndarray, centres: np.ndarray) -> np.ndarray:
@@ -102,29 +120,26 @@ def _mean_over_windows(dist: np.ndarray, ok: np.ndarray) -> np.ndarray:
     return np.where(n > 0, np.where(ok, dist, 0.0).sum(-1) / np.maximum(n, 1), 0.0)
 
 
-def single_anomaly(prim: Primitives | None, pos: np.ndarray, heading: np.ndarray, valid: np.ndarray) -> np.ndarray:
+def single_anomaly(prim: Primitives | None, w: AgentWindows) -> np.ndarray:
     """``[A]`` trajectory anomaly of every agent (0 when ``prim`` is None or the agent has no full window)."""
     if prim is None:
-        return np.zeros(pos.shape[0])
-    feats, ok = single_windows(pos, heading, valid)
-    dist = np.zeros(ok.shape)
-    if ok.any():
-        dist[ok] = _nearest_rms((feats[ok] - prim.single_mean) / prim.single_std, prim.single_centres)
-    return _mean_over_windows(dist, ok)
+        return np.zeros(w.ok.shape[0])
+    dist = np.zeros(w.ok.shape)
+    if w.ok.any():
+        dist[w.ok] = _nearest_rms((w.own[w.ok] - prim.single_mean) / prim.single_std, prim.single_centres)
+    return _mean_over_windows(dist, w.ok)
 
 
 def pair_anomaly(
-    prim: Primitives | None,
-    pos_i: np.ndarray, head_i: np.ndarray, valid_i: np.ndarray,
-    pos_j: np.ndarray, head_j: np.ndarray, valid_j: np.ndarray,
+    prim: Primitives | None, wa: AgentWindows, i: np.ndarray, wb: AgentWindows, j: np.ndarray
 ) -> np.ndarray:
-    """``[P]`` pair anomaly (the larger of the i-frame and j-frame means); inputs are per pair ``[P, T, ...]``."""
-    if prim is None or pos_i.shape[0] == 0:
-        return np.zeros(pos_i.shape[0])
+    """``[P]`` anomaly of pairs (agent ``i[p]`` of set a, ``j[p]`` of set b): the larger of the i-frame and
+    j-frame means over the windows."""
+    if prim is None or i.size == 0:
+        return np.zeros(i.size)
     out = []
-    orders = (((pos_i, head_i, valid_i), (pos_j, valid_j)), ((pos_j, head_j, valid_j), (pos_i, valid_i)))
-    for (pa, ha, va), (pb, vb) in orders:
-        feats, ok = pair_windows(pa, ha, va, pb, vb)
+    for wf, f, wo, o in ((wa, i, wb, j), (wb, j, wa, i)):
+        feats, ok = pair_features(wf, f, wo, o)
         dist = np.zeros(ok.shape)
         if ok.any():
             dist[ok] = _nearest_rms((feats[ok] - prim.pair_mean) / prim.pair_std, prim.pair_centres)
@@ -171,10 +186,10 @@ def fit_primitives(
     per_scene = max(64, 2 * max_windows // max(len(tracks), 1))
     singles, pairs = [], []
     for pos, heading, valid in tracks:
-        feats, ok = single_windows(pos, heading, valid)
-        singles.append(_subsample(feats[ok], per_scene, rng))
+        w = agent_windows(pos, heading, valid)
+        singles.append(_subsample(w.own[w.ok], per_scene, rng))
         ii, jj = np.nonzero(~np.eye(pos.shape[0], dtype=bool))
-        pf, pok = pair_windows(pos[ii], heading[ii], valid[ii], pos[jj], valid[jj])
+        pf, pok = pair_features(w, ii, w, jj)
         pairs.append(_subsample(pf[pok], per_scene, rng))
     return Primitives(*_fit_one(singles, k, rng, seed, max_windows), *_fit_one(pairs, k, rng, seed, max_windows))
 

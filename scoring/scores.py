@@ -104,10 +104,10 @@ def score_scenario(scenario: Scenario, prim: Primitives | None = None) -> Scenar
 
     ctx = {}
     for name, tr in (("gt", gt), ("fe", fe)):
-        feats = individual_features(tr, single_anomaly(prim, tr.pos, tr.heading, tr.valid))
+        ctx[name] = TrackContext(tr, index)
+        feats = individual_features(tr, single_anomaly(prim, ctx[name].windows))
         res.ind_features[name] = np.stack([feats[k] for k in INDIVIDUAL_FEATURES], axis=1)
         res.ind_score[name] = individual_score(feats)
-        ctx[name] = TrackContext(tr, index)
 
     for name in ("gt", "fe"):
         feats, active = social_features(ctx[name], ctx[name], I, J, index, prim)

@@ -29,7 +29,7 @@ import numpy as np
 
 from scoring.frenet import RoadIndex
 from scoring.neighbours import close_pairs
-from scoring.primitives import Primitives, pair_anomaly
+from scoring.primitives import Primitives, agent_windows, pair_anomaly
 from scoring.tracks import AgentTracks
 
 SOCIAL_FEATURES = (
@@ -53,6 +53,7 @@ class TrackContext:
     def __init__(self, tracks: AgentTracks, index: RoadIndex) -> None:
         self.tracks = tracks
         self.speed = tracks.speed
+        self.windows = agent_windows(tracks.pos, tracks.heading, tracks.valid)  # motion-primitive windows
         # Separate x / y planes: hypot on [.., T] arrays is much faster than norms over a trailing axis of 2.
         self.x, self.y = np.ascontiguousarray(tracks.pos[..., 0]), np.ascontiguousarray(tracks.pos[..., 1])
         # float32 copies for the per-row time-to-conflict-point arrays (memory bound; cm precision is plenty).
@@ -123,7 +124,7 @@ def social_features(
     out["inv_thw"][act], out["inv_ttc"][act], out["drac"][act] = thw, ttc, drac
     out["inv_mttcp_agents"][act] = _agent_mttcp(ca, cb, I, J, st_i, st_j, mask)
     out["inv_mttcp_map"][act] = _map_mttcp(ca, cb, I, J, si, sj, st_i, st_j, mask)
-    out["pair_anomaly"][act] = pair_anomaly(prim, pi, a.heading[I], a.valid[I], pj, b.heading[J], b.valid[J])
+    out["pair_anomaly"][act] = pair_anomaly(prim, ca.windows, I, cb.windows, J)
     return out, active
 
 
@@ -231,13 +232,14 @@ def _agent_mttcp(ca: TrackContext, cb: TrackContext, I, J, st_i, st_j, mask) -> 
     n, t_steps = mask.shape
     # Path points of i (set a) within 1 m of path points of j (set b), at any two steps: grid neighbour search
     # over all agents at once, then keep the (i, j) combinations that are active pairs.
-    ia, ib = close_pairs(ca.last_points, cb.first_points, AGENT_CP_DIST_M)
     pair_of = np.full((ca.tracks.n_agents, cb.tracks.n_agents), -1, dtype=np.int64)
     pair_of[I, J] = np.arange(n)
+    ia, ib = close_pairs(
+        ca.last_points, cb.first_points, AGENT_CP_DIST_M,
+        allowed=lambda ia, ib: pair_of[ca.last_agent[ia], cb.first_agent[ib]] >= 0,
+    )
     ai, bj = ca.last_agent[ia], cb.first_agent[ib]
     p = pair_of[ai, bj]
-    keep = p >= 0
-    p, ia, ib, ai, bj = p[keep], ia[keep], ib[keep], ai[keep], bj[keep]
     # Latest step of i's run where j is valid too, earliest step of j's run where i is valid too (validity is
     # one block per agent): the steps the uncollapsed rows would have used.
     ti = np.minimum(ca.last_step[ia], cb.valid_end[bj])

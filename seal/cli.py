@@ -107,9 +107,43 @@ def cmd_data_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_data_score(args: argparse.Namespace) -> int:
+    from scoring.store import score_dataset
+
+    summary = score_dataset(args.dir, workers=args.workers, progress=not args.no_progress)
+    print(json.dumps(summary, indent=2, default=str))
+    return 0
+
+
+def cmd_data_split(args: argparse.Namespace) -> int:
+    from scoring.splits import make_splits
+
+    result = make_splits(
+        args.dir, hard_quantile=args.hard_quantile, n_train=args.n_train, n_eval=args.n_eval,
+        n_hard=args.n_hard, seed=args.seed,
+    )
+    print(json.dumps(result, indent=2, default=str))
+    return 0
+
+
+def cmd_data_report(args: argparse.Namespace) -> int:
+    from scoring.report import write_report
+
+    for path in write_report(args.dir, args.out):
+        print(f"wrote {path}")
+    return 0
+
+
+def cmd_bench_scoring(args: argparse.Namespace) -> int:
+    from scoring.bench import run_scoring_bench
+
+    result = run_scoring_bench(args.dataset, workers=args.workers, limit=args.limit)
+    print(json.dumps(result, indent=2) if args.json else "\n".join(f"{k:>32}: {v}" for k, v in result.items()))
+    return 0
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     from envs.render import render_episode
-
     from seal.dataset import Dataset
 
     out = Path(args.out)
@@ -199,6 +233,40 @@ def build_parser() -> argparse.ArgumentParser:
     info.add_argument("--json", action="store_true", help="print JSON instead of a table")
     info.set_defaults(func=cmd_data_info)
 
+    score = data_sub.add_parser(
+        "score", help="SafeShift scores (GT, FE, AS, AC) per agent and scene, stored in the dataset",
+        description="Compute SafeShift individual, social, trajectory and scene scores for every scenario in all "
+        "variants (ground truth, future-extrapolated, asymmetric, asymmetric-combined) and store them in DIR.",
+    )
+    score.add_argument("dir", help="dataset directory")
+    score.add_argument(
+        "--workers", type=_positive_int("--workers"), default=None, help="processes (default: all cores)"
+    )
+    score.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    score.set_defaults(func=cmd_data_score)
+
+    split = data_sub.add_parser(
+        "split", help="Normal train / eval and Hard splits from the AC scene score",
+        description="Hard = a seeded sample of the scenes above --hard-quantile of the AC scene score; Normal "
+        "train / eval are drawn from the rest. Recorded in the manifest; same arguments, same splits.",
+    )
+    split.add_argument("dir", help="dataset directory (scored with `seal data score`)")
+    split.add_argument("--hard-quantile", type=_share("--hard-quantile"), default=0.8, help="default 0.8")
+    split.add_argument("--n-train", type=_positive_int("--n-train"), default=400, help="default 400")
+    split.add_argument("--n-eval", type=_positive_int("--n-eval"), default=100, help="default 100")
+    split.add_argument("--n-hard", type=_positive_int("--n-hard"), default=100, help="default 100")
+    split.add_argument("--seed", type=int, default=42, help="default 42")
+    split.set_defaults(func=cmd_data_split)
+
+    report = data_sub.add_parser(
+        "report", help="score distributions, feature correlations and example scenes as images",
+        description="Write the score distribution plot (all variants), the feature correlation heat-map and a "
+        "few top-scoring and median scenarios rendered as PNG images into --out.",
+    )
+    report.add_argument("dir", help="dataset directory (scored with `seal data score`)")
+    report.add_argument("--out", required=True, help="output folder")
+    report.set_defaults(func=cmd_data_report)
+
     render = sub.add_parser(
         "render", help="top-down video of a scenario roll-out",
         description="Roll a scenario out (heuristic ego, replayed adversary and traffic) and write a top-down "
@@ -223,6 +291,16 @@ def build_parser() -> argparse.ArgumentParser:
     benv.add_argument("--seed", type=int, default=0, help="random seed")
     benv.add_argument("--json", action="store_true", help="print JSON")
     benv.set_defaults(func=cmd_bench_env)
+    bscore = bench_sub.add_parser(
+        "scoring", help="time to score a dataset with SafeShift (all variants)",
+        description="Score a dataset (default: every scenario) without writing anything and print the time per "
+        "scenario and in total.",
+    )
+    bscore.add_argument("dataset", help="dataset directory")
+    bscore.add_argument("--workers", type=_positive_int("--workers"), default=None, help="processes")
+    bscore.add_argument("--limit", type=_positive_int("--limit"), default=None, help="score only the first N")
+    bscore.add_argument("--json", action="store_true", help="print JSON")
+    bscore.set_defaults(func=cmd_bench_scoring)
     return parser
 
 

@@ -49,7 +49,8 @@ def test_highway_markings_widths_and_successors() -> None:
     road = describe_network(make_network("highway", params), "highway", params)
     assert len(road.lanes) == 9
     for edge in ("a:b", "b:c", "c:d"):
-        right, middle, left = (road.lane(f"{edge}:{i}") for i in range(3))
+        # Map frame (y mirrored from highway-env): lane 0 is the leftmost lane, as in highway-env.
+        left, middle, right = (road.lane(f"{edge}:{i}") for i in range(3))
         # (left, right) seen in the driving direction: outer borders are road edges, inner ones lane lines.
         assert right.line_types == ("striped", "continuous")
         assert middle.line_types == ("striped", "striped")
@@ -77,9 +78,13 @@ def test_merge_ramp_lane_ends_and_shares_a_lane_line() -> None:
     road = describe_network(make_network("merge", params), "merge", params)
     ramp = road.lane(f"b:c:{lanes}")
     assert ramp.successors == ()  # the acceleration lane ends: ramp traffic must merge
-    assert ramp.line_types == ("continuous", "striped")
-    assert road.lane(f"b:c:{lanes - 1}").line_types[0] == "striped"  # no road edge along the ramp
-    assert road.lane(f"a:b:{lanes - 1}").line_types[0] == "continuous"
+    # The ramp joins from the right (right-hand traffic in the map frame): its left border is the lane line
+    # it shares with the rightmost main lane, its right border the road edge.
+    assert ramp.line_types == ("striped", "continuous")
+    assert road.lane(f"b:c:{lanes - 1}").line_types[1] == "striped"  # no road edge along the ramp
+    assert road.lane(f"a:b:{lanes - 1}").line_types[1] == "continuous"
+    ramp_y = ramp.centerline[:, 1].mean()
+    assert ramp_y < road.lane(f"b:c:{lanes - 1}").centerline[:, 1].mean()  # ramp is to the right (-y) of +x traffic
     assert road.lane("j:k:0").successors == ("k:b:0",)
     assert road.lane("k:b:0").successors == (f"b:c:{lanes}",)
 
