@@ -7,9 +7,9 @@ falls in steps 25..75 of the window (an adversary then has time to act before it
 A window is kept when both vehicles exist over the whole window, both move (mean speed > 2 m/s and more than
 10 m travelled) and, in the future part (steps 10..90), their gap falls below `EVENT_GAP_M` or their paths
 cross (within `CONFLICT_DT_S`); oncoming vehicles merely passing each other in their own lanes do not count.
-Windows are ranked by the closest approach plus the smallest time to collision of the future part (so that a
-collision course ranks above driving side by side; with a little noise so that not only crashes win) and at
-most ``cap`` are taken per run, each with a distinct pair and each vehicle in at most two of them.
+Qualifying windows are drawn uniformly (those whose closest approach falls in the preferred steps first), so
+the pool keeps the natural mix of routine interactions, near misses and crashes, and at most ``cap`` are taken
+per run, each with a distinct pair and each vehicle in at most two of them.
 """
 
 from __future__ import annotations
@@ -35,7 +35,6 @@ EVENT_STEPS = (25, 75)
 MIN_MEAN_SPEED = 2.0
 MIN_DISPLACEMENT_M = 10.0
 MAX_PER_VEHICLE = 2
-TTC_CAP_S = 6.0
 
 
 @dataclass(frozen=True)
@@ -156,22 +155,6 @@ def _events(log: RunLog, gaps: dict[tuple[int, int], np.ndarray], pairs: _Pairs)
     return events
 
 
-def _min_ttc(log: RunLog, i: int, j: int, steps: slice) -> float:
-    """Smallest time to collision (s) over ``steps`` at constant velocities: the time to the closest point of
-    approach when the centres then pass closer than half the two widths plus 0.5 m (a collision course)."""
-    a, b = log.states[i, steps], log.states[j, steps]
-    dp = b[:, :2] - a[:, :2]
-    dv = b[:, 3:4] * np.stack([np.cos(b[:, 2]), np.sin(b[:, 2])], 1) - a[:, 3:4] * np.stack(
-        [np.cos(a[:, 2]), np.sin(a[:, 2])], 1
-    )
-    vv = np.maximum((dv * dv).sum(1), 1e-6)
-    t_cpa = -(dp * dv).sum(1) / vv
-    miss = np.linalg.norm(dp + dv * t_cpa[:, None], axis=1)
-    contact = t_cpa - (a[:, 4] + b[:, 4]) / 2 / np.sqrt(vv)  # the boxes touch about half a length earlier
-    course = (t_cpa > 0) & (miss < (a[:, 5] + b[:, 5]) / 2 + 0.5)
-    return float(np.maximum(contact[course], 0.0).min()) if course.any() else np.inf
-
-
 def _moving(log: RunLog, row: int, t0: int) -> bool:
     s = log.states[row, t0 : t0 + N_STEPS]
     return (
@@ -215,16 +198,15 @@ def find_windows(log: RunLog, rng: np.random.Generator, cap: int, min_t0: int = 
         if min_gap >= EVENT_GAP_M and not conflict:
             continue
         pair_collision = (i, j) in collided and t0 <= collided[(i, j)] < t0 + N_STEPS
-        # Rank: closest approach plus time to collision (so being on a collision course beats passing side by
-        # side or oncoming), noise so near-misses compete with crashes, events outside the preferred steps
-        # penalised.
-        ttc = _min_ttc(log, i, j, fut)
         turn = np.abs((log.states[i, fut, 2] - log.states[j, fut, 2] + np.pi) % (2 * np.pi) - np.pi)
         if np.median(turn) > 2.4 and min_gap > 1.0 and not conflict:
             continue  # oncoming traffic passing in its own lane is not an interaction
-        score = min_gap + 0.5 * min(ttc, TTC_CAP_S) + float(rng.uniform(0.0, 1.5))
+        # Rank: a uniform draw among qualifying interactions, so the pool keeps their natural mix of routine
+        # interactions, near misses and crashes (ranking closest-first made nearly every pair a near miss and
+        # left no long tail for scenario scoring to find); events outside the preferred steps come last.
+        score = float(rng.uniform(0.0, 1.0))
         if not EVENT_STEPS[0] <= t_min <= EVENT_STEPS[1]:
-            score += 2.0
+            score += 1.0
         candidates.append((score, i, j, t0, min_gap, pair_collision, t_min))
     candidates.sort(key=lambda c: (c[0], c[1], c[2], c[3]))
 

@@ -33,19 +33,15 @@ def bench_scenarios(dataset: str | Path | None, seed: int = 0, n_runs: int = 8) 
     """Scenarios to benchmark on and a description of where they come from.
 
     Without a dataset: ``n_runs`` highway-env traffic runs (spread over the layouts) simulated in this process
-    by `envs.generate`; if that module is unavailable, the hand-built `envs.scenario_factory` highways.
+    by `envs.generate`.
     """
     if dataset is not None:
         from seal.dataset import load_scenarios
 
         return load_scenarios(dataset), f"dataset {dataset}"
-    try:
-        from envs.generate import RunTask, simulate_run
-        from envs.layouts import LAYOUTS
-    except ImportError:
-        from envs.scenario_factory import highway_scenario
+    from envs.generate import RunTask, simulate_run
+    from envs.layouts import LAYOUTS
 
-        return [highway_scenario(seed * 1000 + i, n_agents=15) for i in range(20)], "envs.scenario_factory"
     scenarios: list[Scenario] = []
     for run in range(n_runs):
         task = RunTask(run=run, layout=LAYOUTS[run % len(LAYOUTS)], seed=seed, kind_shares=(0.7, 0.15, 0.15))

@@ -18,8 +18,9 @@ Features (larger = more safety-relevant; the inverse of a time is 0 when the tim
   a stationary agent's time is 0, it is already there);
 * ``inv_mttcp_agents`` (1/s): the same with the points where i's path comes within 1 m of j's path (at any two
   steps), the point being i's position there;
-* ``collisions`` (steps): number of steps where the per-step motion segments of the two centres intersect or
-  the centres are within 0.25 m (SafeShift's centre-based definition; no boxes);
+* ``collisions`` (steps): number of steps where the per-step motion segments of the two centres intersect, the
+  centres are within 0.25 m (SafeShift's centre-based definition), or the two bodies' oriented boxes overlap
+  (added: in simulated traffic crashing cars are pushed apart, so their centres never meet);
 * ``pair_anomaly``: distance of the pair's motion to the clustered pair primitives.
 """
 
@@ -31,6 +32,7 @@ from scoring.frenet import RoadIndex
 from scoring.neighbours import close_pairs
 from scoring.primitives import Primitives, agent_windows, pair_anomaly
 from scoring.tracks import AgentTracks
+from seal.geometry import box_corners, boxes_overlap
 
 SOCIAL_FEATURES = (
     "inv_thw", "inv_ttc", "drac", "inv_mttcp_map", "inv_mttcp_agents", "collisions", "pair_anomaly",
@@ -119,7 +121,7 @@ def social_features(
     st_i, st_j = mean_i[act] <= STATIONARY_MPS, mean_j[act] <= STATIONARY_MPS
     pi, pj = a.pos[I], b.pos[J]
 
-    out["collisions"][act] = _collisions(pi, pj, dist, mask)
+    out["collisions"][act] = _collisions(a, b, I, J, pi, pj, dist, mask)
     thw, ttc, drac = _following(a, b, I, J, pi, pj, si, sj, dist, mask, index)
     out["inv_thw"][act], out["inv_ttc"][act], out["drac"][act] = thw, ttc, drac
     out["inv_mttcp_agents"][act] = _agent_mttcp(ca, cb, I, J, st_i, st_j, mask)
@@ -164,8 +166,19 @@ def segments_intersect(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.nd
     return proper | touch
 
 
-def _collisions(pi: np.ndarray, pj: np.ndarray, dist: np.ndarray, mask: np.ndarray) -> np.ndarray:
+def _collisions(
+    a: AgentTracks, b: AgentTracks, I: np.ndarray, J: np.ndarray, pi: np.ndarray, pj: np.ndarray,
+    dist: np.ndarray, mask: np.ndarray,
+) -> np.ndarray:
     hit = (dist <= COLLISION_DIST_M) & mask
+    # Box overlap, tested only where the circumscribed circles touch.
+    reach_box = 0.5 * (np.hypot(a.length[I], a.width[I]) + np.hypot(b.length[J], b.width[J]))
+    p, t = np.nonzero(mask & (dist <= reach_box[:, None]))
+    if p.size:
+        box_i = box_corners(pi[p, t, 0], pi[p, t, 1], a.heading[I[p], t], a.length[I[p]], a.width[I[p]])
+        box_j = box_corners(pj[p, t, 0], pj[p, t, 1], b.heading[J[p], t], b.length[J[p]], b.width[J[p]])
+        overlap = boxes_overlap(box_i, box_j)
+        hit[p[overlap], t[overlap]] = True
     # Motion segments can only cross if the centres are closer than the two step lengths together: test exactly
     # only those (pair, step) candidates (few), not all P x T.
     step_i = np.hypot(*(pi[:, 1:] - pi[:, :-1]).transpose(2, 0, 1))

@@ -24,7 +24,8 @@ def cross_road() -> RoadDescription:
 
 
 def track(
-    xy: np.ndarray, valid: np.ndarray | None = None, length: float = LENGTH_M, vel: np.ndarray | None = None
+    xy: np.ndarray, valid: np.ndarray | None = None, length: float = LENGTH_M, vel: np.ndarray | None = None,
+    width: float = WIDTH_M,
 ) -> np.ndarray:
     """``[T, 8]`` track from positions ``[T, 2]``: velocity (unless given) and heading from finite differences."""
     xy = np.asarray(xy, dtype=np.float64)
@@ -36,7 +37,7 @@ def track(
     out[:, 2] = heading
     out[:, 3:5] = vel
     out[:, 5] = length
-    out[:, 6] = WIDTH_M
+    out[:, 6] = width
     out[:, 7] = valid
     out[~valid] = 0.0
     return out

@@ -37,14 +37,27 @@ def test_equal_speeds_have_headway_but_no_ttc() -> None:
 
 
 def test_collision_found_by_segment_intersection_only() -> None:
-    # A crosses the origin along x at step 45, B along y half a metre behind: centres are never within 0.25 m,
-    # but their motion segments of step 46 cross at the origin.
+    # A crosses the origin along x at step 45, B along y half a metre behind: centres are never within 0.25 m
+    # and the (tiny, 0.2 m) bodies never overlap, but their motion segments of step 46 cross at the origin.
     k = np.arange(N_STEPS, dtype=float)
-    a = track(np.stack([k - 45.0, np.zeros(N_STEPS)], axis=1))
-    b = track(np.stack([np.zeros(N_STEPS), k - 45.5], axis=1))
+    a = track(np.stack([k - 45.0, np.zeros(N_STEPS)], axis=1), length=0.2, width=0.2)
+    b = track(np.stack([np.zeros(N_STEPS), k - 45.5], axis=1), length=0.2, width=0.2)
     res = score_scenario(scenario([a, b], cross_road()))
     assert feature(res, "collisions") == 1.0
     assert np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1]).min() > 0.25
+
+
+def test_collision_found_by_box_overlap() -> None:
+    # Side-swipe: B drifts toward A and back while heading straight along +x (explicit velocity, so both boxes
+    # stay axis-aligned). Centres stay >= 1.5 m apart laterally (never within 0.25 m, motion segments never
+    # cross), but the 2 m wide bodies overlap exactly while the lateral offset is below 2 m: steps 41..49.
+    k = np.arange(N_STEPS, dtype=float)
+    lateral = np.clip(np.abs(k - 45.0) * 0.12 + 1.5, 1.5, 3.5)  # 1.98 m at |k - 45| = 4, 2.1 m at 5
+    vel = np.tile([20.0, 0.0], (N_STEPS, 1))
+    a = track(np.stack([2.0 * k, np.zeros(N_STEPS)], axis=1), vel=vel)
+    b = track(np.stack([2.0 * k, lateral], axis=1), vel=vel)
+    res = score_scenario(scenario([a, b], straight_road()))
+    assert feature(res, "collisions") == 9.0
 
 
 def test_segments_intersect() -> None:
