@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from scoring.proximity import pair_proximity
 from scoring.store import load_scores
 from seal.dataset import Dataset, DatasetError
 
@@ -87,7 +88,16 @@ def make_splits(
         "scores_sha256": ds.manifest["scores"]["sha256"],
     }
     ds.update_manifest(splits=splits, split_params=params)
+    close_calls = {}
+    for name, members in splits.items():
+        prox = [pair_proximity(sc) for sc in ds.load(ids=members)] if members else []
+        close_calls[name] = {
+            "pair_within_2m_or_collision": float(np.mean([p.min_gap_m <= 2.0 or p.collision for p in prox]))
+            if prox else float("nan"),
+            "pair_collision": float(np.mean([p.collision for p in prox])) if prox else float("nan"),
+        }
     return {
+        "logged_close_calls": close_calls,
         **{name: len(v) for name, v in splits.items()},
         "threshold": threshold,
         "mean_score": {name: float(np.mean(scores[[order[s] for s in v]])) if v else float("nan")

@@ -198,17 +198,27 @@ def build_table(results: Sequence[ScenarioScores], prim: Primitives | None, meta
     return ScoreTable(a, meta)
 
 
-def summarize_scores(table: ScoreTable) -> dict[str, dict[str, float]]:
-    """Mean and quantiles of every variant's scene score."""
-    out = {}
+def summarize_scores(table: ScoreTable, top_share: float = 0.2) -> dict[str, Any]:
+    """Mean, spread and quantiles of every variant's scene score, plus how the counterfactual changes the tail:
+    ``ac_only_top_share`` = share of the AC top ``top_share`` scenes that are not in the GT top ``top_share``."""
+    out: dict[str, Any] = {}
     for v in VARIANTS:
         x = table.scene(v)
-        q = np.quantile(x, [0.5, 0.8, 0.95, 0.99]) if x.size else [np.nan] * 4
+        q = np.quantile(x, [0.25, 0.5, 0.75, 0.8, 0.95, 0.99]) if x.size else [np.nan] * 6
         out[v] = {
             "mean": float(np.mean(x)) if x.size else float("nan"),
-            "p50": float(q[0]), "p80": float(q[1]), "p95": float(q[2]), "p99": float(q[3]),
+            "std": float(np.std(x)) if x.size else float("nan"),
+            "iqr": float(q[2] - q[0]),
+            "p50": float(q[1]), "p80": float(q[3]), "p95": float(q[4]), "p99": float(q[5]),
             "max": float(np.max(x)) if x.size else float("nan"),
         }
+    gt, ac = table.scene("gt"), table.scene("ac")
+    if gt.size:
+        k = max(1, int(round(top_share * gt.size)))
+        top_gt = set(np.argsort(-gt, kind="stable")[:k].tolist())
+        top_ac = np.argsort(-ac, kind="stable")[:k].tolist()
+        out["ac_only_top_share"] = float(np.mean([i not in top_gt for i in top_ac]))
+        out["ac_over_gt_std"] = float(np.std(ac) / max(np.std(gt), 1e-12))
     return out
 
 

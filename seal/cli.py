@@ -134,6 +134,23 @@ def cmd_data_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_data(args: argparse.Namespace) -> int:
+    import time
+
+    from seal.dataset import Dataset
+
+    start = time.perf_counter()
+    scenarios = Dataset.open(args.dir).load(limit=args.n)
+    seconds = time.perf_counter() - start
+    result = {
+        "scenarios_loaded": len(scenarios), "seconds": round(seconds, 3),
+        "scenarios_per_s": round(len(scenarios) / seconds, 1), "target": f"{args.n} scenarios in < 2 s",
+        "meets_target": len(scenarios) >= args.n and seconds < 2.0,
+    }
+    print(json.dumps(result, indent=2) if args.json else "\n".join(f"{k:>20}: {v}" for k, v in result.items()))
+    return 0
+
+
 def cmd_bench_scoring(args: argparse.Namespace) -> int:
     from scoring.bench import run_scoring_bench
 
@@ -291,6 +308,14 @@ def build_parser() -> argparse.ArgumentParser:
     benv.add_argument("--seed", type=int, default=0, help="random seed")
     benv.add_argument("--json", action="store_true", help="print JSON")
     benv.set_defaults(func=cmd_bench_env)
+    bdata = bench_sub.add_parser(
+        "data", help="time to open a dataset and load (and validate) N scenarios",
+        description="Open a dataset and load its first --n scenarios (checksums and validation included).",
+    )
+    bdata.add_argument("dir", help="dataset directory")
+    bdata.add_argument("--n", type=_positive_int("--n"), default=500, help="scenarios to load (default 500)")
+    bdata.add_argument("--json", action="store_true", help="print JSON")
+    bdata.set_defaults(func=cmd_bench_data)
     bscore = bench_sub.add_parser(
         "scoring", help="time to score a dataset with SafeShift (all variants)",
         description="Score a dataset (default: every scenario) without writing anything and print the time per "

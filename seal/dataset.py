@@ -169,8 +169,11 @@ class Dataset:
     def splits(self) -> dict[str, list[str]]:
         return self.manifest["splits"]
 
-    def load(self, split: str | None = None, ids: Iterable[str] | None = None) -> list[Scenario]:
-        """Load scenarios in dataset order, optionally only those of ``split`` or with the given ``ids``."""
+    def load(
+        self, split: str | None = None, ids: Iterable[str] | None = None, limit: int | None = None
+    ) -> list[Scenario]:
+        """Load scenarios in dataset order, optionally only those of ``split`` or with the given ``ids``, and at
+        most ``limit`` of them (shards past the limit are not read)."""
         wanted: set[str] | None = None
         if split is not None:
             if split not in self.splits:
@@ -183,8 +186,12 @@ class Dataset:
             wanted = ids if wanted is None else wanted & ids
         out: list[Scenario] = []
         for entry in self.manifest["shards"]:
+            if limit is not None and len(out) >= limit:
+                return out[:limit]
             scenarios = read_shard(self.root / entry["file"], entry)
             out.extend(s for s in scenarios if wanted is None or s.scenario_id in wanted)
+        if limit is not None:
+            out = out[:limit]
         if ids is not None:
             missing = set(ids) - {s.scenario_id for s in out}
             if missing:

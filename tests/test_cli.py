@@ -9,7 +9,8 @@ import pytest
 from seal.cli import build_parser, main
 
 COMMANDS = [[], ["demo"], ["data"], ["data", "generate"], ["data", "info"], ["data", "score"], ["data", "split"],
-    ["data", "report"], ["render"], ["bench"], ["bench", "env"], ["bench", "scoring"]]
+    ["data", "report"], ["render"], ["bench"], ["bench", "env"], ["bench", "data"],
+    ["bench", "scoring"]]
 
 
 @pytest.mark.parametrize("words", COMMANDS, ids=lambda w: " ".join(w) or "seal")

@@ -48,6 +48,7 @@ def test_round_trip_preserves_everything(tmp_path: Path) -> None:
         assert a.road.to_json() == b.road.to_json()
         assert dict(a.metadata) == dict(b.metadata)
     assert [s.scenario_id for s in ds.load(ids=["s0003", "s0017"])] == ["s0003", "s0017"]
+    assert [s.scenario_id for s in ds.load(limit=12)] == [s.scenario_id for s in scenarios[:12]]
 
 
 def test_splits_recorded_in_manifest(tmp_path: Path) -> None:
