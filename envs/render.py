@@ -12,11 +12,14 @@ ego green, adversary red, others blue, with their recent path. Everything is dra
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pygame
+
+os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")  # no banner on stdout: `seal render` prints JSON
+import pygame  # noqa: E402
 import shapely
 from highway_env.road.graphics import LaneGraphics, WorldSurface
 from highway_env.road.lane import LineType

@@ -168,7 +168,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         raise CliError(f"--out must end in .mp4 or .gif, got {out.name!r}")
     scenario = Dataset.open(args.dataset).get(args.scenario)
     summary = render_episode(scenario, out, fps=args.fps)
-    print(json.dumps({"out": str(out), **summary}, default=str))
+    print(json.dumps(summary, default=str))
     return 0
 
 
