@@ -46,11 +46,6 @@ class BehaviorOutput:
     def act(cls, steering: float, acceleration: float) -> BehaviorOutput:
         return cls(action=(float(steering), float(acceleration)))
 
-    @property
-    def is_absent(self) -> bool:
-        return self.state is None and self.action is None
-
-
 class AdversaryBehavior(ABC):
     """How the adversary moves during one episode. `reset` is called at every env reset."""
 

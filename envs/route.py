@@ -115,10 +115,6 @@ class Route:
     def n_segments(self) -> int:
         return len(self._seg_len)
 
-    @property
-    def end_s(self) -> float:
-        return self.length
-
     def completion(self, s: float) -> float:
         """Share of the route from `start_s` to its end covered at arc length ``s`` (may be < 0 or > 1)."""
         return (s - self.start_s) / max(self.length - self.start_s, 1e-6)
@@ -146,10 +142,6 @@ class Route:
             heading=float(self._seg_heading[i]),
             segment=i,
         )
-
-    def points_at(self, s: np.ndarray) -> np.ndarray:
-        """Positions ``[K, 2]`` at arc lengths ``s`` ``[K]`` (clamped to the extended route)."""
-        return np.stack([np.interp(s, self._cum, self._ext[:, 0]), np.interp(s, self._cum, self._ext[:, 1])], -1)
 
     def point_at(self, s: float) -> tuple[float, float]:
         """Position at one arc length ``s`` (clamped to the extended route); pure Python, for per-step use."""

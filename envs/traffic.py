@@ -45,6 +45,15 @@ MAX_WAIT_S = 4.0
 
 
 # ------------------------------------------------------------------------------------------ lane geometry
+def _copy_lane_attributes(fast: FastStraight | FastCircle, lane: AbstractLane) -> None:
+    """The attributes every fast lane copies from its highway-env lane, as plain Python scalars."""
+    fast.length = float(lane.length)
+    fast.width = float(lane.width)
+    fast.speed_limit = float(lane.speed_limit)
+    fast.priority = int(lane.priority)
+    fast.forbidden = bool(lane.forbidden)
+
+
 class FastStraight:
     """Scalar-maths twin of a highway-env `StraightLane` (same local coordinates, heading and positions)."""
 
@@ -53,12 +62,8 @@ class FastStraight:
     def __init__(self, lane: StraightLane) -> None:
         self.sx, self.sy = (float(v) for v in lane.start)
         self.dx, self.dy = (float(v) for v in lane.direction)
-        self.length = float(lane.length)
-        self.width = float(lane.width)
         self.heading = float(lane.heading)
-        self.speed_limit = float(lane.speed_limit)
-        self.priority = int(lane.priority)
-        self.forbidden = bool(lane.forbidden)
+        _copy_lane_attributes(self, lane)
 
     def local(self, x: float, y: float) -> tuple[float, float]:
         ex, ey = x - self.sx, y - self.sy
@@ -108,11 +113,7 @@ class FastCircle:
         self.radius = float(lane.radius)
         self.start = float(lane.start_phase)
         self.dir = float(lane.direction)
-        self.length = float(lane.length)
-        self.width = float(lane.width)
-        self.speed_limit = float(lane.speed_limit)
-        self.priority = int(lane.priority)
-        self.forbidden = bool(lane.forbidden)
+        _copy_lane_attributes(self, lane)
 
     def local(self, x: float, y: float) -> tuple[float, float]:
         ex, ey = x - self.cx, y - self.cy
@@ -794,14 +795,3 @@ class Simulation:
             states=states, valid=valid, kinds=list(self.kinds), collisions=list(self.road.collisions)
         )
 
-
-def simulate(
-    layout: str,
-    params: dict,
-    rng: np.random.Generator,
-    n_steps: int,
-    kind_shares: Sequence[float] = (0.7, 0.15, 0.15),
-) -> RunLog:
-    """Run traffic on ``layout`` for ``n_steps`` steps of 0.1 s; ``kind_shares`` = P(normal, inattentive,
-    aggressive) per new driver."""
-    return Simulation(layout, params, rng, kind_shares).run(n_steps)
