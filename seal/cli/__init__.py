@@ -1,0 +1,58 @@
+"""The ``seal`` command line.
+
+Each command module under ``seal/cli/`` registers its subcommands on the shared :class:`CommandTree` and imports
+its implementation lazily inside the handler, so ``seal --help`` is instant and the core package does not import
+the simulator, the adversaries or the experiments at module load. To add commands, write a module with a
+``register(tree)`` function and list it in :data:`COMMAND_MODULES`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from seal.cli.args import CliError
+from seal.cli.tree import CommandTree
+
+__all__ = ["COMMAND_MODULES", "CliError", "build_parser", "main"]
+
+#: Modules whose ``register(tree)`` adds commands, in the order they appear in ``seal --help``.
+COMMAND_MODULES = ("seal.cli.data", "seal.cli.bench")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from seal import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="seal",
+        description="Closed-loop adversarial driving scenarios: build/inspect scenario datasets, roll out and "
+        "render scenarios, train and evaluate models and generators, benchmark.",
+    )
+    parser.add_argument("--version", action="version", version=f"seal {__version__}")
+    tree = CommandTree(parser.add_subparsers(dest="command", metavar="COMMAND", required=True))
+    for name in COMMAND_MODULES:
+        importlib.import_module(name).register(tree)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    from seal.dataset import DatasetError
+    from seal.road import RoadError
+    from seal.scenario import ScenarioError
+
+    try:
+        return int(args.func(args) or 0)
+    except (CliError, DatasetError, ScenarioError, RoadError, FileNotFoundError, ValueError) as exc:
+        print(f"seal: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("seal: interrupted (an unfinished dataset build resumes when re-run)", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,78 @@
+"""``seal bench env|data|scoring``: speed of the environment, of dataset loading and of scoring."""
+
+from __future__ import annotations
+
+import argparse
+
+from seal.cli.args import positive_int, print_result
+from seal.cli.tree import CommandTree
+
+
+def cmd_bench_data(args: argparse.Namespace) -> int:
+    import time
+
+    from seal.dataset import Dataset
+
+    start = time.perf_counter()
+    scenarios = Dataset.open(args.dir).load(limit=args.n)
+    seconds = time.perf_counter() - start
+    result = {
+        "scenarios_loaded": len(scenarios),
+        "seconds": round(seconds, 3),
+        "scenarios_per_s": round(len(scenarios) / seconds, 1),
+        "target": f"{args.n} scenarios in < 2 s",
+        "meets_target": len(scenarios) >= args.n and seconds < 2.0,
+    }
+    print_result(result, args.json, width=20)
+    return 0
+
+
+def cmd_bench_scoring(args: argparse.Namespace) -> int:
+    from scoring.bench import run_scoring_bench
+
+    result = run_scoring_bench(args.dataset, workers=args.workers, limit=args.limit)
+    print_result(result, args.json)
+    return 0
+
+
+def cmd_bench_env(args: argparse.Namespace) -> int:
+    from experiments.bench_env import run_env_bench
+
+    result = run_env_bench(args.dataset, n_steps=args.steps, seed=args.seed)
+    print_result(result, args.json)
+    return 0
+
+
+def register(tree: CommandTree) -> None:
+    bench_sub = tree.group("bench")
+    benv = bench_sub.add_parser(
+        "env",
+        help="ScenarioEnv steps/s vs highway-env highway-v0 (10 vehicles, lidar, 10 Hz)",
+        description="Measure ScenarioEnv steps/s (full observation, replayed traffic, one process) and, in the "
+        "same run, highway-env's highway-v0 with 10 vehicles, LidarObservation, 10 Hz; print both and the ratio.",
+    )
+    benv.add_argument("--dataset", default=None, help="dataset directory (default: generate a small one in memory)")
+    benv.add_argument("--steps", type=positive_int("--steps"), default=3000, help="env steps per measurement")
+    benv.add_argument("--seed", type=int, default=0, help="random seed")
+    benv.add_argument("--json", action="store_true", help="print JSON")
+    benv.set_defaults(func=cmd_bench_env)
+    bdata = bench_sub.add_parser(
+        "data",
+        help="time to open a dataset and load (and validate) N scenarios",
+        description="Open a dataset and load its first --n scenarios (checksums and validation included).",
+    )
+    bdata.add_argument("dir", help="dataset directory")
+    bdata.add_argument("--n", type=positive_int("--n"), default=500, help="scenarios to load (default 500)")
+    bdata.add_argument("--json", action="store_true", help="print JSON")
+    bdata.set_defaults(func=cmd_bench_data)
+    bscore = bench_sub.add_parser(
+        "scoring",
+        help="time to score a dataset with SafeShift (all variants)",
+        description="Score a dataset (default: every scenario) without writing anything and print the time per "
+        "scenario and in total.",
+    )
+    bscore.add_argument("dataset", help="dataset directory")
+    bscore.add_argument("--workers", type=positive_int("--workers"), default=None, help="processes")
+    bscore.add_argument("--limit", type=positive_int("--limit"), default=None, help="score only the first N")
+    bscore.add_argument("--json", action="store_true", help="print JSON")
+    bscore.set_defaults(func=cmd_bench_scoring)

@@ -1,0 +1,230 @@
+"""``seal demo``, ``seal render`` and the ``seal data`` commands that build, score, split and inspect datasets."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from seal.cli.args import LAYOUTS, CliError, layouts, positive_int, share
+from seal.cli.tree import CommandTree
+
+
+def cmd_data_generate(args: argparse.Namespace) -> int:
+    from envs.generate import generate_dataset
+
+    layouts = [name for group in args.layouts for name in group]
+    ds = generate_dataset(
+        args.out,
+        n=args.n,
+        seed=args.seed,
+        layouts=layouts,
+        workers=args.workers,
+        inattentive_share=args.inattentive_share,
+        aggressive_share=args.aggressive_share,
+        overwrite=args.overwrite,
+        progress=not args.no_progress,
+    )
+    print(f"wrote {len(ds)} scenarios to {ds.root}")
+    _print_info(ds.root, as_json=False)
+    return 0
+
+
+def _print_info(root: Path, as_json: bool) -> None:
+    from scoring.proximity import pool_proximity
+    from seal.dataset import Dataset, summarize
+
+    ds = Dataset.open(root)
+    scenarios = ds.load()
+    info = summarize(scenarios)
+    split_of = {sid: name for name, ids in ds.splits.items() for sid in ids}
+    per_split: dict[str, dict[str, int]] = {}
+    for s in scenarios:
+        row = per_split.setdefault(split_of.get(s.scenario_id, "unsplit"), {})
+        row[s.layout] = row.get(s.layout, 0) + 1
+    info["per_split_layout"] = per_split
+    info["proximity"] = pool_proximity(scenarios)
+    info["provenance"] = ds.manifest["provenance"]
+    if as_json:
+        print(json.dumps(info, indent=2, sort_keys=True))
+        return
+    print(f"dataset {root}: {info['scenarios']} scenarios")
+    layouts = sorted(info["per_layout"])
+    print(f"  {'split':<10}" + "".join(f"{name:>14}" for name in layouts) + f"{'total':>10}")
+    for split, row in sorted(per_split.items()):
+        cells = "".join(f"{row.get(name, 0):>14}" for name in layouts)
+        print(f"  {split:<10}{cells}{sum(row.values()):>10}")
+    for key, label in (("agents_per_scenario", "agents per scenario"), ("track_length_steps", "valid steps/track")):
+        st = info[key]
+        print(f"  {label:<22} mean {st['mean']:.1f}  min {st['min']:.0f}  median {st['p50']:.0f}  max {st['max']:.0f}")
+    p = info["proximity"]
+    print(
+        f"  (ego, adv) pair: within 2 m {p['pair_within_2m']:.1%}, within 5 m {p['pair_within_5m']:.1%}, "
+        f"collision {p['pair_collision']:.1%}; scenarios with any collision {p['any_collision']:.1%}"
+    )
+
+
+def cmd_data_info(args: argparse.Namespace) -> int:
+    _print_info(Path(args.dir), as_json=args.json)
+    return 0
+
+
+def cmd_data_score(args: argparse.Namespace) -> int:
+    from scoring.store import score_dataset
+
+    summary = score_dataset(args.dir, workers=args.workers, progress=not args.no_progress)
+    print(json.dumps(summary, indent=2, default=str))
+    return 0
+
+
+def cmd_data_split(args: argparse.Namespace) -> int:
+    from scoring.splits import make_splits
+
+    result = make_splits(
+        args.dir,
+        hard_quantile=args.hard_quantile,
+        n_train=args.n_train,
+        n_eval=args.n_eval,
+        n_hard=args.n_hard,
+        seed=args.seed,
+    )
+    print(json.dumps(result, indent=2, default=str))
+    return 0
+
+
+def cmd_data_report(args: argparse.Namespace) -> int:
+    from scoring.report import write_report
+
+    for path in write_report(args.dir, args.out):
+        print(f"wrote {path}")
+    return 0
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    from envs.render import render_episode
+    from seal.dataset import Dataset
+
+    out = Path(args.out)
+    if out.suffix.lower() not in (".mp4", ".gif"):
+        raise CliError(f"--out must end in .mp4 or .gif, got {out.name!r}")
+    scenario = Dataset.open(args.dataset).get(args.scenario)
+    summary = render_episode(scenario, out, fps=args.fps)
+    print(json.dumps(summary, default=str))
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from experiments.demo import run_demo
+
+    run_demo(Path(args.out), n_scenarios=args.n, n_rollouts=args.rollouts, seed=args.seed, overwrite=args.overwrite)
+    return 0
+
+
+def register(tree: CommandTree) -> None:
+
+    demo = tree.top.add_parser(
+        "demo",
+        help="the main job on the embedded default: build a small dataset, roll out, video, table",
+        description="Build a small base-scenario dataset from highway-env traffic, roll a few scenarios out with "
+        "the heuristic ego against the replayed adversary, write a video and a summary table into --out.",
+    )
+    demo.add_argument("--out", default="runs/demo", help="output folder (default: runs/demo)")
+    demo.add_argument("--n", type=positive_int("--n"), default=40, help="scenarios to generate (default 40)")
+    demo.add_argument("--rollouts", type=positive_int("--rollouts"), default=12, help="scenarios to roll out")
+    demo.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    demo.add_argument("--overwrite", action="store_true", help="replace an existing --out folder")
+    demo.set_defaults(func=cmd_demo)
+
+    data_sub = tree.group("data")
+
+    gen = data_sub.add_parser(
+        "generate",
+        help="generate base scenarios from highway-env traffic",
+        description="Run highway-env traffic (randomised IDM + MOBIL drivers, a share of inattentive and "
+        "aggressive ones) on several layouts, log every vehicle at 10 Hz and cut 9.1 s scenarios around "
+        "interacting (ego, adversary) pairs. Deterministic for a seed; an interrupted build resumes when the "
+        "same command is run again.",
+    )
+    gen.add_argument("--out", required=True, help="dataset directory to create")
+    gen.add_argument("--n", type=positive_int("--n"), required=True, help="number of scenarios")
+    gen.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    gen.add_argument(
+        "--layouts",
+        type=layouts,
+        nargs="+",
+        default=[list(LAYOUTS)],
+        help=f"layouts to use, space or comma separated (default: all of {', '.join(LAYOUTS)})",
+    )
+    gen.add_argument("--workers", type=positive_int("--workers"), default=None, help="processes (default: all cores)")
+    gen.add_argument(
+        "--inattentive-share",
+        type=share("--inattentive-share"),
+        default=0.15,
+        help="share of inattentive drivers in [0, 1] (default 0.15)",
+    )
+    gen.add_argument(
+        "--aggressive-share",
+        type=share("--aggressive-share"),
+        default=0.15,
+        help="share of aggressive drivers in [0, 1] (default 0.15)",
+    )
+    gen.add_argument("--overwrite", action="store_true", help="replace an existing dataset or unfinished build")
+    gen.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    gen.set_defaults(func=cmd_data_generate)
+
+    info = data_sub.add_parser(
+        "info",
+        help="counts per layout and split, agents per scenario, track lengths",
+        description="Print counts per layout and split, agents per scenario, track length statistics and how "
+        "close the logged (ego, adversary) pairs come.",
+    )
+    info.add_argument("dir", help="dataset directory")
+    info.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    info.set_defaults(func=cmd_data_info)
+
+    score = data_sub.add_parser(
+        "score",
+        help="SafeShift scores (GT, FE, AS, AC) per agent and scene, stored in the dataset",
+        description="Compute SafeShift individual, social, trajectory and scene scores for every scenario in all "
+        "variants (ground truth, future-extrapolated, asymmetric, asymmetric-combined) and store them in DIR.",
+    )
+    score.add_argument("dir", help="dataset directory")
+    score.add_argument("--workers", type=positive_int("--workers"), default=None, help="processes (default: all cores)")
+    score.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    score.set_defaults(func=cmd_data_score)
+
+    split = data_sub.add_parser(
+        "split",
+        help="Normal train / eval and Hard splits from the AC scene score",
+        description="Hard = a seeded sample of the scenes above --hard-quantile of the AC scene score; Normal "
+        "train / eval are drawn from the rest. Recorded in the manifest; same arguments, same splits.",
+    )
+    split.add_argument("dir", help="dataset directory (scored with `seal data score`)")
+    split.add_argument("--hard-quantile", type=share("--hard-quantile"), default=0.8, help="default 0.8")
+    split.add_argument("--n-train", type=positive_int("--n-train"), default=400, help="default 400")
+    split.add_argument("--n-eval", type=positive_int("--n-eval"), default=100, help="default 100")
+    split.add_argument("--n-hard", type=positive_int("--n-hard"), default=100, help="default 100")
+    split.add_argument("--seed", type=int, default=42, help="default 42")
+    split.set_defaults(func=cmd_data_split)
+
+    report = data_sub.add_parser(
+        "report",
+        help="score distributions, feature correlations and example scenes as images",
+        description="Write the score distribution plot (all variants), the feature correlation heat-map and a "
+        "few top-scoring and median scenarios rendered as PNG images into --out.",
+    )
+    report.add_argument("dir", help="dataset directory (scored with `seal data score`)")
+    report.add_argument("--out", required=True, help="output folder")
+    report.set_defaults(func=cmd_data_report)
+
+    render = tree.top.add_parser(
+        "render",
+        help="top-down video of a scenario roll-out",
+        description="Roll a scenario out (heuristic ego, replayed adversary and traffic) and write a top-down "
+        "video; the ego is green, the adversary red, other traffic blue.",
+    )
+    render.add_argument("--dataset", required=True, help="dataset directory")
+    render.add_argument("--scenario", required=True, help="scenario id (see `seal data info --json` or manifest)")
+    render.add_argument("--out", required=True, help="output file, .mp4 or .gif")
+    render.add_argument("--fps", type=positive_int("--fps"), default=10, help="frames per second (default 10)")
+    render.set_defaults(func=cmd_render)
