@@ -1,7 +1,9 @@
 """Cut 9.1 s scenario windows around interacting vehicle pairs out of a logged traffic run.
 
 An *event* is a moment where two vehicles interact: their bodies come within `EVENT_GAP_M` (a local minimum of
-the box gap, or a collision), or their paths cross with less than `CONFLICT_DT_S` between their passages of
+the box gap, or a collision) other than by driving in neighbouring lanes (see `in_own_lanes`: with 4 m lanes
+and 2 m wide cars every overtake passes within 2 m, which is lane keeping, not an interaction), or their paths
+cross with less than `CONFLICT_DT_S` between their passages of
 the crossing point (one yields to the other). For each event a window start ``t0`` is drawn so that the event
 falls in steps 25..75 of the window (an adversary then has time to act before it and the ego time to react).
 A window is kept when both vehicles exist over the whole window, both move (mean speed > 2 m/s and more than
@@ -32,6 +34,10 @@ CONTEXT_M = 80.0
 """Other vehicles within this distance (m) of the ego or the adversary are part of the scenario."""
 EVENT_STEPS = (25, 75)
 """Preferred window steps for the closest approach / conflict."""
+SIDE_GAP_M = 1.0
+"""Parallel (or oncoming) vehicles whose bodies keep at least this lateral gap (m) across their headings are in
+their own lanes: their closeness is not an interaction."""
+PARALLEL_RAD = np.radians(20.0)
 MIN_MEAN_SPEED = 2.0
 MIN_DISPLACEMENT_M = 10.0
 MAX_PER_VEHICLE = 2
@@ -54,6 +60,24 @@ def _corners(log: RunLog, row: int, steps: slice | np.ndarray) -> np.ndarray:
     """Box corners ``[K, 4, 2]`` of vehicle ``row`` at ``steps``."""
     s = log.states[row, steps]
     return box_corners(s[..., 0], s[..., 1], s[..., 2], s[..., 4], s[..., 5])
+
+
+def in_own_lanes(log: RunLog, i: int, j: int, steps: np.ndarray) -> np.ndarray:
+    """``[K]`` bool: at ``steps``, ``i`` and ``j`` drive parallel or oncoming (headings within `PARALLEL_RAD` of
+    0 or pi) with a lateral body gap, across ``i``'s heading, of at least `SIDE_GAP_M`."""
+    si, sj = log.states[i, steps], log.states[j, steps]
+    dx, dy = sj[:, 0] - si[:, 0], sj[:, 1] - si[:, 1]
+    c, s = np.cos(si[:, 2]), np.sin(si[:, 2])
+    lat = -dx * s + dy * c
+    turn = np.abs((sj[:, 2] - si[:, 2] + np.pi) % (2 * np.pi) - np.pi)
+    parallel = (turn < PARALLEL_RAD) | (turn > np.pi - PARALLEL_RAD)
+    return parallel & (np.abs(lat) - 0.5 * (si[:, 5] + sj[:, 5]) >= SIDE_GAP_M)
+
+
+def interaction_gap(log: RunLog, i: int, j: int, steps: np.ndarray) -> np.ndarray:
+    """``[K]`` box gap (m) of ``i`` and ``j`` at ``steps``, inf where they keep to their own lanes."""
+    g = box_gap(_corners(log, i, steps), _corners(log, j, steps))
+    return np.where(in_own_lanes(log, i, j, steps), np.inf, g)
 
 
 NEAR_M = 30.0
@@ -84,7 +108,8 @@ def _near_pairs(log: RunLog) -> _Pairs:
 
 
 def _pair_gaps(log: RunLog, pairs: _Pairs) -> dict[tuple[int, int], np.ndarray]:
-    """Box gap (m) over time of every pair that ever comes within `EVENT_GAP_M`; inf where farther/absent."""
+    """Interaction gap (m, `interaction_gap`) over time of every pair that ever comes within `EVENT_GAP_M`; inf
+    where farther, absent or in their own lanes."""
     t = log.valid.shape[1]
     diag = np.hypot(log.states[..., 4], log.states[..., 5])
     diag = np.nanmax(np.where(log.valid, diag, np.nan), axis=1)
@@ -94,7 +119,7 @@ def _pair_gaps(log: RunLog, pairs: _Pairs) -> dict[tuple[int, int], np.ndarray]:
         i, j = int(pairs.i[p]), int(pairs.j[p])
         steps = np.flatnonzero(close[p])
         g = np.full(t, np.inf)
-        g[steps] = box_gap(_corners(log, i, steps), _corners(log, j, steps))
+        g[steps] = interaction_gap(log, i, j, steps)
         out[(i, j)] = g
     return out
 
@@ -193,13 +218,14 @@ def find_windows(log: RunLog, rng: np.random.Generator, cap: int, min_t0: int = 
         fut = slice(t0 + CURRENT_STEP, t0 + N_STEPS)
         g = box_gap(_corners(log, i, fut), _corners(log, j, fut))
         min_gap = float(g.min())
-        t_min = int(np.argmin(g)) + CURRENT_STEP
+        g_interaction = np.where(in_own_lanes(log, i, j, np.arange(fut.start, fut.stop)), np.inf, g)
+        t_min = int(np.argmin(g_interaction)) + CURRENT_STEP
         conflict = bool(_conflicts(log, i, j, t0 + CURRENT_STEP, t0 + N_STEPS))
-        if min_gap >= EVENT_GAP_M and not conflict:
+        if g_interaction.min() >= EVENT_GAP_M and not conflict:
             continue
         pair_collision = (i, j) in collided and t0 <= collided[(i, j)] < t0 + N_STEPS
         turn = np.abs((log.states[i, fut, 2] - log.states[j, fut, 2] + np.pi) % (2 * np.pi) - np.pi)
-        if np.median(turn) > 2.4 and min_gap > 1.0 and not conflict:
+        if np.median(turn) > 2.4 and g_interaction.min() > 1.0 and not conflict:
             continue  # oncoming traffic passing in its own lane is not an interaction
         # Rank: a uniform draw among qualifying interactions, so the pool keeps their natural mix of routine
         # interactions, near misses and crashes (ranking closest-first made nearly every pair a near miss and

@@ -18,9 +18,11 @@ Features (larger = more safety-relevant; the inverse of a time is 0 when the tim
   a stationary agent's time is 0, it is already there);
 * ``inv_mttcp_agents`` (1/s): the same with the points where i's path comes within 1 m of j's path (at any two
   steps), the point being i's position there;
-* ``collisions`` (steps): number of steps where the per-step motion segments of the two centres intersect, the
-  centres are within 0.25 m (SafeShift's centre-based definition), or the two bodies' oriented boxes overlap
-  (added: in simulated traffic crashing cars are pushed apart, so their centres never meet);
+* ``collisions`` (contacts): number of contacts, a contact being a run of consecutive steps where the per-step
+  motion segments of the two centres intersect, the centres are within 0.25 m (SafeShift's centre-based
+  definition), or the two bodies' oriented boxes overlap (added: in simulated traffic crashing cars are pushed
+  apart, so their centres never meet). Contacts, not contact steps: an extrapolated track that drives through a
+  slower vehicle overlaps it for many steps, and a step count would outweigh every other feature of the pair;
 * ``pair_anomaly``: distance of the pair's motion to the clustered pair primitives.
 """
 
@@ -189,7 +191,10 @@ def _collisions(
     if p.size:
         seg_hit = segments_intersect(pi[p, t], pi[p, t + 1], pj[p, t], pj[p, t + 1])
         hit[p[seg_hit], t[seg_hit] + 1] = True
-    return hit.sum(1).astype(np.float64)
+    # Count contacts, not contact steps: an extrapolated track driving through a slower vehicle overlaps it for
+    # many steps, which as a step count would outweigh every other feature of the pair.
+    onsets = hit[:, :1].sum(1) + (hit[:, 1:] & ~hit[:, :-1]).sum(1)
+    return onsets.astype(np.float64)
 
 
 def _following(a, b, I, J, pi, pj, si, sj, dist, mask, index: RoadIndex):

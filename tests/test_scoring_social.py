@@ -50,14 +50,17 @@ def test_collision_found_by_segment_intersection_only() -> None:
 def test_collision_found_by_box_overlap() -> None:
     # Side-swipe: B drifts toward A and back while heading straight along +x (explicit velocity, so both boxes
     # stay axis-aligned). Centres stay >= 1.5 m apart laterally (never within 0.25 m, motion segments never
-    # cross), but the 2 m wide bodies overlap exactly while the lateral offset is below 2 m: steps 41..49.
+    # cross), but the 2 m wide bodies overlap exactly while the lateral offset is below 2 m: steps 41..49, one
+    # contact. A second drift-in (steps 71..79) is a second contact: contacts count, not contact steps.
     k = np.arange(N_STEPS, dtype=float)
-    lateral = np.clip(np.abs(k - 45.0) * 0.12 + 1.5, 1.5, 3.5)  # 1.98 m at |k - 45| = 4, 2.1 m at 5
     vel = np.tile([20.0, 0.0], (N_STEPS, 1))
     a = track(np.stack([2.0 * k, np.zeros(N_STEPS)], axis=1), vel=vel)
-    b = track(np.stack([2.0 * k, lateral], axis=1), vel=vel)
-    res = score_scenario(scenario([a, b], straight_road()))
-    assert feature(res, "collisions") == 9.0
+    for centres, contacts in (([45.0], 1.0), ([45.0, 75.0], 2.0)):
+        dips = [np.clip(np.abs(k - c) * 0.12 + 1.5, 1.5, 3.5) for c in centres]  # 1.98 m at |k - c| = 4, 2.1 at 5
+        lateral = np.minimum.reduce(dips)
+        b = track(np.stack([2.0 * k, lateral], axis=1), vel=vel)
+        res = score_scenario(scenario([a, b], straight_road()))
+        assert feature(res, "collisions") == contacts
 
 
 def test_segments_intersect() -> None:
