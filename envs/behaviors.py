@@ -5,7 +5,7 @@ Each env step the env calls ``behavior.step(t, state, observation)`` to move the
 for "absent at t + 1") or a normalised action ``[steering, acceleration]`` that the env integrates with the
 bicycle model (`envs.kinematics`). The env builds the adversary's own observation (same builder as the ego's,
 from the adversary's viewpoint, on the route `AdversaryBehavior.make_route` returns) only for behaviours with
-``needs_observation = True``.
+``needs_observation = True``, and only on steps where `AdversaryBehavior.observes` says so.
 """
 
 from __future__ import annotations
@@ -63,8 +63,13 @@ class AdversaryBehavior(ABC):
         Args:
             t: current scenario step (``CURRENT_STEP`` on the first env step).
             state: the adversary's state at ``t``, None if it is absent.
-            observation: its observation at ``t`` when `needs_observation`, else None.
+            observation: its observation at ``t`` when `needs_observation` and `observes` (t), else None.
         """
+
+    def observes(self, t: int) -> bool:
+        """Whether `step` at scenario step ``t`` uses the observation (asked only when `needs_observation`);
+        a behaviour that acts on it for part of the episode saves the cost of building it elsewhere."""
+        return True
 
     def make_route(self, scenario: Scenario) -> Route:
         """Route used for the adversary's observation (default: its logged track)."""

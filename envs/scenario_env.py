@@ -362,10 +362,13 @@ class ScenarioEnv(gym.Env):
         behavior, adv = self._behavior, self._adv
         obs = None
         if behavior.needs_observation and adv is not None:
+            # Project every step (cheap) so the hinted projection keeps up with the adversary even on steps that
+            # skip the observation.
             proj = self._adv_route.project(adv.x, adv.y, self._adv_hint)
             self._adv_hint = proj.segment
-            others = self._cur[self._present & (np.arange(len(self._cur)) != self._adv_idx), :7]
-            obs = self._builder.build(adv, self._adv_route, others, proj)
+            if behavior.observes(t):
+                others = self._cur[self._present & (np.arange(len(self._cur)) != self._adv_idx), :7]
+                obs = self._builder.build(adv, self._adv_route, others, proj)
         out: BehaviorOutput = behavior.step(t, adv, obs)
         if out.action is not None:
             return None if adv is None else bicycle_step(adv, out.action[0], out.action[1])

@@ -19,7 +19,7 @@ from seal.cli.tree import CommandTree
 __all__ = ["COMMAND_MODULES", "CliError", "build_parser", "main"]
 
 #: Modules whose ``register(tree)`` adds commands, in the order they appear in ``seal --help``.
-COMMAND_MODULES = ("seal.cli.data", "seal.cli.bench", "seal.cli.importers")
+COMMAND_MODULES = ("seal.cli.data", "seal.cli.bench", "seal.cli.importers", "seal.cli.skills")
 
 
 def build_parser() -> argparse.ArgumentParser:

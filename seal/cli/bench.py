@@ -36,6 +36,12 @@ def cmd_bench_scoring(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_env(args: argparse.Namespace) -> int:
+    if args.adversary == "seal":
+        from experiments.bench_skills import run_skill_bench
+
+        result = run_skill_bench(args.dataset, skills=args.skills, n_steps=args.steps, seed=args.seed)
+        print_result(result, args.json)
+        return 0
     from experiments.bench_env import run_env_bench
 
     result = run_env_bench(args.dataset, n_steps=args.steps, seed=args.seed)
@@ -54,6 +60,11 @@ def register(tree: CommandTree) -> None:
     benv.add_argument("--dataset", default=None, help="dataset directory (default: generate a small one in memory)")
     benv.add_argument("--steps", type=positive_int("--steps"), default=3000, help="env steps per measurement")
     benv.add_argument("--seed", type=int, default=0, help="random seed")
+    benv.add_argument("--adversary", choices=("replay", "seal"), default="replay",
+                      help="replay: ScenarioEnv vs highway-v0 (default); seal: steps/s with the SEAL skill adversary "
+                      "vs the replayed adversary in the same run, and the cost ratio (target <= 1.5)")
+    benv.add_argument("--skills", default=None,
+                      help="with --adversary seal: skills folder from `seal fit skills` (default: untrained models)")
     benv.add_argument("--json", action="store_true", help="print JSON")
     benv.set_defaults(func=cmd_bench_env)
     bdata = bench_sub.add_parser(

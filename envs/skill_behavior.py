@@ -1,0 +1,113 @@
+"""`SkillSwitchBehavior`: the SEAL adversary (thesis 6.3.2, DESIGN section 7): it follows a given track (the
+top-ranked candidate) and, from a switch step on - 10 steps (1 s) before the predicted collision / closest
+approach by default, see `switch_step_for` - is driven by a `SkillPolicy` that sees its own observation every
+step and so reacts to the ego.
+
+Before the switch the adversary is placed on the track (``follow="replay"``, as CAT replays its candidate) or
+tracks it with the bicycle model (``follow="track"``); the env builds no observation for it then
+(`AdversaryBehavior.observes`). Its observation route is the followed track, so the navigation checkpoints keep
+pointing along the chosen candidate after the switch (the thesis derives the adversary's goals from it).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from envs.behaviors import AdversaryBehavior, BehaviorOutput, TrackingBehavior
+from envs.kinematics import AgentState, placement_state
+from envs.route import Route
+from seal.scenario import CURRENT_STEP, VALID, Scenario
+
+SWITCH_OFFSET_STEPS = 10
+"""Default steps between the switch to the skill policy and the predicted collision step (1 s)."""
+FOLLOW_MODES = ("replay", "track")
+
+
+class StepPolicy(Protocol):
+    """What the behaviour needs from a skill policy (`seal.skills.policy.SkillPolicy`)."""
+
+    def reset(self, seed: int | None = None) -> None: ...
+
+    def act(self, observation: np.ndarray) -> np.ndarray: ...
+
+
+def switch_step_for(predicted_step: int | None, offset_steps: int = SWITCH_OFFSET_STEPS) -> int:
+    """Scenario step at which to switch to the skill policy: ``offset_steps`` before ``predicted_step`` (a
+    scenario step index), not before `CURRENT_STEP`; without a prediction, at `CURRENT_STEP`."""
+    if offset_steps < 0:
+        raise ValueError(f"offset_steps must be >= 0, got {offset_steps}")
+    if predicted_step is None:
+        return CURRENT_STEP
+    return max(CURRENT_STEP, int(predicted_step) - int(offset_steps))
+
+
+class SkillSwitchBehavior(AdversaryBehavior):
+    """Follow ``track`` before ``switch_step``, then act with ``policy`` (see the module docstring).
+
+    Args:
+        policy: the skill policy (reset at every episode).
+        track: ``[T, 8]`` track in the scenario layout indexed by scenario step (e.g.
+            `adversaries.candidate_path.candidate_track` of the chosen candidate); None for the logged adversary.
+        switch_step: first scenario step whose move the policy decides (``CURRENT_STEP``: from the start).
+        follow: ``"replay"`` (placement on the track) or ``"track"`` (bicycle-model tracking) before the switch.
+        seed: seed of the policy's noise each episode; None draws it from the env's rng at reset (so
+            ``env.reset(seed=...)`` fixes the roll-out).
+    """
+
+    needs_observation = True
+
+    def __init__(
+        self, policy: StepPolicy, track: np.ndarray | None = None, switch_step: int = CURRENT_STEP,
+        follow: str = "replay", seed: int | None = None,
+    ) -> None:
+        if follow not in FOLLOW_MODES:
+            raise ValueError(f"SkillSwitchBehavior: follow must be one of {FOLLOW_MODES}, got {follow!r}")
+        if int(switch_step) < CURRENT_STEP:
+            raise ValueError(f"SkillSwitchBehavior: switch_step must be >= {CURRENT_STEP}, got {switch_step}")
+        given = None if track is None else np.asarray(track, dtype=np.float64)
+        if given is not None and (given.ndim != 2 or given.shape[1] != 8 or given.shape[0] <= CURRENT_STEP + 1):
+            raise ValueError(f"SkillSwitchBehavior: track must be [T > {CURRENT_STEP + 1}, 8], got {given.shape}")
+        self.policy = policy
+        self.switch_step = int(switch_step)
+        self.follow = follow
+        self.seed = seed
+        self._given = given
+        self._track: np.ndarray | None = given
+        self._tracker: TrackingBehavior | None = None
+        self.episode_seed: int | None = None
+        """Seed the policy got at the last reset."""
+
+    def reset(self, scenario: Scenario, rng: np.random.Generator) -> None:
+        self._track = self._given if self._given is not None else scenario.track(scenario.adv_id).astype(np.float64)
+        if self.follow == "track":
+            valid = np.flatnonzero(self._track[:, VALID] > 0.5)
+            self._tracker = TrackingBehavior(self._track[: valid[-1] + 1], start_step=0)
+            self._tracker.reset(scenario, rng)
+        self.episode_seed = int(rng.integers(2**63)) if self.seed is None else int(self.seed)
+        self.policy.reset(self.episode_seed)
+
+    def make_route(self, scenario: Scenario) -> Route:
+        track = self._given if self._given is not None else scenario.track(scenario.adv_id)
+        return Route.from_track(track)
+
+    def observes(self, t: int) -> bool:
+        return t >= self.switch_step
+
+    def step(self, t: int, state: AgentState | None, observation: np.ndarray | None) -> BehaviorOutput:
+        if state is None:
+            return BehaviorOutput.absent()
+        if t >= self.switch_step:
+            if observation is None:
+                raise RuntimeError("SkillSwitchBehavior: the env passed no observation after the switch")
+            a = self.policy.act(observation)
+            return BehaviorOutput.act(float(a[0]), float(a[1]))
+        if self._tracker is not None:
+            return self._tracker.step(t, state, observation)
+        track = self._track
+        assert track is not None, "reset() first"
+        k = t + 1
+        if k >= track.shape[0] or track[k, VALID] < 0.5:
+            return BehaviorOutput.absent()
+        return BehaviorOutput.place(placement_state(state, track[k]))

@@ -1,0 +1,115 @@
+"""``seal bench env --adversary seal``: cost of an env step with the SEAL skill adversary against a step with the
+replayed adversary, measured in the same run.
+
+Three `ScenarioEnv` variants play the same scenarios with the heuristic ego: the logged adversary replayed
+(reference), the skill adversary from the first step (`SkillSwitchBehavior` with ``switch_step = CURRENT_STEP``:
+its own observation and a skill-policy step every env step, the worst case) and the skill adversary switching
+30 steps in (a typical SEAL episode: replay, then 1 s before a collision predicted 4 s in, the skill policy).
+They run in interleaved blocks so that load changes on a shared machine hit all three alike. Only time inside
+``env.step`` / ``env.reset`` counts (the adversary's policy runs inside ``step``; the ego's does not), per wall
+second and per CPU second of this process. Cost ratio = reference steps/s / variant steps/s (target <= 1.5).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from seal.scenario import CURRENT_STEP
+
+TARGET_COST_RATIO = 1.5
+TYPICAL_SWITCH_DELAY_STEPS = 30
+
+
+def skill_policy_for_bench(skills: str | Path | None, seed: int = 0) -> tuple[Any, str]:
+    """The adversarial `SkillPolicy` of a skills folder, or one with randomly initialised default-size models
+    (the speed does not depend on the weights); and a description of which."""
+    import torch
+
+    from seal.skills.policy import SkillPolicy
+    from seal.skills.realnvp import ConditionalRealNVP
+    from seal.skills.vae import SkillVAE
+
+    if skills is not None:
+        return SkillPolicy.load(skills, prior="adversarial"), f"trained models from {skills}"
+    torch.manual_seed(seed)
+    return SkillPolicy(SkillVAE(), ConditionalRealNVP()), "untrained default-size models (random weights)"
+
+
+def run_skill_bench(
+    dataset: str | Path | None, skills: str | Path | None = None, n_steps: int = 3000, seed: int = 0,
+    block: int = 250,
+) -> dict[str, Any]:
+    """Steps/s of the three variants (see the module docstring) over ``n_steps`` steps each, and cost ratios."""
+    from envs.heuristic import HeuristicDriver
+    from envs.scenario_env import ScenarioEnv
+    from envs.skill_behavior import SkillSwitchBehavior
+    from experiments.bench_env import bench_scenarios
+
+    scenarios, source = bench_scenarios(dataset, seed)
+    policy, models = skill_policy_for_bench(skills, seed)
+    variants = {
+        "replay": None,
+        "skill_from_start": SkillSwitchBehavior(policy, switch_step=CURRENT_STEP),
+        f"skill_after_{TYPICAL_SWITCH_DELAY_STEPS}": SkillSwitchBehavior(
+            policy, switch_step=CURRENT_STEP + TYPICAL_SWITCH_DELAY_STEPS),
+    }
+    driver = HeuristicDriver()
+    state: dict[str, dict[str, Any]] = {}
+    for k, (name, adversary) in enumerate(variants.items()):
+        env = ScenarioEnv(scenarios, adversary=adversary)
+        for s in scenarios:  # warm the per-road caches outside the timed loop
+            env.reset(options={"scenario_id": s.scenario_id})
+        obs, _ = env.reset(seed=seed + k)
+        state[name] = {"env": env, "obs": obs, "wall": 0.0, "cpu": 0.0, "steps": 0, "episodes": 1, "outcomes": {}}
+    while any(st["steps"] < n_steps for st in state.values()):
+        for st in state.values():
+            env = st["env"]
+            for _ in range(min(block, n_steps - st["steps"])):
+                action = driver.predict(st["obs"])[0]
+                t0, c0 = time.perf_counter(), time.process_time()
+                obs, _, terminated, truncated, info = env.step(action)
+                if terminated or truncated:
+                    st["outcomes"][info["outcome"]] = st["outcomes"].get(info["outcome"], 0) + 1
+                    obs, _ = env.reset()
+                    st["episodes"] += 1
+                st["wall"] += time.perf_counter() - t0
+                st["cpu"] += time.process_time() - c0
+                st["obs"] = obs
+                st["steps"] += 1
+    rates = {name: (st["steps"] / st["wall"], st["steps"] / st["cpu"]) for name, st in state.items()}
+    ref_wall, ref_cpu = rates["replay"]
+    result: dict[str, Any] = {}
+    for name, (wall, _) in rates.items():
+        result[f"{name}_steps_per_s"] = round(wall, 1)
+    for name, (wall, cpu) in rates.items():
+        if name != "replay":
+            result[f"{name}_cost_ratio"] = round(ref_wall / wall, 3)
+            result[f"{name}_cost_ratio_cpu"] = round(ref_cpu / cpu, 3)
+    worst = result["skill_from_start_cost_ratio"]
+    policy_us = _policy_step_us(policy)
+    result.update({
+        "meets_target": bool(worst <= TARGET_COST_RATIO),
+        "target": f"skill-adversary step cost <= {TARGET_COST_RATIO} x replayed-adversary step (skill from start)",
+        "skill_policy_step_us": round(policy_us, 1),
+        "n_steps": n_steps,
+        "models": models,
+        "scenarios": len(scenarios),
+        "scenario_source": source,
+        "episodes": {name: st["episodes"] for name, st in state.items()},
+        "outcomes": {name: st["outcomes"] for name, st in state.items()},
+    })
+    return result
+
+
+def _policy_step_us(policy: Any, n: int = 2000) -> float:
+    """Mean time of one `SkillPolicy.act` on a fixed observation (skill sampling amortised), microseconds."""
+    obs = np.zeros(policy.obs_dim, dtype=np.float32)
+    policy.reset(0)
+    t0 = time.perf_counter()
+    for _ in range(n):
+        policy.act(obs)
+    return (time.perf_counter() - t0) / n * 1e6

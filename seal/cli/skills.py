@@ -1,0 +1,50 @@
+"""``seal fit skills``: SEAL's skill VAE and benign / adversarial skill priors from heuristic demonstrations."""
+
+from __future__ import annotations
+
+import argparse
+
+from seal.cli.args import positive_int
+from seal.cli.tree import CommandTree
+
+
+def cmd_fit_skills(args: argparse.Namespace) -> int:
+    import json
+
+    from experiments.fit_skills import fit_skills, format_summary, resolve_config
+
+    config = resolve_config(preset=args.preset, config_file=args.config, split=args.split, limit=args.limit,
+                            seed=args.seed, workers=args.workers)
+    metrics = fit_skills(args.dataset, args.out, config, demos_path=args.demos, progress=not args.no_progress)
+    print(json.dumps(metrics, indent=2, default=str) if args.json else format_summary(metrics))
+    return 0
+
+
+def register(tree: CommandTree) -> None:
+    p = tree.group("fit").add_parser(
+        "skills",
+        help="train SEAL's skill VAE and benign / adversarial skill priors from heuristic demonstrations",
+        description="Simulate every vehicle of the split's scenarios with a noisy heuristic driver (resumable, in "
+        "parallel), cut the (own observation, action) sequences into 10-step windows (adversarial: ending within "
+        "20 steps before that agent's collision; dropped: near an out-of-road end; else benign), train the skill "
+        "VAE (LSTM encoder, closed-loop MLP decoder, latent 8) and two state-conditioned RealNVP priors. Writes "
+        "vae.pt, prior_benign.pt, prior_adversarial.pt, metrics.json (held-out reconstruction error, prior NLL per "
+        "class incl. cross terms), embedding.png (both priors' samples over held-out states, PCA), config.yaml "
+        "and CSV training logs to --out.",
+    )
+    p.add_argument("dataset", help="dataset directory with splits (seal data split)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--preset", choices=("quick", "standard"), default="standard",
+                   help="YAML preset experiments/configs/skills_<preset>.yaml (default standard)")
+    p.add_argument("--config", default=None,
+                   help="YAML config overriding the preset (keys: experiments.fit_skills.DEFAULTS)")
+    p.add_argument("--split", default=None, help="split to learn from (default train)")
+    p.add_argument("--limit", type=positive_int("--limit"), default=None, help="use only the first N scenarios")
+    p.add_argument("--demos", default=None,
+                   help="demonstrations file to build or reuse (default OUT/demos.npz)")
+    p.add_argument("--workers", type=positive_int("--workers"), default=None,
+                   help="processes for the demonstrations (default 2)")
+    p.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument("--json", action="store_true", help="print the metrics as JSON")
+    p.set_defaults(func=cmd_fit_skills)

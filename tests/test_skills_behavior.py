@@ -1,0 +1,137 @@
+"""The SEAL skill adversary in ScenarioEnv: replay until the switch step, then the skill policy on its own
+observation; deterministic for a seed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from envs import observation as ob
+from envs.behaviors import PolicyBehavior
+from envs.heuristic import HeuristicDriver
+from envs.scenario_env import ScenarioEnv
+from envs.skill_behavior import SkillSwitchBehavior, switch_step_for
+from seal.scenario import CURRENT_STEP, N_STEPS, VX, VY
+from seal.skills.policy import SkillPolicy
+from seal.skills.realnvp import ConditionalRealNVP, RealNVPConfig
+from seal.skills.vae import SkillVAE, VAEConfig
+
+SWITCH = CURRENT_STEP + 15
+
+
+def _policy() -> SkillPolicy:
+    torch.manual_seed(0)
+    vae, prior = SkillVAE(VAEConfig()), ConditionalRealNVP(RealNVPConfig())
+    gen = torch.Generator().manual_seed(1)
+    with torch.no_grad():
+        for p in prior.parameters():  # couplings start as the identity; give the noise a state-dependent map
+            p.copy_(torch.randn(p.shape, generator=gen) * 0.1)
+        prior.z_std.fill_(2.0)
+    return SkillPolicy(vae, prior)
+
+
+class _Recorder:
+    """Wraps a policy and records the observations it is given."""
+
+    def __init__(self, policy: SkillPolicy) -> None:
+        self.policy = policy
+        self.observations: list[np.ndarray] = []
+
+    def reset(self, seed: int | None = None) -> None:
+        self.policy.reset(seed)
+        self.observations.clear()
+
+    def act(self, observation: np.ndarray) -> np.ndarray:
+        self.observations.append(np.array(observation))
+        return self.policy.act(observation)
+
+
+def _episode(env: ScenarioEnv, seed: int, scenario_id: str):
+    driver = HeuristicDriver()
+    obs, _ = env.reset(seed=seed, options={"scenario_id": scenario_id})
+    done = False
+    while not done:
+        obs, _, terminated, truncated, info = env.step(driver.predict(obs)[0])
+        done = terminated or truncated
+    return info["rollout"]
+
+
+def test_switch_step_for() -> None:
+    assert switch_step_for(50) == 40
+    assert switch_step_for(50, offset_steps=5) == 45
+    assert switch_step_for(12) == CURRENT_STEP
+    assert switch_step_for(None) == CURRENT_STEP
+    with pytest.raises(ValueError, match="offset_steps"):
+        switch_step_for(40, -1)
+
+
+def test_skill_adversary_follows_the_track_then_acts_on_its_own_observation(highway) -> None:
+    scenario = highway[0]
+    recorder = _Recorder(_policy())
+    behavior = SkillSwitchBehavior(recorder, switch_step=SWITCH)
+    env = ScenarioEnv([scenario], config={"terminate_on_crash": False}, adversary=behavior)
+    roll = _episode(env, 0, scenario.scenario_id)
+    adv = roll.adv_track
+    logged = scenario.track(scenario.adv_id)
+    # Replay up to and including the switch step's state; the policy decides the moves from SWITCH on.
+    assert np.allclose(adv[: SWITCH + 1, :2], logged[: SWITCH + 1, :2], atol=1e-4)
+    end = min(roll.last_step, N_STEPS - 1) + 1
+    assert roll.last_step > SWITCH + 10
+    assert not np.allclose(adv[SWITCH + 2 : end, :2], logged[SWITCH + 2 : end, :2], atol=0.05)
+    # One observation per step from the switch on, none before (the env skips building it).
+    assert len(recorder.observations) == roll.last_step - SWITCH
+    # The observation is the adversary's own: its speed and its position relative to its route (the logged
+    # track it was replaying), not the ego's.
+    first = recorder.observations[0]
+    speed = float(np.hypot(adv[SWITCH, VX], adv[SWITCH, VY]))
+    ego_speed = float(np.hypot(roll.ego_track[SWITCH, VX], roll.ego_track[SWITCH, VY]))
+    assert abs(first[ob.SPEED] * ob.MAX_SPEED_MPS - speed) < 1e-3 and abs(speed - ego_speed) > 0.1
+    assert abs(first[ob.LATERAL]) < 1e-3 and abs(first[ob.HEADING_ERROR]) < 0.02
+
+
+def test_skill_adversary_roll_out_is_deterministic_for_a_seed(highway) -> None:
+    scenario = highway[1]
+    env = ScenarioEnv([scenario], config={"terminate_on_crash": False},
+                      adversary=SkillSwitchBehavior(_policy(), switch_step=CURRENT_STEP))
+    a = _episode(env, 5, scenario.scenario_id)
+    b = _episode(env, 5, scenario.scenario_id)
+    c = _episode(env, 6, scenario.scenario_id)
+    assert a.last_step == b.last_step
+    assert np.array_equal(a.tracks, b.tracks)
+    assert not np.array_equal(a.adv_track, c.adv_track)
+    # A fixed behaviour seed overrides the env's: the same adversary under different env seeds.
+    fixed = ScenarioEnv([scenario], config={"terminate_on_crash": False},
+                        adversary=SkillSwitchBehavior(_policy(), switch_step=CURRENT_STEP, seed=11))
+    d, e = _episode(fixed, 1, scenario.scenario_id), _episode(fixed, 2, scenario.scenario_id)
+    assert np.array_equal(d.adv_track, e.adv_track)
+
+
+def test_tracking_mode_and_given_track(highway) -> None:
+    scenario = highway[2]
+    track = scenario.track(scenario.adv_id).astype(np.float64).copy()
+    track[CURRENT_STEP + 1 :, 1] += np.linspace(0.0, 2.0, track.shape[0] - CURRENT_STEP - 1)  # drift left
+    behavior = SkillSwitchBehavior(_policy(), track=track, switch_step=CURRENT_STEP + 20, follow="track")
+    env = ScenarioEnv([scenario], config={"terminate_on_crash": False}, adversary=behavior)
+    roll = _episode(env, 0, scenario.scenario_id)
+    k = CURRENT_STEP + 20
+    # Bicycle-model tracking of the given (shifted) track, not the log: within a few decimetres of it.
+    assert np.abs(roll.adv_track[CURRENT_STEP + 5 : k, 1] - track[CURRENT_STEP + 5 : k, 1]).max() < 0.3
+    with pytest.raises(ValueError, match="follow"):
+        SkillSwitchBehavior(_policy(), follow="teleport")
+    with pytest.raises(ValueError, match="switch_step"):
+        SkillSwitchBehavior(_policy(), switch_step=3)
+
+
+def test_policy_behaviour_still_observes_every_step(highway) -> None:
+    # Backward compatibility of AdversaryBehavior.observes: reactive behaviours keep getting observations.
+    seen: list[np.ndarray] = []
+
+    class Spy:
+        def predict(self, obs, **kwargs):
+            seen.append(obs)
+            return HeuristicDriver().predict(obs)
+
+    env = ScenarioEnv([highway[0]], adversary=PolicyBehavior(Spy()))
+    roll = _episode(env, 0, highway[0].scenario_id)
+    assert len(seen) == roll.n_steps
