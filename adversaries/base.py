@@ -7,6 +7,7 @@ plan: roll-outs are past episodes only.
 
 from __future__ import annotations
 
+import importlib
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
@@ -61,6 +62,15 @@ class AdversaryGenerator(ABC):
 
 _REGISTRY: dict[str, Callable[..., AdversaryGenerator]] = {}
 
+GENERATOR_MODULES: dict[str, str] = {
+    "replay": "adversaries.replay",
+    "rule": "adversaries.rule",
+    "cat": "adversaries.cat",
+    "goose": "adversaries.goose",
+}
+"""Module that registers each built-in generator, imported on first lookup (so a name resolves without importing
+every generator, and even when ``adversaries/__init__.py`` did not run). Add a line per new generator."""
+
 
 def register(name: str) -> Callable[[type[AdversaryGenerator]], type[AdversaryGenerator]]:
     """Class decorator: make a generator available as ``name`` in configs and on the command line."""
@@ -76,11 +86,18 @@ def register(name: str) -> Callable[[type[AdversaryGenerator]], type[AdversaryGe
 
 
 def available_generators() -> list[str]:
-    return sorted(_REGISTRY)
+    return sorted(set(_REGISTRY) | set(GENERATOR_MODULES))
+
+
+def generator_class(name: str) -> Callable[..., AdversaryGenerator]:
+    """The class (factory) registered as ``name``; unknown names get an error listing the known ones."""
+    if name not in _REGISTRY and name in GENERATOR_MODULES:
+        importlib.import_module(GENERATOR_MODULES[name])
+    if name not in _REGISTRY:
+        raise ValueError(f"unknown generator {name!r}; available: {', '.join(available_generators())}")
+    return _REGISTRY[name]
 
 
 def make_generator(name: str, **kwargs: Any) -> AdversaryGenerator:
     """Instantiate a registered generator; unknown names get an error listing the known ones."""
-    if name not in _REGISTRY:
-        raise ValueError(f"unknown generator {name!r}; available: {', '.join(available_generators())}")
-    return _REGISTRY[name](**kwargs)
+    return generator_class(name)(**kwargs)

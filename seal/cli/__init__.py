@@ -19,7 +19,10 @@ from seal.cli.tree import CommandTree
 __all__ = ["COMMAND_MODULES", "CliError", "build_parser", "main"]
 
 #: Modules whose ``register(tree)`` adds commands, in the order they appear in ``seal --help``.
-COMMAND_MODULES = ("seal.cli.data", "seal.cli.bench", "seal.cli.importers", "seal.cli.skills")
+COMMAND_MODULES = (
+    "seal.cli.data", "seal.cli.bench", "seal.cli.generators", "seal.cli.importers", "seal.cli.goose", "seal.cli.prior",
+    "seal.cli.skills",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

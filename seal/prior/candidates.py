@@ -22,6 +22,8 @@ class Candidates:
         speed: ``[K, T]`` speeds in m/s, derived from the positions.
         probs: ``[K]`` probabilities (non-negative, summing to 1).
         agent_index: index of the agent in ``scenario.tracks``.
+        fallback: ``None`` when the trajectory prior's network produced the candidates, else why a fallback
+            (constant velocity, see `seal.prior.constant_velocity_candidates`) was used instead.
     """
 
     xy: np.ndarray
@@ -29,6 +31,7 @@ class Candidates:
     speed: np.ndarray
     probs: np.ndarray
     agent_index: int
+    fallback: str | None = None
 
     def __post_init__(self) -> None:
         k, t, two = self.xy.shape
@@ -48,7 +51,8 @@ class Candidates:
 
     @classmethod
     def from_positions(
-        cls, xy: np.ndarray, probs: np.ndarray, start_xy: np.ndarray, start_heading: float, agent_index: int
+        cls, xy: np.ndarray, probs: np.ndarray, start_xy: np.ndarray, start_heading: float, agent_index: int,
+        fallback: str | None = None,
     ) -> Candidates:
         """Build candidates from positions alone: heading and speed follow from the finite differences.
 
@@ -58,6 +62,7 @@ class Candidates:
             start_xy: ``[2]`` the agent's current position (m), the point before step 0.
             start_heading: the agent's current heading (rad), used while a candidate stands still.
             agent_index: index of the agent in the scenario.
+            fallback: see the class attribute.
         """
         xy = np.asarray(xy, dtype=np.float64)
         probs = np.asarray(probs, dtype=np.float64)
@@ -67,10 +72,14 @@ class Candidates:
         delta = xy - prev
         step_m = np.linalg.norm(delta, axis=-1)
         heading = np.arctan2(delta[..., 1], delta[..., 0])
-        # A stopped candidate keeps its last heading instead of the arbitrary atan2(0, 0).
+        # A stopped candidate keeps its last heading instead of the arbitrary atan2(0, 0): forward-fill from the
+        # last moving step (vectorised: index of the last moving step so far, per row).
         moving = step_m > 1e-3
-        heading = np.where(moving, heading, np.nan)
         heading[:, 0] = np.where(moving[:, 0], heading[:, 0], start_heading)
-        for j in range(1, heading.shape[1]):
-            heading[:, j] = np.where(np.isnan(heading[:, j]), heading[:, j - 1], heading[:, j])
-        return cls(xy=xy, heading=heading, speed=step_m / DT_S, probs=probs / probs.sum(), agent_index=agent_index)
+        moving[:, 0] = True
+        last = np.maximum.accumulate(np.where(moving, np.arange(heading.shape[1]), 0), axis=1)
+        heading = np.take_along_axis(heading, last, axis=1)
+        return cls(
+            xy=xy, heading=heading, speed=step_m / DT_S, probs=probs / probs.sum(), agent_index=agent_index,
+            fallback=fallback,
+        )

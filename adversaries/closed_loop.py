@@ -1,0 +1,127 @@
+"""The closed loop of DESIGN section 4 inside one env process: a generator perturbs episodes from the scenario's
+roll-out queue and every finished ego roll-out goes back into that queue.
+
+`ClosedLoopEnv` wraps a `ScenarioEnv`; it owns the process's `RolloutHistory`. For several processes (SB3
+``SubprocVecEnv``) `closed_loop_env_fns` partitions the scenarios across the workers (`partition_scenarios`), so
+each scenario is always played, and its queue kept, by one worker: a roll-out produced in a worker is the newest
+entry of the queue that worker's generator reads the next time the scenario comes up.
+
+Every reset's ``info["adversary"]`` says what drove the adversary (generator name or ``"log"``, chosen candidate,
+predicted step, generation time) and ``history``: the `rollout_digest` of each roll-out in the queue the generator
+saw (oldest first); the last step of an episode adds ``info["rollout_digest"]`` of the roll-out just appended.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from adversaries.base import K_ROLLOUTS, AdversaryGenerator, make_generator
+from adversaries.history import RolloutHistory, rollout_digest
+from envs.behaviors import AdversaryBehavior, ReplayBehavior
+from envs.scenario_env import ScenarioEnv
+from seal.scenario import Scenario
+
+
+class ClosedLoopAdversary:
+    """`ScenarioEnv` adversary factory: with probability ``perturb_prob`` the generator's behaviour for the
+    scenario's current queue, else the logged adversary. ``last`` holds the metadata of the latest call."""
+
+    def __init__(
+        self, generator: AdversaryGenerator | None, history: RolloutHistory, perturb_prob: float = 1.0
+    ) -> None:
+        self.generator = generator
+        self.history = history
+        self.perturb_prob = float(perturb_prob)
+        self.last: dict[str, Any] = {}
+
+    def __call__(self, scenario: Scenario, rng: np.random.Generator) -> AdversaryBehavior:
+        queue = self.history.queue(scenario)
+        digests = [rollout_digest(r) for r in queue]
+        perturb = self.generator is not None and (self.perturb_prob >= 1.0 or rng.random() < self.perturb_prob)
+        if not perturb:
+            self.last = {"generator": "log", "perturbed": False, "history": digests}
+            return ReplayBehavior()
+        generation = self.generator.generate(scenario, queue, rng)
+        self.last = {
+            "generator": self.generator.name,
+            "perturbed": True,
+            "chosen_candidate": generation.chosen_candidate,
+            "predicted_step": generation.predicted_step,
+            "generation_time_s": generation.generation_time_s,
+            "history": digests,
+        }
+        return generation.behavior
+
+
+class ClosedLoopEnv(gym.Wrapper):
+    """A `ScenarioEnv` whose adversary comes from ``generator`` and whose roll-outs feed the scenario queues.
+
+    Args:
+        env: the env (its adversary spec is replaced).
+        generator: the generator, or None for the logged adversary only (queues are still kept).
+        k: queue length.
+        perturb_prob: share of episodes the generator perturbs (the curriculum sets it with `set_perturb_prob`).
+    """
+
+    def __init__(
+        self, env: ScenarioEnv, generator: AdversaryGenerator | None, k: int = K_ROLLOUTS, perturb_prob: float = 1.0
+    ) -> None:
+        super().__init__(env)
+        self.history = RolloutHistory(k)
+        self.adversary = ClosedLoopAdversary(generator, self.history, perturb_prob)
+        env.set_adversary(self.adversary)
+
+    def set_perturb_prob(self, perturb_prob: float) -> None:
+        self.adversary.perturb_prob = float(perturb_prob)
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        self.adversary.last = {}
+        obs, info = self.env.reset(seed=seed, options=options)
+        info["adversary"] = dict(self.adversary.last) or {"generator": "given", "perturbed": False}
+        return obs, info
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        rollout = info.get("rollout")
+        if rollout is not None:
+            self.history.append(self.env.unwrapped.scenario, rollout)
+            info["rollout_digest"] = rollout_digest(rollout)
+        return obs, reward, terminated, truncated, info
+
+
+def partition_scenarios(scenarios: Sequence[Scenario], n_workers: int) -> list[list[Scenario]]:
+    """Deal ``scenarios`` round-robin to ``n_workers`` disjoint, non-empty parts (each scenario in exactly one)."""
+    if n_workers < 1:
+        raise ValueError(f"n_workers must be >= 1, got {n_workers}")
+    if len(scenarios) < n_workers:
+        raise ValueError(f"cannot split {len(scenarios)} scenarios across {n_workers} workers (each needs one)")
+    return [list(scenarios[w::n_workers]) for w in range(n_workers)]
+
+
+def closed_loop_env_fns(
+    scenarios: Sequence[Scenario],
+    n_workers: int,
+    generator: str | None,
+    generator_kwargs: Mapping[str, Any] | None = None,
+    env_config: Mapping[str, Any] | None = None,
+    k: int = K_ROLLOUTS,
+    perturb_prob: float = 1.0,
+) -> list[Callable[[], ClosedLoopEnv]]:
+    """One env constructor per worker (for SB3 ``SubprocVecEnv`` / ``DummyVecEnv``), worker ``w`` playing only
+    its part of `partition_scenarios`; the generator is built by name inside the worker."""
+    parts = partition_scenarios(scenarios, n_workers)
+    kwargs = dict(generator_kwargs or {})
+    config = dict(env_config or {})
+
+    def make(part: list[Scenario]) -> Callable[[], ClosedLoopEnv]:
+        def build() -> ClosedLoopEnv:
+            gen = make_generator(generator, **kwargs) if generator is not None else None
+            return ClosedLoopEnv(ScenarioEnv(part, config=config), gen, k=k, perturb_prob=perturb_prob)
+
+        return build
+
+    return [make(part) for part in parts]

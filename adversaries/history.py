@@ -1,0 +1,128 @@
+"""The per-scenario queue of the last K ego roll-outs that generators condition on (DESIGN section 4).
+
+Each scenario's queue starts as K copies of the logged ego future (`logged_rollout`) and every finished episode
+of that scenario is appended, dropping the oldest, so it always holds exactly K roll-outs, oldest first.
+
+Where the queues live when environments run in several processes: inside each env process. A training or
+evaluation job partitions the scenarios across its workers (`adversaries.closed_loop.partition_scenarios`), so a
+scenario is always played by the same worker and the roll-out of one episode reaches the queue used the next
+time that scenario is perturbed without any inter-process traffic (no shared store, no locks, nothing on disk).
+`RolloutHistory` is plain picklable data, so a job can still fetch the queues from its workers (SB3's
+``get_attr``) to checkpoint or inspect them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections import deque
+from collections.abc import Iterator
+
+import numpy as np
+
+from adversaries.base import K_ROLLOUTS
+from envs.rollout import Rollout
+from seal.geometry import box_corners, boxes_overlap
+from seal.scenario import CURRENT_STEP, HEADING, LENGTH, VALID, WIDTH, Scenario, X, Y
+
+
+def logged_rollout(scenario: Scenario) -> Rollout:
+    """The logged episode as a `Rollout`: what the queue holds before the scenario was ever played.
+
+    ``tracks`` are the scenario's tracks (91 steps); ``last_step`` is the ego's last valid step; ``ego_crashes``
+    / ``adv_crashes`` are the logged box overlaps after `CURRENT_STEP`; the outcome is ``"timeout"`` (the log ran
+    to its end), route completion 1 and ``adversary = "log"``.
+    """
+    tracks = scenario.tracks
+    ego_i, adv_i = scenario.ego_index, scenario.adv_index
+    valid = tracks[:, :, VALID] > 0.5
+    ego_valid = np.flatnonzero(valid[ego_i])
+    last_step = int(ego_valid[-1]) if ego_valid.size else CURRENT_STEP
+    corners = box_corners(tracks[..., X], tracks[..., Y], tracks[..., HEADING], tracks[..., LENGTH], tracks[..., WIDTH])
+    future = np.arange(tracks.shape[1]) > CURRENT_STEP
+
+    def crashes(i: int, skip: tuple[int, ...]) -> list[tuple[int, int]]:
+        hit = boxes_overlap(corners[i][None], corners) & valid[i][None] & valid & future[None]  # [A, T]
+        hit[list(skip)] = False
+        steps, agents = np.nonzero(hit.T)
+        return [(int(t), int(scenario.agent_ids[a])) for t, a in zip(steps, agents, strict=True)]
+
+    return Rollout(
+        scenario_id=scenario.scenario_id,
+        tracks=tracks.copy(),
+        agent_ids=scenario.agent_ids.copy(),
+        ego_id=scenario.ego_id,
+        adv_id=scenario.adv_id,
+        last_step=last_step,
+        outcome="timeout",
+        ego_crashes=crashes(ego_i, (ego_i,)),
+        adv_crashes=crashes(adv_i, (adv_i, ego_i)),
+        route_completion=1.0,
+        adversary="log",
+    )
+
+
+def rollout_digest(rollout: Rollout) -> str:
+    """Short content hash of a roll-out's executed ego track (identifies a roll-out across processes)."""
+    h = hashlib.blake2b(digest_size=8)
+    h.update(rollout.scenario_id.encode())
+    h.update(np.ascontiguousarray(rollout.ego_track, dtype=np.float32).tobytes())
+    h.update(str(rollout.last_step).encode())
+    return h.hexdigest()
+
+
+class RolloutHistory:
+    """Per-scenario queues of the last ``k`` ego roll-outs (oldest first).
+
+    A scenario's queue is created on first use with ``k`` copies of `logged_rollout`; `append` adds a roll-out
+    and drops the oldest, so every queue always holds exactly ``k`` roll-outs.
+
+    Args:
+        k: queue length (CAT / SEAL use 5).
+    """
+
+    def __init__(self, k: int = K_ROLLOUTS) -> None:
+        if k < 1:
+            raise ValueError(f"RolloutHistory: k must be >= 1, got {k}")
+        self.k = int(k)
+        self._queues: dict[str, deque[Rollout]] = {}
+
+    def queue(self, scenario: Scenario) -> tuple[Rollout, ...]:
+        """The scenario's ``k`` roll-outs, oldest first (initialised from the log on first use)."""
+        return tuple(self._queue(scenario))
+
+    def append(self, scenario: Scenario, rollout: Rollout) -> None:
+        """Add the roll-out of a finished episode of ``scenario`` (the oldest one drops out)."""
+        if rollout.scenario_id != scenario.scenario_id:
+            raise ValueError(
+                f"RolloutHistory.append: roll-out of scenario {rollout.scenario_id!r} given for "
+                f"{scenario.scenario_id!r}"
+            )
+        self._queue(scenario).append(rollout)
+
+    def digests(self, scenario: Scenario) -> list[str]:
+        """`rollout_digest` of each roll-out in the scenario's queue, oldest first."""
+        return [rollout_digest(r) for r in self._queue(scenario)]
+
+    def _queue(self, scenario: Scenario) -> deque[Rollout]:
+        q = self._queues.get(scenario.scenario_id)
+        if q is None:
+            logged = logged_rollout(scenario)
+            q = deque([logged] * self.k, maxlen=self.k)
+            self._queues[scenario.scenario_id] = q
+        return q
+
+    def __contains__(self, scenario_id: object) -> bool:
+        return scenario_id in self._queues
+
+    def __len__(self) -> int:
+        """Number of scenarios with a queue."""
+        return len(self._queues)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._queues)
+
+    def copy(self) -> RolloutHistory:
+        """An independent copy (the roll-outs themselves are shared: they are never modified)."""
+        other = RolloutHistory(self.k)
+        other._queues = {sid: deque(q, maxlen=self.k) for sid, q in self._queues.items()}
+        return other

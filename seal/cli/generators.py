@@ -1,0 +1,105 @@
+"""``seal eval generators`` and ``seal bench generators``: compare adversary generators and time them."""
+
+from __future__ import annotations
+
+import argparse
+
+from seal.cli.args import CliError, positive_int, print_result
+from seal.cli.tree import CommandTree
+
+
+def _generator_options(args: argparse.Namespace) -> tuple[dict, dict]:
+    """(resolved config, shared generator options) from the command line; bad generator names -> CliError."""
+    from experiments.eval_generators import resolve_config
+
+    try:
+        config = resolve_config(
+            args.config, generators=args.generators, ego=getattr(args, "ego", None),
+            split=args.split, limit=args.limit, k=getattr(args, "k", None), seed=args.seed, prior=args.prior,
+            candidates=args.candidates, gen_opts=args.gen_opt,
+        )
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    if args.all_scenarios:
+        config["split"] = None
+    return config, {"prior": config["prior"], "candidates": config["candidates"]}
+
+
+def cmd_eval_generators(args: argparse.Namespace) -> int:
+    from experiments.eval_generators import run_eval_generators
+    from experiments.generator_metrics import markdown_table
+
+    config, _ = _generator_options(args)
+    rows = run_eval_generators(args.dataset, args.out, config, progress=not args.no_progress)
+    print(markdown_table(rows))
+    print(f"wrote {args.out}/generators.md, generators.csv, generators.json, episodes.csv and config.yaml")
+    return 0
+
+
+def cmd_bench_generators(args: argparse.Namespace) -> int:
+    from experiments.bench_generators import bench_generators, format_bench
+    from experiments.eval_generators import build_generator, load_eval_scenarios
+
+    config, shared = _generator_options(args)
+    scenarios = load_eval_scenarios(args.dataset, config["split"], config["limit"] or args.n)
+    generators = {name: build_generator(name, kw, shared) for name, kw in config["generators"].items()}
+    result = bench_generators(scenarios, generators, seed=config["seed"])
+    if args.json:
+        print_result(result, True)
+    else:
+        print(format_bench(result))
+    return 0
+
+
+def _common(p: argparse.ArgumentParser, default_generators: str) -> None:
+    p.add_argument("dataset", help="dataset directory (seal data generate / score / split)")
+    p.add_argument(
+        "--generators", default=None,
+        help=f"comma-separated generator names (default {default_generators}); e.g. replay,rule,cat,goose",
+    )
+    p.add_argument("--split", default=None, help="dataset split to use (default eval)")
+    p.add_argument("--all-scenarios", action="store_true", help="ignore splits, use every scenario")
+    p.add_argument("--limit", type=positive_int("--limit"), default=None, help="only the first N scenarios")
+    p.add_argument("--prior", default=None, help="trajectory prior file for candidate-based generators (cat)")
+    p.add_argument(
+        "--candidates", default=None,
+        help="built-in candidate source instead of a prior: lanes (map-based heuristic) or constant_velocity",
+    )
+    p.add_argument(
+        "--gen-opt", action="append", default=[], metavar="NAME.KEY=VALUE",
+        help="constructor option of one generator, repeatable, e.g. goose.model=agent.pt or cat.follow=track",
+    )
+    p.add_argument("--config", default=None, help="YAML config (keys as in experiments.eval_generators.DEFAULTS)")
+    p.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
+
+
+def register(tree: CommandTree) -> None:
+    ev = tree.group("eval").add_parser(
+        "generators",
+        help="X-Gen evaluation of adversary generators against one ego (Table 6.2 columns)",
+        description="For every scenario: one normal episode, then K sequential perturbation passes per generator "
+        "against the same ego (each roll-out appended to the scenario's queue); the last pass is scored. Writes "
+        "generators.{md,csv,json}, episodes.csv and the resolved config.yaml into --out.",
+    )
+    _common(ev, "replay,rule,cat")
+    ev.add_argument(
+        "--ego", default=None,
+        help="heuristic | replay | path of a trained run (folder or SB3 .zip with config.yaml); default replay",
+    )
+    ev.add_argument("--k", type=positive_int("--k"), default=None, help="perturbation passes = queue length (5)")
+    ev.add_argument("--out", required=True, help="output folder")
+    ev.add_argument("--no-progress", action="store_true", help="no progress bar")
+    ev.set_defaults(func=cmd_eval_generators)
+
+    bench = tree.group("bench").add_parser(
+        "generators",
+        help="generation latency per scenario (batch of one, CPU) vs the 30 ms real-time budget",
+        description="Time each generator's generate() on N scenarios (queue: K copies of the logged ego future, "
+        "one warm-up call), twice per scenario: print mean / p50 / p95 / max ms of the first (cold) call, mean / "
+        "p95 of the second (warm) call, CAT's candidate (pi_gen) and selection shares, and the ratio to replay "
+        "measured in the same run.",
+    )
+    _common(bench, "replay,rule,cat")
+    bench.add_argument("--n", type=positive_int("--n"), default=100, help="scenarios to time (default 100)")
+    bench.add_argument("--json", action="store_true", help="print JSON")
+    bench.set_defaults(func=cmd_bench_generators)
