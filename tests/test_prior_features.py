@@ -89,7 +89,7 @@ def test_targets_must_be_present_now() -> None:
 
 def test_road_points_and_road_loss() -> None:
     from seal.prior.features import road_points
-    from seal.prior.train import road_loss
+    from seal.prior.losses import road_loss
 
     s = sf.lane_change_scenario()  # straight road along +x, lanes at y = 0, 4, 8
     cfg = FeatureConfig(n_agents=4, n_chunks=6)

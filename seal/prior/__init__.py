@@ -24,7 +24,7 @@ _LAZY = {
     "PriorFileError": "seal.prior.prior",
     "PriorConfig": "seal.prior.network",
     "FeatureConfig": "seal.prior.features",
-    "TrainConfig": "seal.prior.train",
+    "TrainConfig": "seal.prior.train_config",
     "fit_prior": "seal.prior.train",
     "evaluate_prior": "seal.prior.evaluate",
 }

@@ -5,9 +5,10 @@ Encoder: each agent's 1.1 s history (a flat MLP over its 11 steps) and each lane
 token is that agent's latent (``[B, n_agents, d_model]``, the target at index 0) — the hook for latent steering
 (adding a direction to a latent before decoding, as in papers ``000`` / ``002``).
 
-Decoder: ``n_modes`` learned mode queries, offset by the target's latent, cross-attend to all tokens; an MLP per
-query gives the mode's logit and its controls (acceleration and yaw rate at ``n_knots`` knots), integrated into
-positions by `seal.prior.kinematics`.
+Decoder: one query per mode, built from the mode's anchor (a control profile, see `PriorNet`) and offset by the
+target's latent, cross-attends to all tokens; an MLP gives the mode's controls (acceleration and yaw rate at
+``n_knots`` knots, a bounded correction of its anchor), integrated into positions by `seal.prior.kinematics`.
+Mode logits: a K-way classifier on the target's latent plus a score of each attended query.
 """
 
 from __future__ import annotations

@@ -1,12 +1,11 @@
-"""Training of the prior: winner-takes-all regression over the modes plus cross-entropy on the mode logits.
+"""Training of the prior (`fit_prior`): data, anchors, optimisation, validation, early stopping, resumption.
 
-Loss per target: the mode with the smallest ADE to the logged future is the winner; its positions are pulled to
-the future with a Huber loss over the valid future steps (metres), and the mode logits are trained with
-cross-entropy to pick the winner. Validation (targets of held-out scenarios) after every epoch measures
-minADE@1 / @6; the best epoch by validation minADE@6 is kept and written, training stops early when it has not
-improved for ``patience`` epochs, or when the next epoch would overrun the time budget. The training state is
-saved next to the output after an epoch (at most every `STATE_EVERY_S`) so an interrupted run resumes with
-``resume=True``.
+The targets of a share of the scenarios (held out by scenario) are the validation set. The mode anchors are the
+k-means centres of the training targets' controls (`seal.prior.anchors`); the losses are in
+`seal.prior.losses`. After every epoch validation measures minADE@1 / @6 (and an on-road share); the best epoch
+by validation minADE@6 is kept and written, training stops early when it has not improved for ``patience``
+epochs, or when the next epoch would overrun the time budget. The training state is saved next to the output
+after an epoch (at most every `STATE_EVERY_S`) so an interrupted run resumes with ``resume=True``.
 """
 
 from __future__ import annotations
@@ -14,214 +13,21 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from seal.prior.anchors import fit_anchors
-from seal.prior.features import featurise, road_points
-from seal.prior.metrics import ROAD_CHECK_EVERY, displacement_errors, top_k_min
+from seal.prior.losses import anchor_assignment, batch_loss, evaluate_samples, training_loss
 from seal.prior.network import PriorConfig, PriorNet, default_anchors
 from seal.prior.prior import TrajectoryPrior
-from seal.prior.samples import SampleSet, TargetFilter, build_samples
+from seal.prior.samples import build_samples
+from seal.prior.train_config import TrainConfig
 from seal.scenario import Scenario
 
 STATE_EVERY_S = 30.0  # minimum seconds between two saves of the resumable training state
-
-
-@dataclass(frozen=True)
-class TrainConfig:
-    """How the prior is trained (recorded in the saved model).
-
-    Attributes:
-        epochs: maximum epochs.
-        batch_size: targets per optimiser step.
-        lr: peak learning rate (AdamW; linear warm-up, then cosine decay to zero over the planned epochs).
-        weight_decay: AdamW weight decay.
-        warmup_steps: optimiser steps of linear warm-up.
-        cls_weight: weight of the mode cross-entropy against the Huber regression (m).
-        huber_beta_m: Huber transition (m).
-        grad_clip: gradient-norm clip.
-        val_fraction: share of the training scenarios held out for validation (by scenario).
-        patience: epochs without a better validation minADE@6 before stopping.
-        max_minutes: wall-clock budget; the planned epochs shrink to fit it after the first epoch and no epoch
-            starts that would overrun it (None: no budget, fully deterministic for a seed).
-        seed: seed of initialisation, validation hold-out and batch order.
-        threads: torch CPU threads.
-        road_weight: weight of the on-road loss: for ``road_modes`` random modes per target and step, the mean
-            distance (m) by which their 0.5 s samples lie farther than ``road_margin_m`` from the nearest lane
-            centreline point among ``road_chunks`` chunks around the target's 8 s constant-velocity path. It
-            keeps the modes that the winner-takes-all regression does not train on the road. 0 switches it off.
-        road_margin_m: distance from a lane centreline that costs nothing (m; about half a lane).
-        road_modes: modes per target that the on-road loss sees in one step, to save time: the ``road_top_modes``
-            most probable ones (those generators use most) and random others.
-        road_top_modes: see ``road_modes``.
-        road_batch: targets per step that the on-road loss sees (the first of the shuffled batch, to save time).
-        road_chunks: lane chunks per target for the on-road loss.
-        targets: which agents are training targets.
-    """
-
-    epochs: int = 10
-    batch_size: int = 128
-    lr: float = 2e-3
-    weight_decay: float = 1e-4
-    warmup_steps: int = 200
-    cls_weight: float = 0.5
-    huber_beta_m: float = 0.5
-    grad_clip: float = 5.0
-    val_fraction: float = 0.05
-    patience: int = 3
-    max_minutes: float | None = 12.0
-    seed: int = 0
-    threads: int = 1
-    road_weight: float = 3.0
-    road_margin_m: float = 1.5
-    road_modes: int = 8
-    road_top_modes: int = 3
-    road_batch: int = 48
-    road_chunks: int = 96
-    targets: TargetFilter = field(default_factory=TargetFilter)
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
-        d = dict(d)
-        unknown = set(d) - set(cls.__dataclass_fields__)
-        if unknown:
-            raise ValueError(f"training config: unknown field(s) {sorted(unknown)}")
-        targets = d.pop("targets", {})
-        if isinstance(targets, dict):
-            unknown = set(targets) - set(TargetFilter.__dataclass_fields__)
-            if unknown:
-                raise ValueError(f"training config: unknown field(s) targets.{sorted(unknown)}")
-            targets = TargetFilter(**targets)
-        return cls(targets=targets, **d)
-
-
-def prior_loss(
-    chosen_xy: torch.Tensor, logits: torch.Tensor, best: torch.Tensor, future_xy: torch.Tensor,
-    future_valid: torch.Tensor, cls_weight: float, huber_beta_m: float,
-) -> torch.Tensor:
-    """Huber regression of each target's winning mode + cross-entropy of the mode logits (module docstring).
-
-    Args:
-        chosen_xy: ``[B, T, 2]`` the winning mode's positions (m). logits: ``[B, K]``. best: ``[B]`` winning modes.
-        future_xy: ``[B, T, 2]`` logged future (m). future_valid: ``[B, T]`` bool.
-    """
-    huber = F.smooth_l1_loss(chosen_xy, future_xy, reduction="none", beta=huber_beta_m).sum(-1)  # [B, T]
-    m = future_valid.to(huber.dtype)
-    reg = ((huber * m).sum(-1) / m.sum(-1).clamp(min=1.0)).mean()
-    return reg + cls_weight * F.cross_entropy(logits, best)
-
-
-@torch.no_grad()
-def anchor_assignment(net: PriorNet, samples: SampleSet, batch_size: int = 1024) -> torch.Tensor:
-    """``[S]`` for every target, the mode whose anchor (integrated from the target's start) has the smallest ADE.
-
-    Anchors are fixed during training, so this is computed once instead of every step.
-    """
-    out = []
-    for rows in torch.arange(len(samples)).split(batch_size):
-        anchors = net.anchor_trajectories(samples.tables.start[rows])
-        ade, _ = displacement_errors(anchors, samples.future[rows], samples.future_valid[rows])
-        out.append(ade.argmin(dim=1))
-    return torch.cat(out)
-
-
-def road_loss(xy: torch.Tensor, points: torch.Tensor, mask: torch.Tensor, margin_m: float) -> torch.Tensor:
-    """Mean distance (m) beyond ``margin_m`` from positions ``[B, M, T, 2]`` to the nearest of ``points``
-    ``[B, R, 2]`` (``mask`` ``[B, R]`` marks real points)."""
-    b, m, t, _ = xy.shape
-    flat = xy.reshape(b, m * t, 2)
-    with torch.no_grad():  # find the nearest point without autograd over the [B, M*T, R] distance matrix
-        nearest = torch.cdist(flat, points).masked_fill(~mask[:, None, :], float("inf")).argmin(dim=-1)
-    near = torch.gather(points, 1, nearest[..., None].expand(-1, -1, 2))  # [B, M*T, 2]
-    return torch.relu(torch.linalg.norm(flat - near, dim=-1) - margin_m).mean()
-
-
-def batch_loss(
-    net: PriorNet, samples: SampleSet, rows: torch.Tensor, tc: TrainConfig, assigned: torch.Tensor | None,
-    generator: torch.Generator | None = None,
-) -> torch.Tensor:
-    """Training loss of the targets ``rows``; ``assigned`` are the anchor assignments of all targets (None for
-    ``assignment == "predicted"``: the mode with the smallest ADE wins). ``generator`` draws the modes the
-    on-road loss sees."""
-    feats = featurise(samples.tables, rows, net.cfg.features)
-    tokens, mask = net.encode(feats)
-    fut, valid = samples.future[rows], samples.future_valid[rows]
-    use_road = tc.road_weight > 0 and samples.tables.road_idx is not None
-    n_sub = min(len(rows), tc.road_batch) if use_road else 0  # targets the on-road loss sees
-    controls, logits = net.decode_controls(tokens, mask)
-    start = feats["start"]
-    if assigned is not None:
-        best = assigned[rows]
-        # Only the modes the losses see are integrated: integration is the costliest part of decoding.
-        chosen = net.integrate(net.select_modes(controls, best[:, None]), start)[:, 0]
-    else:
-        xy = net.integrate(controls, start)
-        with torch.no_grad():
-            best = displacement_errors(xy, fut, valid)[0].argmin(dim=1)
-        chosen = xy[torch.arange(len(rows)), best]
-    loss = prior_loss(chosen, logits, best, fut, valid, tc.cls_weight, tc.huber_beta_m)
-    if n_sub:
-        n_top = min(tc.road_top_modes, tc.road_modes, net.cfg.n_modes)
-        top = torch.topk(logits[:n_sub].detach(), n_top, dim=1).indices
-        rand = torch.randint(0, net.cfg.n_modes, (n_sub, max(0, tc.road_modes - n_top)), generator=generator)
-        extra = torch.cat([top, rand], dim=1)
-        others = net.integrate(net.select_modes(controls[:n_sub], extra), start[:n_sub])
-        points, pmask = road_points(samples.tables, rows[:n_sub])
-        samples_xy = others[:, :, ROAD_CHECK_EVERY - 1 :: ROAD_CHECK_EVERY]
-        loss = loss + tc.road_weight * road_loss(samples_xy, points, pmask, tc.road_margin_m)
-    return loss
-
-
-@torch.no_grad()
-def training_loss(
-    net: PriorNet, samples: SampleSet, tc: TrainConfig, assigned: torch.Tensor | None, max_targets: int = 2048
-) -> float:
-    """Mean training loss of ``net`` (eval mode) over the first ``max_targets`` targets of ``samples``."""
-    was_training = net.training
-    net.eval()
-    rows = torch.arange(min(len(samples), max_targets))
-    gen = torch.Generator().manual_seed(0)
-    total = sum(batch_loss(net, samples, chunk, tc, assigned, gen).item() * len(chunk) for chunk in rows.split(512))
-    net.train(was_training)
-    return total / len(rows)
-
-
-@torch.no_grad()
-def evaluate_samples(net: PriorNet, samples: SampleSet, batch_size: int = 512) -> dict[str, float]:
-    """Mean minADE@1 / @6 / @K and minFDE@6 (m) of ``net`` on ``samples`` (their valid future steps), and, when
-    the samples carry road chunks, ``on_road``: the share of candidates whose 0.5 s samples all lie within 4 m
-    (about a lane width) of a lane-centreline point (a training monitor; `seal eval prior` measures it exactly)."""
-    net.eval()
-    sums = {"min_ade_1": 0.0, "min_ade_6": 0.0, "min_ade_all": 0.0, "min_fde_6": 0.0}
-    on_road = 0.0
-    n = len(samples)
-    for start in range(0, n, batch_size):
-        rows = torch.arange(start, min(n, start + batch_size))
-        xy, logits = net(featurise(samples.tables, rows, net.cfg.features))
-        ade, fde = displacement_errors(xy, samples.future[rows], samples.future_valid[rows])
-        sums["min_ade_1"] += float(top_k_min(ade, logits, 1).sum())
-        sums["min_ade_6"] += float(top_k_min(ade, logits, 6).sum())
-        sums["min_ade_all"] += float(ade.min(dim=1).values.sum())
-        sums["min_fde_6"] += float(top_k_min(fde, logits, 6).sum())
-        if samples.tables.road_idx is not None:
-            points, mask = road_points(samples.tables, rows)
-            pts = xy[:, :, ROAD_CHECK_EVERY - 1 :: ROAD_CHECK_EVERY]
-            b, k, t, _ = pts.shape
-            d = torch.cdist(pts.reshape(b, k * t, 2), points).masked_fill(~mask[:, None, :], float("inf"))
-            on_road += float((d.min(dim=-1).values.view(b, k, t) <= 4.0).all(dim=-1).float().mean(dim=1).sum())
-    out = {k: v / n for k, v in sums.items()}
-    if samples.tables.road_idx is not None:
-        out["on_road"] = on_road / n
-    return out
 
 
 def split_validation(n_scenarios: int, fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
