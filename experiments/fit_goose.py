@@ -23,10 +23,10 @@ from tqdm import tqdm
 from adversaries.goose_agent import ALGOS, GooseAgent, load_goose_agent, policy_kwargs, save_goose_agent
 from adversaries.goose_env import GooseEnv
 from adversaries.goose_spec import GooseSpec
+from experiments import presets
 from experiments.goose_eval import evaluate, random_actor, zero_actor
 from seal.atomic import atomic_write_bytes, atomic_write_json
 
-CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 PRESETS = ("quick", "standard")
 
 DEFAULTS: dict[str, Any] = {
@@ -63,19 +63,11 @@ None), ``seed``, ``log_every`` (steps per success.csv row) and ``spec`` (`GooseS
 
 def load_preset(name: str) -> dict[str, Any]:
     """The YAML preset ``experiments/configs/goose_<name>.yaml``."""
-    if name not in PRESETS:
-        raise ValueError(f"--preset must be one of {PRESETS}, got {name!r}")
-    return _read_yaml(CONFIG_DIR / f"goose_{name}.yaml")
+    return presets.load_preset("goose", name, PRESETS, DEFAULTS)
 
 
 def _read_yaml(path: Path) -> dict[str, Any]:
-    loaded = yaml.safe_load(path.read_text()) or {}
-    if not isinstance(loaded, dict):
-        raise ValueError(f"{path}: expected a mapping of options")
-    unknown = sorted(set(loaded) - set(DEFAULTS))
-    if unknown:
-        raise ValueError(f"{path}: unknown option(s) {unknown}; known: {sorted(DEFAULTS)}")
-    return loaded
+    return presets.read_options(path, DEFAULTS)
 
 
 def resolve_config(preset: str | None = "standard", config_file: str | Path | None = None,

@@ -35,10 +35,10 @@ from typing import Any
 import numpy as np
 import yaml
 
+from experiments import presets
 from seal.atomic import atomic_write_bytes, atomic_write_json
 from seal.skills.demos import ADVERSARIAL, BENIGN, Demonstrations, WindowSpec, label_windows, split_by_scenario
 
-CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 PRESETS = ("quick", "standard")
 
 DEFAULTS: dict[str, Any] = {
@@ -73,19 +73,11 @@ plot)."""
 
 def load_preset(name: str) -> dict[str, Any]:
     """The YAML preset ``experiments/configs/skills_<name>.yaml``."""
-    if name not in PRESETS:
-        raise ValueError(f"--preset must be one of {PRESETS}, got {name!r}")
-    return _read_yaml(CONFIG_DIR / f"skills_{name}.yaml")
+    return presets.load_preset("skills", name, PRESETS, DEFAULTS)
 
 
 def _read_yaml(path: Path) -> dict[str, Any]:
-    loaded = yaml.safe_load(path.read_text()) or {}
-    if not isinstance(loaded, dict):
-        raise ValueError(f"{path}: expected a mapping of options")
-    unknown = sorted(set(loaded) - set(DEFAULTS))
-    if unknown:
-        raise ValueError(f"{path}: unknown option(s) {unknown}; known: {sorted(DEFAULTS)}")
-    return loaded
+    return presets.read_options(path, DEFAULTS)
 
 
 def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
