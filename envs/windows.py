@@ -22,6 +22,7 @@ import numpy as np
 
 from envs.traffic import RunLog
 from seal.geometry import box_corners, box_gap
+from seal.interaction import in_own_lanes as own_lanes
 from seal.scenario import CURRENT_STEP, DT_S, N_STEPS
 
 EVENT_GAP_M = 5.0
@@ -34,10 +35,6 @@ CONTEXT_M = 80.0
 """Other vehicles within this distance (m) of the ego or the adversary are part of the scenario."""
 EVENT_STEPS = (25, 75)
 """Preferred window steps for the closest approach / conflict."""
-SIDE_GAP_M = 1.0
-"""Parallel (or oncoming) vehicles whose bodies keep at least this lateral gap (m) across their headings are in
-their own lanes: their closeness is not an interaction."""
-PARALLEL_RAD = np.radians(20.0)
 MIN_MEAN_SPEED = 2.0
 MIN_DISPLACEMENT_M = 10.0
 MAX_PER_VEHICLE = 2
@@ -63,15 +60,9 @@ def _corners(log: RunLog, row: int, steps: slice | np.ndarray) -> np.ndarray:
 
 
 def in_own_lanes(log: RunLog, i: int, j: int, steps: np.ndarray) -> np.ndarray:
-    """``[K]`` bool: at ``steps``, ``i`` and ``j`` drive parallel or oncoming (headings within `PARALLEL_RAD` of
-    0 or pi) with a lateral body gap, across ``i``'s heading, of at least `SIDE_GAP_M`."""
+    """``[K]`` bool: at ``steps``, ``i`` and ``j`` keep to their own lanes (`seal.interaction.in_own_lanes`)."""
     si, sj = log.states[i, steps], log.states[j, steps]
-    dx, dy = sj[:, 0] - si[:, 0], sj[:, 1] - si[:, 1]
-    c, s = np.cos(si[:, 2]), np.sin(si[:, 2])
-    lat = -dx * s + dy * c
-    turn = np.abs((sj[:, 2] - si[:, 2] + np.pi) % (2 * np.pi) - np.pi)
-    parallel = (turn < PARALLEL_RAD) | (turn > np.pi - PARALLEL_RAD)
-    return parallel & (np.abs(lat) - 0.5 * (si[:, 5] + sj[:, 5]) >= SIDE_GAP_M)
+    return own_lanes(si[:, :2], si[:, 2], si[:, 5], sj[:, :2], sj[:, 2], sj[:, 5])
 
 
 def interaction_gap(log: RunLog, i: int, j: int, steps: np.ndarray) -> np.ndarray:

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from envs.traffic import RunLog
-from envs.windows import SIDE_GAP_M, in_own_lanes, interaction_gap
+from envs.windows import in_own_lanes, interaction_gap
+from seal.interaction import SIDE_GAP_M
 
 
 def _log(*tracks: np.ndarray) -> RunLog:
@@ -58,3 +59,19 @@ def test_close_lateral_gaps_and_following_are_interactions(lateral_m: float) -> 
     # Following 3 m behind in the same lane: the longitudinal body gap counts.
     follow = _log(_straight(0.0, 0.0), _straight(8.0, 0.0))
     np.testing.assert_allclose(interaction_gap(follow, 0, 1, np.arange(5)), 3.0, atol=1e-9)
+
+
+def test_own_lanes_rule_is_shared_and_the_alongside_condition_is_optional() -> None:
+    from seal.interaction import in_own_lanes as core_rule
+
+    # b is 2 m + 2 m (bodies) to the left of a, parallel: own lanes. 10 m ahead it still is, unless the
+    # vehicles must also be alongside (lengths given, as the importers ask).
+    a_xy, b_alongside, b_ahead = np.zeros(2), np.array([1.0, 4.0]), np.array([10.0, 4.0])
+    w = np.asarray(2.0)
+    assert core_rule(a_xy, 0.0, w, b_alongside, 0.0, w)
+    assert core_rule(a_xy, 0.0, w, b_ahead, 0.0, w)
+    lengths = (np.asarray(4.5), np.asarray(4.5))
+    assert core_rule(a_xy, 0.0, w, b_alongside, 0.0, w, lengths_m=lengths)
+    assert not core_rule(a_xy, 0.0, w, b_ahead, 0.0, w, lengths_m=lengths)
+    # Crossing at 90 degrees is never "own lanes".
+    assert not core_rule(a_xy, 0.0, w, b_alongside, np.pi / 2, w)

@@ -1,9 +1,10 @@
 """Cut 9.1 s scenario windows around interacting (ego, adversary) pairs out of a recorded `AgentLog`.
 
-Same interaction criteria as the generated pool (`envs.windows`, which core code cannot import): two vehicles
-interact when their bodies come within `EVENT_GAP_M` other than by driving side by side in their own lanes
-(`side_by_side`), or their paths cross with less than `CONFLICT_DT_S` between their passages of the crossing
-point. Differences for recorded data, and why:
+Same interaction criteria as the generated pool (`envs.windows`; the own-lanes rule is shared,
+`seal.interaction`): two vehicles interact when their bodies come within `EVENT_GAP_M` other than by driving side
+by side in their own lanes (`side_by_side`, which also asks them to be alongside: see `seal.interaction`), or
+their paths cross with less than `CONFLICT_DT_S` between their passages of the crossing point.
+Differences for recorded data, and why:
 
 * Recordings may be shorter than 9.1 s (CommonRoad benchmark excerpts are 3-10 s). A window needs both focal
   agents over the full 1.1 s history and at least ``min_future_steps`` future steps; steps past the end of the
@@ -29,6 +30,7 @@ import numpy as np
 from seal.geometry import box_corners, box_gap, boxes_overlap
 from seal.importers.lane_index import AgentLanes, LaneIndex
 from seal.importers.tracks import AgentLog
+from seal.interaction import in_own_lanes
 from seal.road import RoadDescription
 from seal.scenario import CURRENT_STEP, DT_S, HEADING, LENGTH, N_STEPS, VALID, VX, VY, WIDTH, X, Y
 
@@ -38,10 +40,6 @@ CONFLICT_DIST_M = 1.5
 """Paths cross where they pass within this distance (m) of each other."""
 CONFLICT_DT_S = 2.5
 """A crossing is a conflict when both pass it within this many seconds."""
-SIDE_GAP_M = 1.0
-"""Vehicles alongside each other with at least this lateral body gap (m) keep their lanes: not an interaction
-(every overtake on a multi-lane road passes within a couple of metres)."""
-PARALLEL_RAD = np.radians(20.0)
 NEAR_M = 30.0
 """Pairs whose centres never come closer than this (m) cannot interact."""
 CONTEXT_M = 80.0
@@ -133,15 +131,12 @@ def _moving(tracks: np.ndarray) -> bool:
 
 
 def side_by_side(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``[T]`` bool for two ``[T, 8]`` tracks: parallel or oncoming (headings within `PARALLEL_RAD` of 0 or pi),
-    overlapping along ``a``'s heading and at least `SIDE_GAP_M` apart sideways, i.e. in their own lanes."""
-    dx, dy = b[:, X] - a[:, X], b[:, Y] - a[:, Y]
-    c, s = np.cos(a[:, HEADING]), np.sin(a[:, HEADING])
-    lon, lat = dx * c + dy * s, -dx * s + dy * c
-    turn = np.abs((b[:, HEADING] - a[:, HEADING] + np.pi) % (2 * np.pi) - np.pi)
-    parallel = (turn < PARALLEL_RAD) | (turn > np.pi - PARALLEL_RAD)
-    overlap = np.abs(lon) < 0.5 * (a[:, LENGTH] + b[:, LENGTH])
-    return parallel & overlap & (np.abs(lat) - 0.5 * (a[:, WIDTH] + b[:, WIDTH]) >= SIDE_GAP_M)
+    """``[T]`` bool for two ``[T, 8]`` tracks: alongside each other in their own lanes
+    (`seal.interaction.in_own_lanes` with the lengthwise-overlap condition)."""
+    return in_own_lanes(
+        a[:, [X, Y]], a[:, HEADING], a[:, WIDTH], b[:, [X, Y]], b[:, HEADING], b[:, WIDTH],
+        lengths_m=(a[:, LENGTH], b[:, LENGTH]),
+    )
 
 
 def _crossing(a: np.ndarray, b: np.ndarray) -> bool:
