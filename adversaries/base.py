@@ -67,6 +67,7 @@ GENERATOR_MODULES: dict[str, str] = {
     "rule": "adversaries.rule",
     "cat": "adversaries.cat",
     "goose": "adversaries.goose",
+    "seal": "adversaries.seal",
 }
 """Module that registers each built-in generator, imported on first lookup (so a name resolves without importing
 every generator, and even when ``adversaries/__init__.py`` did not run). Add a line per new generator."""

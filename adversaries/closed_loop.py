@@ -8,11 +8,17 @@ entry of the queue that worker's generator reads the next time the scenario come
 
 Every reset's ``info["adversary"]`` says what drove the adversary (generator name or ``"log"``, chosen candidate,
 predicted step, generation time) and ``history``: the `rollout_digest` of each roll-out in the queue the generator
-saw (oldest first); the last step of an episode adds ``info["rollout_digest"]`` of the roll-out just appended.
+saw (oldest first); the last step of an episode adds ``info["rollout_digest"]`` of the roll-out just appended and
+``info["episode_adversary"]``: that episode's reset metadata again (what a vectorised trainer sees at an episode's
+end, when the reset info already belongs to the next episode).
+
+`ClosedLoopEnv.get_state` / `set_state` save and restore a worker's queues and the env's rng (numpy arrays and
+JSON only) so that a training run resumes with the queues it had at its checkpoint.
 """
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -22,6 +28,7 @@ import numpy as np
 from adversaries.base import K_ROLLOUTS, AdversaryGenerator, make_generator
 from adversaries.history import RolloutHistory, rollout_digest
 from envs.behaviors import AdversaryBehavior, ReplayBehavior
+from envs.road_geometry import get_road_geometry, reserve_road_cache
 from envs.scenario_env import ScenarioEnv
 from seal.scenario import Scenario
 
@@ -73,15 +80,44 @@ class ClosedLoopEnv(gym.Wrapper):
         super().__init__(env)
         self.history = RolloutHistory(k)
         self.adversary = ClosedLoopAdversary(generator, self.history, perturb_prob)
+        self._episode_adversary: dict[str, Any] = {}
         env.set_adversary(self.adversary)
 
     def set_perturb_prob(self, perturb_prob: float) -> None:
         self.adversary.perturb_prob = float(perturb_prob)
 
+    def get_perturb_prob(self) -> float:
+        return self.adversary.perturb_prob
+
+    def warm_up(self) -> int:
+        """Build what the first episode of each scenario would otherwise build (its road geometry, its queue of
+        logged roll-outs), so timings see the steady state of a long run; returns the number of scenarios."""
+        scenarios = self.env.unwrapped.scenarios
+        reserve_road_cache(len({id(s.road) for s in scenarios}))
+        for scenario in scenarios:
+            get_road_geometry(scenario.road)
+            self.history.queue(scenario)
+        return len(scenarios)
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        """This worker's roll-out queues (`RolloutHistory.get_state`) plus ``rng_state`` (0-d str: JSON of the
+        env's numpy bit-generator state, which picks scenarios, curriculum draws and generator randomness)."""
+        state = self.history.get_state()
+        state["rng_state"] = np.array(json.dumps(self.env.unwrapped.np_random.bit_generator.state))
+        return state
+
+    def set_state(self, state: Mapping[str, np.ndarray], source: str = "closed-loop state") -> None:
+        """Restore what `get_state` returned (queues in place, so the adversary keeps reading them)."""
+        self.history.set_state(state, source)
+        if "rng_state" in state:
+            rng = self.env.unwrapped.np_random  # property: seeds a fresh generator when none exists yet
+            rng.bit_generator.state = json.loads(str(np.asarray(state["rng_state"])))
+
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         self.adversary.last = {}
         obs, info = self.env.reset(seed=seed, options=options)
         info["adversary"] = dict(self.adversary.last) or {"generator": "given", "perturbed": False}
+        self._episode_adversary = info["adversary"]
         return obs, info
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
@@ -90,6 +126,7 @@ class ClosedLoopEnv(gym.Wrapper):
         if rollout is not None:
             self.history.append(self.env.unwrapped.scenario, rollout)
             info["rollout_digest"] = rollout_digest(rollout)
+            info["episode_adversary"] = self._episode_adversary
         return obs, reward, terminated, truncated, info
 
 
@@ -119,6 +156,7 @@ def closed_loop_env_fns(
 
     def make(part: list[Scenario]) -> Callable[[], ClosedLoopEnv]:
         def build() -> ClosedLoopEnv:
+            reserve_road_cache(len({id(s.road) for s in part}))  # every reset would else miss the cache
             gen = make_generator(generator, **kwargs) if generator is not None else None
             return ClosedLoopEnv(ScenarioEnv(part, config=config), gen, k=k, perturb_prob=perturb_prob)
 

@@ -8,14 +8,18 @@ evaluation job partitions the scenarios across its workers (`adversaries.closed_
 scenario is always played by the same worker and the roll-out of one episode reaches the queue used the next
 time that scenario is perturbed without any inter-process traffic (no shared store, no locks, nothing on disk).
 `RolloutHistory` is plain picklable data, so a job can still fetch the queues from its workers (SB3's
-``get_attr``) to checkpoint or inspect them.
+``get_attr``) to inspect them; to checkpoint them (`experiments.train`) `RolloutHistory.get_state` turns them into
+numpy arrays plus JSON (saved with ``np.savez``, loaded with ``allow_pickle=False``) and `RolloutHistory.set_state`
+rebuilds them.
 """
 
 from __future__ import annotations
 
 import hashlib
+import json
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -70,6 +74,21 @@ def rollout_digest(rollout: Rollout) -> str:
     return h.hexdigest()
 
 
+_ROLLOUT_SCALARS = (
+    "scenario_id", "ego_id", "adv_id", "last_step", "outcome", "ego_crashes", "adv_crashes", "out_of_road_step",
+    "success_step", "route_completion", "episode_return", "adversary",
+)
+"""`Rollout` fields stored as JSON by `RolloutHistory.get_state` (the two arrays are stored as arrays)."""
+
+
+def _jsonable_field(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, list):
+        return [[int(t), int(a)] for t, a in value]
+    return value
+
+
 class RolloutHistory:
     """Per-scenario queues of the last ``k`` ego roll-outs (oldest first).
 
@@ -120,6 +139,64 @@ class RolloutHistory:
 
     def __iter__(self) -> Iterator[str]:
         return iter(self._queues)
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        """The queues as flat arrays (no pickle needed to store them, e.g. ``np.savez(path, **state)``).
+
+        Keys: ``meta`` (0-d str: JSON with ``k``, each distinct roll-out's scalar fields and each scenario's queue
+        as indices into the roll-outs, oldest first), ``tracks_<i>`` (``[A, T, 8]`` float32) and
+        ``agent_ids_<i>`` (``[A]`` int64) of roll-out ``i``. A roll-out held several times (the K logged copies
+        a queue starts with) is stored once.
+        """
+        index: dict[int, int] = {}
+        rollouts: list[Rollout] = []
+        queues: dict[str, list[int]] = {}
+        for sid, q in self._queues.items():
+            refs = []
+            for r in q:
+                if id(r) not in index:
+                    index[id(r)] = len(rollouts)
+                    rollouts.append(r)
+                refs.append(index[id(r)])
+            queues[sid] = refs
+        arrays: dict[str, np.ndarray] = {}
+        fields = []
+        for i, r in enumerate(rollouts):
+            arrays[f"tracks_{i}"] = np.asarray(r.tracks, dtype=np.float32)
+            arrays[f"agent_ids_{i}"] = np.asarray(r.agent_ids, dtype=np.int64)
+            fields.append({name: _jsonable_field(getattr(r, name)) for name in _ROLLOUT_SCALARS})
+        meta = {"k": self.k, "rollouts": fields, "queues": queues}
+        arrays["meta"] = np.array(json.dumps(meta))
+        return arrays
+
+    @classmethod
+    def from_state(cls, state: Mapping[str, np.ndarray], source: str = "history state") -> RolloutHistory:
+        """Rebuild the queues written by `get_state`; ``source`` names the file in errors."""
+        if "meta" not in state:
+            raise ValueError(f"{source}: no 'meta' entry; not a roll-out history state")
+        meta = json.loads(str(np.asarray(state["meta"])))
+        history = cls(int(meta["k"]))
+        rollouts = []
+        for i, f in enumerate(meta["rollouts"]):
+            try:
+                tracks, ids = state[f"tracks_{i}"], state[f"agent_ids_{i}"]
+            except KeyError as exc:
+                raise ValueError(f"{source}: roll-out {i} has no {exc.args[0]!r} array") from None
+            f = dict(f)
+            f["ego_crashes"] = [(int(t), int(a)) for t, a in f["ego_crashes"]]
+            f["adv_crashes"] = [(int(t), int(a)) for t, a in f["adv_crashes"]]
+            rollouts.append(Rollout(tracks=np.array(tracks, dtype=np.float32), agent_ids=np.array(ids, dtype=np.int64),
+                                    **f))
+        for sid, refs in meta["queues"].items():
+            if len(refs) != history.k:
+                raise ValueError(f"{source}: queue of {sid!r} holds {len(refs)} roll-outs, expected k = {history.k}")
+            history._queues[sid] = deque((rollouts[j] for j in refs), maxlen=history.k)
+        return history
+
+    def set_state(self, state: Mapping[str, np.ndarray], source: str = "history state") -> None:
+        """Replace this history's queues (and ``k``) with those of a `get_state` result."""
+        other = RolloutHistory.from_state(state, source)
+        self.k, self._queues = other.k, other._queues
 
     def copy(self) -> RolloutHistory:
         """An independent copy (the roll-outs themselves are shared: they are never modified)."""

@@ -331,6 +331,13 @@ _CACHE: OrderedDict[int, tuple[RoadDescription, RoadGeometry]] = OrderedDict()
 _CACHE_SIZE = 64
 
 
+def reserve_road_cache(n_roads: int) -> None:
+    """Keep at least ``n_roads`` geometries in `get_road_geometry`'s cache (about 0.07 MB each): a training env
+    cycling through more distinct roads than the default 64 would otherwise rebuild one (~20 ms) on most resets."""
+    global _CACHE_SIZE
+    _CACHE_SIZE = max(_CACHE_SIZE, int(n_roads))
+
+
 def get_road_geometry(road: RoadDescription) -> RoadGeometry:
     """`RoadGeometry` of ``road``, cached by object identity (scenarios of a dataset shard share road objects).
 

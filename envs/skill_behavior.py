@@ -101,8 +101,8 @@ class SkillSwitchBehavior(AdversaryBehavior):
         if t >= self.switch_step:
             if observation is None:
                 raise RuntimeError("SkillSwitchBehavior: the env passed no observation after the switch")
-            a = self.policy.act(observation)
-            return BehaviorOutput.act(float(a[0]), float(a[1]))
+            steering, acceleration = self.policy.act(observation).tolist()
+            return BehaviorOutput.act(steering, acceleration)
         if self._tracker is not None:
             return self._tracker.step(t, state, observation)
         track = self._track

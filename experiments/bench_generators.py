@@ -7,8 +7,8 @@ on a scenario is "cold" (per-road caches, e.g. the prior's map featurisation, ar
 closed loop generates K = 5 times per scenario, so most calls are warm). Reported per generator: mean / p50 / p95
 / max milliseconds of `AdversaryGenerator.generate` over cold calls (the headline) and the warm mean / p95
 (candidate prediction included), and, where the generator reports them, the candidate-source and selection
-shares of the cold calls. The reference measured in the same run is ``replay`` (no work beyond building its
-behaviour).
+shares of the cold calls (SEAL: also its objective's ranking time). The reference measured in the same run is
+``replay`` (no work beyond building its behaviour).
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ def bench_generators(
     for name, generator in generators.items():
         rng = np.random.default_rng(seed)
         generator.generate(scenarios[0], queues[0], rng)  # warm-up
-        total, warm, cand, select = [], [], [], []
+        total, warm, cand, select, rank = [], [], [], [], []
         for scenario, queue in zip(scenarios, queues, strict=True):
             start = time.perf_counter()
             generation = generator.generate(scenario, queue, rng)
@@ -57,6 +57,8 @@ def bench_generators(
             if "candidate_time_s" in generation.extra:
                 cand.append(generation.extra["candidate_time_s"])
                 select.append(generation.extra["select_time_s"])
+            if "rank_time_s" in generation.extra:
+                rank.append(generation.extra["rank_time_s"])
         ms = 1e3 * np.asarray(total)
         row: dict[str, Any] = {f"ms_{k}": v for k, v in _stats(ms).items()}
         warm_stats = _stats(1e3 * np.asarray(warm))
@@ -64,6 +66,9 @@ def bench_generators(
         if cand:
             row["candidate_ms_mean"] = round(1e3 * float(np.mean(cand)), 3)
             row["select_ms_mean"] = round(1e3 * float(np.mean(select)), 3)
+        if rank:  # SEAL: the objective's share of the selection (ranking all candidates)
+            row["rank_ms_mean"] = round(1e3 * float(np.mean(rank)), 3)
+            row["rank_ms_p95"] = round(1e3 * float(np.percentile(rank, 95)), 3)
         row["p95_within_budget"] = bool(row["ms_p95"] < budget_ms)
         result[name] = row
     if "replay" in generators:
@@ -77,11 +82,12 @@ def format_bench(result: dict[str, Any]) -> str:
     """Aligned text table of `bench_generators`."""
     names = [k for k, v in result.items() if isinstance(v, dict)]
     cols = ("ms_mean", "ms_p50", "ms_p95", "ms_max", "warm_ms_mean", "warm_ms_p95", "candidate_ms_mean",
-            "select_ms_mean", "x_replay", "p95_within_budget")
+            "select_ms_mean", "rank_ms_mean", "rank_ms_p95", "x_replay", "p95_within_budget")
     lines = [
         f"generation latency per scenario (batch of one, CPU), {result['scenarios']} scenarios, "
         f"budget {result['budget_ms']:.0f} ms",
-        "(ms_*: first call per scenario; warm_*: second call; candidate / select: shares of the first call)",
+        "(ms_*: first call per scenario; warm_*: second call; candidate / select: shares of the first call; "
+        "rank: SEAL's objective within select)",
         f"{'generator':<12}" + "".join(f"{c:>18}" for c in cols),
     ]
     for name in names:

@@ -40,20 +40,26 @@ DEFAULTS: dict[str, Any] = {
     "seed": 0,
     "prior": None,
     "candidates": None,
+    "objective": None,
+    "skills": None,
     "env": {},
 }
 """Config keys: ``generators`` (names, or a mapping name -> constructor kwargs), ``ego`` (heuristic | replay |
 run path), ``split`` (None = every scenario), ``limit`` (first N scenarios of the split), ``k`` (passes = queue
 length), ``seed``, ``prior`` / ``candidates`` (candidate source handed to every generator that takes one),
+``objective`` / ``skills`` (SEAL's learned objective file or ``cat``, and skill model folder, likewise handed on),
 ``env`` (`ScenarioEnv` config overrides)."""
 
-SHARED_OPTIONS = ("prior", "candidates")
+SHARED_OPTIONS = ("prior", "candidates", "objective", "skills")
 """Options passed to every generator whose constructor has a parameter of that name."""
 
 
 def parse_generators(spec: str | Sequence[str] | Mapping[str, Any]) -> dict[str, dict[str, Any]]:
     """Generator names (comma-separated text, a list, or a mapping name -> kwargs) checked against the
-    registry; unknown names raise an error listing the available ones."""
+    registry; unknown names raise an error listing the available ones.
+
+    In a mapping, an entry may name its generator with a ``generator`` key, so one generator can be compared in
+    several configurations under labels of its own (e.g. ``seal_benign: {generator: seal, switch: benign}``)."""
     if isinstance(spec, str):
         spec = [s.strip() for s in spec.split(",") if s.strip()]
     parsed = {str(k): dict(v or {}) for k, v in spec.items()} if isinstance(spec, Mapping) else {
@@ -61,12 +67,18 @@ def parse_generators(spec: str | Sequence[str] | Mapping[str, Any]) -> dict[str,
     }
     if not parsed:
         raise ValueError("--generators: no generator given")
-    unknown = [name for name in parsed if name not in available_generators()]
+    unknown = [f"{name} (generator: {generator_name(name, kw)})" if "generator" in kw else name
+               for name, kw in parsed.items() if generator_name(name, kw) not in available_generators()]
     if unknown:
         raise ValueError(
             f"--generators: unknown generator(s) {', '.join(unknown)}; available: {', '.join(available_generators())}"
         )
     return parsed
+
+
+def generator_name(label: str, kwargs: Mapping[str, Any]) -> str:
+    """The registered generator behind a ``generators`` entry: its ``generator`` key, else the label itself."""
+    return str(kwargs.get("generator", label))
 
 
 def apply_generator_options(generators: dict[str, dict[str, Any]], options: Sequence[str]) -> None:
@@ -105,8 +117,10 @@ def resolve_config(
 
 
 def build_generator(name: str, kwargs: Mapping[str, Any], shared: Mapping[str, Any]) -> AdversaryGenerator:
-    """Instantiate ``name`` with ``kwargs`` plus each shared option its constructor accepts."""
-    cls = generator_class(name)
+    """Instantiate entry ``name`` (a generator name, or a label whose ``kwargs`` name the generator, see
+    `parse_generators`) with ``kwargs`` plus each shared option its constructor accepts."""
+    cls = generator_class(generator_name(name, kwargs))
+    kwargs = {k: v for k, v in kwargs.items() if k != "generator"}
     params = inspect.signature(cls).parameters
     merged = {k: v for k, v in shared.items() if v is not None and k in params and k not in kwargs}
     return cls(**merged, **kwargs)

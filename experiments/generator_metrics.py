@@ -17,12 +17,26 @@ import numpy as np
 from envs.road_geometry import get_road_geometry
 from envs.rollout import Rollout
 from scoring.realism import collision_metrics, realism_wd
-from seal.geometry import box_corners
+from seal.geometry import box_corners, box_gap
 from seal.scenario import CURRENT_STEP, HEADING, LENGTH, VALID, WIDTH, Scenario, X, Y
 
 OFFROAD_TOLERANCE_M = 0.5
 """A box corner may stick out of the drivable area this far (as in `ScenarioEnv`)."""
 OUTCOMES = ("success", "crash", "out_of_road", "timeout")
+CLOSE_CALL_M = 2.0
+"""An episode is a close call when the ego and the adversary touch or their boxes come within this gap (m)."""
+
+
+def min_box_gap(ego_track: np.ndarray, adv_track: np.ndarray) -> float:
+    """Smallest gap (m) between the ego's and the adversary's boxes over the steps where both are valid (0 on
+    contact, inf if never both valid); tracks ``[T, 8]`` on the same steps."""
+    both = (ego_track[:, VALID] > 0.5) & (adv_track[:, VALID] > 0.5)
+    if not both.any():
+        return float("inf")
+    e, a = ego_track[both], adv_track[both]
+    gap = box_gap(box_corners(e[:, X], e[:, Y], e[:, HEADING], e[:, LENGTH], e[:, WIDTH]),
+                  box_corners(a[:, X], a[:, Y], a[:, HEADING], a[:, LENGTH], a[:, WIDTH]))
+    return float(gap.min())
 
 
 def offroad_flags(scenario: Scenario, track: np.ndarray, tolerance_m: float = OFFROAD_TOLERANCE_M) -> np.ndarray:
@@ -142,6 +156,8 @@ def summarize(records: Sequence[EpisodeRecord], logged: Sequence[LoggedAdversary
         "scenarios": n,
         **rates,
         "adv_collision_rate": sum(r.adv_collision for r in records) / n,
+        "close_call_rate": sum(r.adv_collision or min_box_gap(r.ego_track, r.adv_track) <= CLOSE_CALL_M
+                               for r in records) / n,
         "route_completion": float(np.mean([r.route_completion for r in records])),
         **realism,
         "collision_speed_mps": coll["collision_speed_mps"],
@@ -160,6 +176,7 @@ TABLE_COLUMNS = (
     ("crash_rate", "crash", "{:.1%}"),
     ("out_of_road_rate", "out of road", "{:.1%}"),
     ("adv_collision_rate", "adv. collision", "{:.1%}"),
+    ("close_call_rate", "close call (< 2 m)", "{:.1%}"),
     ("yaw_wd", "yaw WD", "{:.3f}"),
     ("acc_wd", "acc WD", "{:.3f}"),
     ("road_wd", "road WD", "{:.3f}"),

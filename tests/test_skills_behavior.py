@@ -135,3 +135,63 @@ def test_policy_behaviour_still_observes_every_step(highway) -> None:
     env = ScenarioEnv([highway[0]], adversary=PolicyBehavior(Spy()))
     roll = _episode(env, 0, highway[0].scenario_id)
     assert len(seen) == roll.n_steps
+
+
+def _box_edges(boxes: np.ndarray, x: float, y: float) -> tuple[np.ndarray, ...]:
+    """Edges of ``[N, 7]`` boxes as segments relative to (x, y): starts ax, ay and vectors ex, ey ``[4N]``."""
+    from seal.geometry import box_corners
+
+    c = box_corners(boxes[:, 0], boxes[:, 1], boxes[:, 2], boxes[:, 5], boxes[:, 6])  # [N, 4, 2]
+    e = np.roll(c, -1, axis=1) - c
+    return c[..., 0].ravel() - x, c[..., 1].ravel() - y, e[..., 0].ravel(), e[..., 1].ravel()
+
+
+def test_build_many_equals_one_build_per_viewer(highway) -> None:
+    # The env builds the ego's and the skill adversary's observations in one pass (`build_many`); each row must
+    # be exactly what `build` gives that viewer alone, and the lidar must match a ray cast against box edges.
+    from envs.kinematics import AgentState
+    from envs.observation import ObservationBuilder
+    from envs.rays import cast_rays
+    from envs.road_geometry import get_road_geometry
+    from envs.route import Route
+
+    scenario = highway[0]
+    builder = ObservationBuilder(get_road_geometry(scenario.road))
+    rng = np.random.default_rng(0)
+    route = Route.from_track(scenario.track(scenario.ego_id))
+    for trial in range(40):
+        n = int(rng.integers(2, 9))
+        boxes = np.column_stack([
+            rng.uniform(-30, 90, n), rng.uniform(-3, 11, n), rng.uniform(-0.4, 0.4, n), rng.uniform(-5, 30, n),
+            rng.uniform(-2, 2, n), rng.uniform(4, 12, n), rng.uniform(1.8, 2.6, n),
+        ])
+        rows = [0, 1] if trial % 4 else [0, -1]  # -1: a viewer that is not among the boxes
+        if trial % 5 == 0:
+            boxes[2, :2] = boxes[0, :2] + [1.0, 0.5]  # viewer 0 overlaps another vehicle: lidar reads from inside
+        states = [AgentState(float(b[0]), float(b[1]), float(b[2]), float(np.hypot(b[3], b[4])), float(b[5]),
+                             float(b[6]), 0.1, -0.2, 0.05) for b in boxes[:2]]
+        projections = [route.project(s.x, s.y) for s in states]
+        both = builder.build_many(states, [route, route], projections, boxes, rows)
+        for v in range(2):
+            others = np.delete(boxes, rows[v], axis=0) if rows[v] >= 0 else boxes
+            alone = builder.build(states[v], route, others, projections[v])
+            np.testing.assert_array_equal(both[v], alone)
+            angles = states[v].heading + 2 * np.pi * np.arange(ob.N_LIDAR_RAYS) / ob.N_LIDAR_RAYS
+            expected = cast_rays(np.cos(angles), np.sin(angles), *_box_edges(others, states[v].x, states[v].y),
+                                 ob.LIDAR_RANGE_M)
+            np.testing.assert_allclose(alone[ob.LIDAR] * ob.LIDAR_RANGE_M, expected, atol=1e-4)
+    with pytest.raises(ValueError, match="one entry per viewer"):
+        builder.build_many(states, [route], projections, boxes, rows)
+
+
+def test_policy_clone_has_its_own_episode_state() -> None:
+    policy = _policy()
+    clone = policy.clone()
+    assert clone._decoder._w_obs is policy._decoder._w_obs  # weights shared, not copied
+    obs = np.random.default_rng(0).uniform(0, 1, policy.obs_dim).astype(np.float32)
+    policy.reset(1)
+    clone.reset(2)
+    a, b = policy.act(obs), clone.act(obs)
+    assert not np.array_equal(a, b) and not np.array_equal(policy.z, clone.z)
+    policy.reset(2)
+    np.testing.assert_array_equal(policy.act(obs), b)  # same seed, same skill: the clone did not disturb it

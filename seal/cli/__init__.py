@@ -21,7 +21,8 @@ __all__ = ["COMMAND_MODULES", "CliError", "build_parser", "main"]
 #: Modules whose ``register(tree)`` adds commands, in the order they appear in ``seal --help``.
 COMMAND_MODULES = (
     "seal.cli.data", "seal.cli.bench", "seal.cli.generators", "seal.cli.importers", "seal.cli.goose", "seal.cli.prior",
-    "seal.cli.skills",
+    "seal.cli.skills", "seal.cli.evaluate", "seal.cli.compare", "seal.cli.run", "seal.cli.train",
+    "seal.cli.objective",
 )
 
 

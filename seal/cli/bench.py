@@ -49,8 +49,42 @@ def cmd_bench_env(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_training(args: argparse.Namespace) -> int:
+    from experiments.bench_training import run_training_bench
+    from experiments.train_config import load_train_config
+
+    over = {"pipeline": args.pipeline, "dataset": args.dataset, "n_envs": args.n_envs}
+    if args.prior is not None:
+        over["pipelines.cat.kwargs.prior"] = args.prior
+        over["pipelines.seal.kwargs.prior"] = args.prior
+    config = load_train_config(args.config, over)
+    result = run_training_bench(config, steps=args.steps, progress=not args.json)
+    print_result(result, args.json, width=42)
+    return 0
+
+
 def register(tree: CommandTree) -> None:
     bench_sub = tree.group("bench")
+    btrain = bench_sub.add_parser(
+        "training",
+        help="seal train env steps/s with learning vs env only (random actions), estimated 1M-step wall time",
+        description="Run the config's training vec env (one closed-loop worker per core, the pipeline's generator "
+        "at the curriculum's mean perturbation probability) for --steps env steps with random actions, then train "
+        "the config's SB3 model for --steps env steps (gradient updates from the first batch on); print both "
+        "steps/s, the generator's share of env time, the cost of a gradient step and the estimated wall time of a "
+        "1M-step run (target < 2 h).",
+    )
+    btrain.add_argument("--config", default="standard",
+                        help="preset name (quick | standard | paper) or YAML file with a train: section (default: "
+                        "standard, the default preset of seal train)")
+    btrain.add_argument("--steps", type=positive_int("--steps"), default=3000, help="env steps per measurement")
+    btrain.add_argument("--pipeline", choices=("noadv", "goose", "cat", "seal"), default=None,
+                        help="pipeline (default: the config's, cat)")
+    btrain.add_argument("--dataset", default=None, help="dataset directory (default: the config's)")
+    btrain.add_argument("--prior", default=None, help="trajectory prior for the cat / seal pipelines")
+    btrain.add_argument("--n-envs", type=positive_int("--n-envs"), default=None, help="env workers (default: cores)")
+    btrain.add_argument("--json", action="store_true", help="print JSON (no progress bars)")
+    btrain.set_defaults(func=cmd_bench_training)
     benv = bench_sub.add_parser(
         "env",
         help="ScenarioEnv steps/s vs highway-env highway-v0 (10 vehicles, lidar, 10 Hz)",

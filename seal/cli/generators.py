@@ -16,13 +16,13 @@ def _generator_options(args: argparse.Namespace) -> tuple[dict, dict]:
         config = resolve_config(
             args.config, generators=args.generators, ego=getattr(args, "ego", None),
             split=args.split, limit=args.limit, k=getattr(args, "k", None), seed=args.seed, prior=args.prior,
-            candidates=args.candidates, gen_opts=args.gen_opt,
+            candidates=args.candidates, objective=args.objective, skills=args.skills, gen_opts=args.gen_opt,
         )
     except ValueError as exc:
         raise CliError(str(exc)) from None
     if args.all_scenarios:
         config["split"] = None
-    return config, {"prior": config["prior"], "candidates": config["candidates"]}
+    return config, {key: config[key] for key in ("prior", "candidates", "objective", "skills")}
 
 
 def cmd_eval_generators(args: argparse.Namespace) -> int:
@@ -65,6 +65,9 @@ def _common(p: argparse.ArgumentParser, default_generators: str) -> None:
         "--candidates", default=None,
         help="built-in candidate source instead of a prior: lanes (map-based heuristic) or constant_velocity",
     )
+    p.add_argument("--objective", default=None,
+                   help="seal: learned objective file (seal fit objective) or 'cat' for CAT's heuristic selection")
+    p.add_argument("--skills", default=None, help="seal: skill model folder (seal fit skills)")
     p.add_argument(
         "--gen-opt", action="append", default=[], metavar="NAME.KEY=VALUE",
         help="constructor option of one generator, repeatable, e.g. goose.model=agent.pt or cat.follow=track",

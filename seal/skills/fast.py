@@ -56,8 +56,9 @@ class FastDecoder:
         self._b = self._b_obs + self._w_z @ np.asarray(z, dtype=np.float32)
 
     def decode(self, obs: np.ndarray) -> np.ndarray:
-        """Action ``[action_dim]`` float32 in [-1, 1] for one observation ``[obs_dim]``."""
-        h = self._w_obs @ np.asarray(obs, dtype=np.float32) + self._b
+        """Action ``[action_dim]`` float32 in [-1, 1] for one observation ``[obs_dim]`` (float32)."""
+        h = self._w_obs @ obs
+        h += self._b
         np.maximum(h, 0.0, out=h)
         return np.tanh(_run(h, self._rest))
 

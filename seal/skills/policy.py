@@ -8,6 +8,7 @@ action closed-loop from the current observation and ``z``. Inference runs on num
 
 from __future__ import annotations
 
+import copy
 import os
 from typing import Any
 
@@ -61,6 +62,15 @@ class SkillPolicy:
         models = load_skill_models(folder, priors=(prior,))
         return cls(models.vae, models.priors[prior], **kwargs)
 
+    def clone(self) -> SkillPolicy:
+        """A policy with its own episode state (noise rng, current skill) sharing this one's model weights: one per
+        behaviour, so behaviours alive at the same time (several envs in one process) do not share a skill."""
+        other = copy.copy(self)
+        other._decoder = copy.copy(self._decoder)  # set_skill rebinds its skill bias, the weights stay shared
+        other.rng = copy.deepcopy(self.rng)
+        other.reset()
+        return other
+
     def reset(self, seed: int | None = None) -> None:
         """Start a new episode: the next step samples a new skill; ``seed`` reseeds the noise rng if given."""
         if seed is not None or not hasattr(self, "rng"):
@@ -70,7 +80,9 @@ class SkillPolicy:
 
     def act(self, observation: np.ndarray) -> np.ndarray:
         """Normalised action ``[steering, acceleration]`` ``[2]`` float32 for one observation ``[obs_dim]``."""
-        obs = np.asarray(observation, dtype=np.float32).reshape(-1)
+        obs = np.asarray(observation, dtype=np.float32)  # no copy for the env's float32 rows
+        if obs.ndim != 1:
+            obs = obs.reshape(-1)
         if obs.shape[0] != self.obs_dim:
             raise ValueError(f"SkillPolicy.act: observation must have {self.obs_dim} entries, got {obs.shape[0]}")
         if self.steps % self.horizon == 0:
@@ -78,7 +90,7 @@ class SkillPolicy:
             self.z = self._sampler.sample(noise, obs)
             self._decoder.set_skill(self.z)
         self.steps += 1
-        return self._decoder.decode(obs).astype(np.float32)
+        return self._decoder.decode(obs)
 
     def predict(
         self, observation: np.ndarray, state: Any = None, episode_start: np.ndarray | None = None,

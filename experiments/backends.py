@@ -1,0 +1,171 @@
+"""Where independent jobs (one training run per pipeline x seed, one ego evaluation) execute.
+
+A backend maps a picklable top-level function over a list of job dicts and returns one `JobResult` per job, in
+job order; a failing job is reported in its result (with the error text) instead of stopping the others.
+
+* `InlineBackend`: in this process, one after another (debugging, tests, ``--workers 0``).
+* `LocalBackend`: a process pool on this machine (``spawn`` start method, so workers start clean of this
+  process's threads and torch state).
+* `RayBackend`: Ray tasks on a running cluster: ``ray start --head`` on the head node, then the address from
+  the config, ``RAY_ADDRESS`` or ``"auto"``; or a private local instance with ``local_cpus``. Workers must see
+  the same files as the driver (run folders, datasets, the results store), e.g. a shared filesystem.
+"""
+
+from __future__ import annotations
+
+import os
+import traceback
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+Job = Mapping[str, Any]
+JobFn = Callable[[Job], Any]
+BACKENDS = ("local", "ray", "inline")
+
+
+@dataclass
+class JobResult:
+    """What one job returned (``value``) or why it failed (``error``, the traceback's last lines)."""
+
+    job: Job
+    value: Any = None
+    error: str | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+class Backend(Protocol):
+    name: str
+
+    def map(self, fn: JobFn, jobs: Sequence[Job], desc: str = "jobs") -> list[JobResult]:
+        """Run ``fn(job)`` for every job; results in job order."""
+        ...
+
+
+def _call(fn: JobFn, job: Job) -> JobResult:
+    try:
+        return JobResult(job, fn(job))
+    except Exception as exc:  # a job's failure is its result; the other jobs go on
+        tail = "".join(traceback.format_exception(exc)[-3:]).strip()
+        return JobResult(job, error=f"{type(exc).__name__}: {exc}\n{tail}")
+
+
+class InlineBackend:
+    """Jobs in this process, in order."""
+
+    name = "inline"
+
+    def map(self, fn: JobFn, jobs: Sequence[Job], desc: str = "jobs") -> list[JobResult]:
+        return [_call(fn, job) for job in jobs]
+
+
+class LocalBackend:
+    """A pool of ``workers`` spawned processes (default: the CPU count)."""
+
+    name = "local"
+
+    def __init__(self, workers: int | None = None) -> None:
+        self.workers = max(1, int(workers or os.cpu_count() or 1))
+
+    def map(self, fn: JobFn, jobs: Sequence[Job], desc: str = "jobs") -> list[JobResult]:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        from tqdm import tqdm
+
+        if not jobs:
+            return []
+        results: list[JobResult | None] = [None] * len(jobs)
+        with ProcessPoolExecutor(min(self.workers, len(jobs)), mp_context=mp.get_context("spawn")) as pool:
+            futures = {pool.submit(_call, fn, job): i for i, job in enumerate(jobs)}
+            for fut in tqdm(as_completed(futures), total=len(jobs), desc=desc, unit="job"):
+                i = futures[fut]
+                try:
+                    results[i] = fut.result()
+                except Exception as exc:  # the worker process died (e.g. out of memory)
+                    results[i] = JobResult(jobs[i], error=f"worker process failed: {type(exc).__name__}: {exc}")
+        return [r for r in results if r is not None]
+
+
+class RayBackend:
+    """Ray tasks: ``ray.init(address=...)`` with ``address`` (config) or ``RAY_ADDRESS`` or ``"auto"`` (a running
+    cluster), or, with ``local_cpus``, a private local instance of that many CPUs. ``cpus_per_job`` CPUs are
+    reserved per task."""
+
+    name = "ray"
+
+    def __init__(
+        self, address: str | None = None, local_cpus: int | None = None, cpus_per_job: float = 1.0,
+        runtime_env: Mapping[str, Any] | None = None,
+    ) -> None:
+        try:
+            import ray
+        except ImportError:
+            raise RuntimeError(
+                "--backend ray needs Ray: pip install -e '.[ray]' (or use --backend local)"
+            ) from None
+        self._ray = ray
+        self.cpus_per_job = float(cpus_per_job)
+        if not ray.is_initialized():
+            # The driver's sys.path (the repository) must reach the workers: ship it as PYTHONPATH.
+            env = {"env_vars": {"PYTHONPATH": os.pathsep.join(p for p in _import_roots() if p)}}
+            env.update(runtime_env or {})
+            if local_cpus is not None:
+                ray.init(num_cpus=int(local_cpus), include_dashboard=False, runtime_env=env, log_to_driver=False)
+            else:
+                target = address or os.environ.get("RAY_ADDRESS") or "auto"
+                try:
+                    ray.init(address=target, runtime_env=env)
+                except (ConnectionError, RuntimeError) as exc:
+                    raise RuntimeError(
+                        f"--backend ray: no Ray cluster at {target!r} ({exc}); start one with `ray start --head` "
+                        "(or set RAY_ADDRESS / the preset's backend.address), or use --backend local"
+                    ) from None
+
+    def map(self, fn: JobFn, jobs: Sequence[Job], desc: str = "jobs") -> list[JobResult]:
+        from tqdm import tqdm
+
+        if not jobs:
+            return []
+        task = self._ray.remote(num_cpus=self.cpus_per_job)(_call)
+        refs = [task.remote(fn, dict(job)) for job in jobs]
+        index = {ref: i for i, ref in enumerate(refs)}
+        results: list[JobResult | None] = [None] * len(jobs)
+        pending = list(refs)
+        with tqdm(total=len(jobs), desc=desc, unit="job") as bar:
+            while pending:
+                ready, pending = self._ray.wait(pending, num_returns=1)
+                i = index[ready[0]]
+                try:
+                    results[i] = self._ray.get(ready[0])
+                except Exception as exc:  # the task or its worker died
+                    results[i] = JobResult(jobs[i], error=f"ray task failed: {type(exc).__name__}: {exc}")
+                bar.update(1)
+        return [r for r in results if r is not None]
+
+    def shutdown(self) -> None:
+        self._ray.shutdown()
+
+
+def _import_roots() -> list[str]:
+    """The directory this package is imported from (the repository or site-packages)."""
+    import experiments
+
+    return [os.path.dirname(os.path.dirname(os.path.abspath(experiments.__file__)))]
+
+
+def make_backend(
+    name: str, workers: int | None = None, address: str | None = None, ray_local_cpus: int | None = None
+) -> Backend:
+    """``local`` (``workers`` processes), ``ray`` (cluster at ``address`` / ``RAY_ADDRESS`` / auto, or a local
+    instance of ``ray_local_cpus``) or ``inline``."""
+    if name == "local":
+        return InlineBackend() if workers == 0 else LocalBackend(workers)
+    if name == "ray":
+        return RayBackend(address=address, local_cpus=ray_local_cpus)
+    if name == "inline":
+        return InlineBackend()
+    raise ValueError(f"--backend must be one of {BACKENDS}, got {name!r}")

@@ -1,0 +1,54 @@
+"""``seal compare``: thesis-style tables (Markdown + CSV), plots and videos from the results store."""
+
+from __future__ import annotations
+
+import argparse
+
+from seal.cli.args import CliError
+from seal.cli.tree import CommandTree
+
+
+def _names(text: str | None) -> list[str] | None:
+    return [t.strip() for t in text.split(",") if t.strip()] if text else None
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from experiments.compare import ego_markdown, generator_markdown, write_report
+
+    if not Path(args.store).is_file():
+        raise CliError(f"--store {args.store}: no such results store (fill one with `seal eval runs`)")
+    result = write_report(
+        args.store, args.out, pipelines=_names(args.pipeline), settings=_names(args.setting),
+        plots=not args.no_plots, videos=args.videos, video_format=args.video_format, progress=not args.no_progress,
+    )
+    print(ego_markdown(result["table_6_1"]))
+    if result["table_6_2"]:
+        print(generator_markdown(result["table_6_2"]))
+    print(f"wrote {args.out}/report.md, table_6_1.csv, table_6_2.csv, rates_per_run.csv"
+          + (f", {len(result['figures'])} figures" if result["figures"] else "")
+          + (f", {len(result['videos'])} videos" if result["videos"] else ""))
+    return 0
+
+
+def register(tree: CommandTree) -> None:
+    p = tree.top.add_parser(
+        "compare",
+        help="report from a results store: Table 6.1 / 6.2 as Markdown + CSV, plots, videos",
+        description="Read the evaluation episodes of a results store (seal eval runs / seal run) and write into "
+        "--out: report.md; table_6_1.csv (per pipeline x setting: median, q25, q75, IQR over seeds of success / "
+        "crash / out-of-road rates); table_6_2.csv (per generator: ego success averaged over egos, realism "
+        "Wasserstein distances, collision speed, head-on rates, generation time); rates_per_run.csv; "
+        "bars_<metric>.png (median with IQR per setting); training_curves.png (from each run's progress.csv); "
+        "and with --videos N, N videos per generator against one ego.",
+    )
+    p.add_argument("--store", default="results.sqlite", help="SQLite results store (default results.sqlite)")
+    p.add_argument("--out", required=True, help="report folder")
+    p.add_argument("--pipeline", default=None, help="only these pipelines (comma-separated, e.g. noadv,cat,replay)")
+    p.add_argument("--setting", default=None, help="only these settings (comma-separated, e.g. normal,hard,cat)")
+    p.add_argument("--no-plots", action="store_true", help="tables only")
+    p.add_argument("--videos", type=int, default=0, help="videos per generator setting (default 0; re-simulates)")
+    p.add_argument("--video-format", choices=("mp4", "gif"), default="mp4", help="video format (default mp4)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_compare)

@@ -1,0 +1,80 @@
+"""``seal eval runs``: evaluate trained egos (plus the Replay ego) on Normal, Hard, X-Gen and real-data settings,
+results into the SQLite results store.
+
+It is a subcommand of the ``eval`` group (``seal eval runs RUN...``) rather than ``seal eval RUN...``: ``eval``
+already has subcommands (``prior``, ``generators``), and argparse cannot mix a subcommand with free positional
+run paths without guessing whether the first word is a command or a folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from seal.cli.args import CliError, positive_int
+from seal.cli.tree import CommandTree
+
+
+def cmd_eval_runs(args: argparse.Namespace) -> int:
+    from experiments.eval_generators import apply_generator_options
+    from experiments.evaluate import evaluate_runs, read_run, resolve_eval_config
+
+    try:
+        egos = [read_run(r) for r in args.runs]
+        config = resolve_eval_config(
+            args.config, run_configs=[e.config for e in egos], k=args.k, limit=args.limit, seed=args.seed,
+            prior=args.prior, candidates=args.candidates,
+        )
+        for option in args.gen_opt:
+            name = option.partition(".")[0]
+            config["generators"].setdefault(name, {})
+        apply_generator_options(config["generators"], args.gen_opt)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    results = evaluate_runs(
+        args.runs, args.settings, args.store, dataset=args.dataset, config=config,
+        replay_ego=not args.no_replay_ego, workers=args.workers, progress=not args.no_progress,
+    )
+    for r in results:
+        written = ", ".join(f"{s}: {n}" for s, n in r["written"].items())
+        print(f"{r['run']}: new episodes {written}")
+    print(f"results in {args.store} (seal compare --store {args.store} --out REPORT_DIR)")
+    return 0
+
+
+def register(tree: CommandTree) -> None:
+    p = tree.group("eval").add_parser(
+        "runs",
+        help="evaluate trained egos (+ Replay ego) on normal / hard / X-Gen / real:DIR settings into a results store",
+        description="Evaluate each RUN folder (config.yaml + final_model.zip, from `seal train` / `seal run`) and, "
+        "unless --no-replay-ego, the Replay ego (logged ego replayed open loop). Settings: normal (eval split, "
+        "logged adversary), hard (hard split), a generator name such as cat, goose, seal, rule (the Normal eval "
+        "scenarios: one normal episode, then K sequential perturbation passes against the same ego, the last "
+        "scored), real:DIR (an imported dataset, its eval split or every scenario, logged adversary). One row per "
+        "(run, dataset, setting, scenario) goes into the SQLite --store; scenarios already there are skipped, so "
+        "re-running adds only what is missing.",
+    )
+    p.add_argument("runs", nargs="*", metavar="RUN",
+                   help="run folders (or 'heuristic' for the rule-based driver); none = only the Replay ego")
+    p.add_argument("--settings", default="normal,hard",
+                   help="comma-separated: normal, hard, GENERATOR (cat, goose, seal, rule, replay), real:DIR "
+                   "(default normal,hard)")
+    p.add_argument("--store", default="results.sqlite", help="SQLite results store (default results.sqlite)")
+    p.add_argument("--dataset", default=None,
+                   help="dataset with eval / hard splits (default: the 'dataset' of the first run's config.yaml)")
+    p.add_argument("--limit", type=positive_int("--limit"), default=None, help="first N scenarios of each split")
+    p.add_argument("--k", type=positive_int("--k"), default=None, help="perturbation passes = queue length (5)")
+    p.add_argument("--seed", type=int, default=None, help="episode / generator rng seed, same for every ego (0)")
+    p.add_argument("--config", default=None,
+                   help="YAML with generators kwargs (generators: {goose: {model: F}, cat: {prior: F}}), prior, "
+                   "candidates, k, limit, seed, env; a `seal run` preset's eval section also works. Default: the "
+                   "generator kwargs recorded in the runs' config.yaml")
+    p.add_argument("--prior", default=None, help="trajectory prior for candidate-based generators (cat, seal)")
+    p.add_argument("--candidates", default=None, help="built-in candidate source instead of a prior: lanes | "
+                   "constant_velocity")
+    p.add_argument("--gen-opt", action="append", default=[], metavar="NAME.KEY=VALUE",
+                   help="constructor option of one generator, repeatable, e.g. goose.model=goose.zip")
+    p.add_argument("--no-replay-ego", action="store_true", help="do not evaluate the Replay ego")
+    p.add_argument("--workers", type=positive_int("--workers"), default=1,
+                   help="egos evaluated in parallel processes (default 1)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_eval_runs)

@@ -1,0 +1,59 @@
+"""``seal run PRESET.yaml``: data -> scores -> splits -> model fits -> train pipelines x seeds -> eval -> report."""
+
+from __future__ import annotations
+
+import argparse
+
+from seal.cli.args import CliError, positive_int
+from seal.cli.tree import CommandTree
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    import json
+    from pathlib import Path
+
+    from experiments.backends import make_backend
+    from experiments.run_pipeline import load_run_config, run_pipeline
+
+    try:
+        config = load_run_config(args.config)
+    except (OSError, ValueError) as exc:
+        raise CliError(str(exc)) from None
+    bcfg = config.get("backend") or {}
+    name = args.backend or bcfg.get("name", "local")
+    workers = args.workers if args.workers is not None else bcfg.get("workers")
+    try:
+        backend = make_backend(name, workers, address=args.address or bcfg.get("address"))
+    except RuntimeError as exc:
+        raise CliError(str(exc)) from None
+    out = args.out or str(Path("runs") / Path(args.config).stem)
+    try:
+        summary = run_pipeline(args.config, out, backend=backend, progress=not args.no_progress)
+    except RuntimeError as exc:
+        print(f"seal run: {exc}")
+        return 1
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
+def register(tree: CommandTree) -> None:
+    p = tree.top.add_parser(
+        "run",
+        help="the whole experiment of a preset: data, scores, splits, fits, training x seeds, eval, report",
+        description="Run every step of an experiment preset (experiments/configs/quick|standard|paper.yaml): "
+        "generate, score and split the data; fit the models the generators need (prior, GOOSE, skills, "
+        "objective); train one ego per pipeline x seed; evaluate every ego plus the Replay ego into "
+        "OUT/results.sqlite; write OUT/report. Finished steps are skipped on re-run (markers in OUT/steps, run "
+        "folders with done.json, evaluations already in the store). Train and eval jobs run on the local "
+        "machine in processes (--backend local) or as Ray tasks on a running cluster (--backend ray; start one "
+        "with `ray start --head`; address from --address, the preset's backend.address, RAY_ADDRESS or auto).",
+    )
+    p.add_argument("config", help="preset YAML, e.g. experiments/configs/quick.yaml")
+    p.add_argument("--out", default=None, help="output folder (default runs/<preset name>)")
+    p.add_argument("--backend", choices=("local", "ray"), default=None,
+                   help="where train / eval jobs run (default: the preset's backend.name, else local)")
+    p.add_argument("--workers", type=positive_int("--workers"), default=None,
+                   help="local worker processes (default: the preset's backend.workers, else the CPU count)")
+    p.add_argument("--address", default=None, help="Ray cluster address (default RAY_ADDRESS, else auto)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(func=cmd_run)

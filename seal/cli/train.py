@@ -1,0 +1,116 @@
+"""``seal train``: train an SB3 ego in the closed loop with one adversary pipeline, or resume a killed run."""
+
+from __future__ import annotations
+
+import argparse
+
+from seal.cli.args import CliError, positive_int
+from seal.cli.tree import CommandTree
+
+DEFAULT_CONFIG = "standard"
+
+
+def _set_option(text: str) -> tuple[str, object]:
+    import yaml
+
+    key, sep, value = text.partition("=")
+    if not (sep and key):
+        raise argparse.ArgumentTypeError(f"--set {text!r}: expected KEY=VALUE, e.g. hyperparams.td3.batch_size=128")
+    return key.strip(), yaml.safe_load(value)
+
+
+def overrides_from_args(args: argparse.Namespace) -> dict[str, object]:
+    """Config overrides (dotted keys) from the command-line options."""
+    over: dict[str, object] = {"pipeline": args.pipeline, "seed": args.seed, "algo": args.algo,
+                               "dataset": args.dataset, "total_timesteps": args.steps, "n_envs": args.n_envs}
+    if args.prior is not None:
+        over["pipelines.cat.kwargs.prior"] = args.prior
+        over["pipelines.seal.kwargs.prior"] = args.prior
+    if args.goose_model is not None:
+        over["pipelines.goose.kwargs.model"] = args.goose_model
+    if args.objective is not None:
+        over["pipelines.seal.kwargs.objective"] = args.objective
+    if args.skills is not None:
+        over["pipelines.seal.kwargs.skills"] = args.skills
+    for key, value in args.set or []:
+        over[key] = value
+    return over
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    import json
+    import signal
+    import sys
+    from pathlib import Path
+
+    from experiments.train import train_run
+    from experiments.train_config import load_train_config
+    from experiments.train_state import RunFolderError, read_done
+
+    if (args.out is None) == (args.resume is None):
+        raise CliError("give exactly one of --out RUN (a new run) or --resume RUN (continue a killed run)")
+    if args.resume is not None:
+        options = (("--config", args.config), ("--pipeline", args.pipeline), ("--seed", args.seed),
+                   ("--set", args.set), ("--steps", args.steps), ("--algo", args.algo), ("--dataset", args.dataset),
+                   ("--n-envs", args.n_envs), ("--prior", args.prior), ("--goose-model", args.goose_model),
+                   ("--objective", args.objective), ("--skills", args.skills))
+        given = [opt for opt, v in options if v is not None]
+        if given:
+            raise CliError(f"--resume continues with the run's recorded config.yaml; drop {', '.join(given)}")
+        out, config = Path(args.resume), {}
+    else:
+        out = Path(args.out)
+        config = load_train_config(args.config or DEFAULT_CONFIG, overrides_from_args(args))
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt  # `timeout` / a scheduler's SIGTERM: close the env workers, say how to resume
+
+    signal.signal(signal.SIGTERM, interrupt)
+    try:
+        train_run(config, out, resume=args.resume is not None, progress=not args.no_progress,
+                  log=lambda m: print(m, file=sys.stderr))
+    except RunFolderError as exc:
+        raise CliError(str(exc)) from None
+    except KeyboardInterrupt:
+        print(f"seal: interrupted; continue with `seal train --resume {out}` (from its last checkpoint)",
+              file=sys.stderr)
+        return 130
+    done = read_done(out)
+    print(json.dumps(done, indent=2) if args.json else f"run {out}: {done['steps']} env steps, {done['wall_s']} s")
+    return 0
+
+
+def register(tree: CommandTree) -> None:
+    p = tree.top.add_parser(
+        "train",
+        help="train an SB3 ego (TD3 / SAC / PPO) against an adversary pipeline under CAT's curriculum",
+        description="Train an ego policy with Stable-Baselines3 in the closed loop: a random train scenario per "
+        "episode, perturbed with probability p(t) = min(1.8 t/T, 0.9) by the pipeline's generator (noadv: never; "
+        "goose, cat, seal), one env worker per core, each keeping its scenarios' last K ego roll-outs. Writes a run "
+        "folder: config.yaml (resolved), progress.csv + tb/ (TensorBoard) logs with episode success / crash / "
+        "out-of-road rates, p(t) and generation time, eval/ (periodic evaluation on the Normal eval split), "
+        "checkpoints/, final_model.zip and done.json. A killed run continues with --resume RUN and ends after the "
+        "same number of steps; a finished run is never overwritten.",
+    )
+    p.add_argument("--config", default=None,
+                   help="preset name (quick | standard | paper: experiments/configs/<name>.yaml) or a YAML file with a "
+                   f"train: section (default {DEFAULT_CONFIG})")
+    p.add_argument("--pipeline", choices=("noadv", "goose", "cat", "seal"), default=None,
+                   help="adversary pipeline (default: the config's, cat)")
+    p.add_argument("--seed", type=int, default=None, help="random seed (default: the config's, 0)")
+    p.add_argument("--out", default=None, help="new run folder (must be absent or empty)")
+    p.add_argument("--resume", default=None, metavar="RUN", help="continue the unfinished run in RUN")
+    p.add_argument("--algo", choices=("td3", "sac", "ppo"), default=None, help="SB3 algorithm (default td3)")
+    p.add_argument("--dataset", default=None, help="dataset directory with train / eval splits (default: config)")
+    p.add_argument("--steps", type=positive_int("--steps"), default=None, help="total env steps (default: config)")
+    p.add_argument("--n-envs", type=positive_int("--n-envs"), default=None,
+                   help="env worker processes (default: the config's, or every core)")
+    p.add_argument("--prior", default=None, help="trajectory prior file for the cat and seal pipelines")
+    p.add_argument("--goose-model", default=None, help="GOOSE agent file for the goose pipeline")
+    p.add_argument("--objective", default=None, help="SEAL objective network file for the seal pipeline")
+    p.add_argument("--skills", default=None, help="SEAL skills folder (seal fit skills) for the seal pipeline")
+    p.add_argument("--set", type=_set_option, action="append", metavar="KEY=VALUE",
+                   help="override a train: key (dotted, value read as YAML), e.g. hyperparams.td3.learning_starts=500; "
+                   "repeatable")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true", help="print done.json as JSON")
+    p.set_defaults(func=cmd_train)
