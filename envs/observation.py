@@ -41,6 +41,7 @@ carries the curve.
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Sequence
 
 import numpy as np
@@ -103,6 +104,53 @@ _LIDAR_REACH2 = (LIDAR_RANGE_M + 8.0) ** 2
 diagonal of a 15 m truck)."""
 
 
+RAY_CELL_M = 5.0
+"""Grid cell (m) of the ray casts' segment look-up (`_RayGrid`): finer than the road geometry's 20 m cells, so a
+viewer casts against fewer segments (a superset of all it can hit: the same distances)."""
+
+
+class _RayGrid:
+    """Segments a ray of range ``reach`` cast from a point can hit, looked up per ``cell`` grid cell: those of the
+    `SegmentGrid` (bounding box within ``reach`` of the cell) that also come within ``reach`` + half the cell
+    diagonal of the cell centre (a point of the cell is at most that far from it): a superset of every segment
+    within ``reach`` of the point, so the ray distances are the same as against all segments."""
+
+    def __init__(self, segments: Segments, reach: float, cell: float) -> None:
+        self.cell = float(cell)
+        self._grid = SegmentGrid(segments, reach=reach, cell=cell)
+        self._limit2 = (reach + cell * math.sqrt(0.5) + 0.01) ** 2  # 1 cm against rounding
+        self._cells: dict[tuple[int, int], Segments] = {}
+
+    def query(self, x: float, y: float) -> Segments:
+        key = (math.floor(x / self.cell), math.floor(y / self.cell))
+        hit = self._cells.get(key)
+        if hit is None:
+            s = self._grid.query(x, y)  # same cell key
+            px, py = (key[0] + 0.5) * self.cell - s.ax, (key[1] + 0.5) * self.cell - s.ay
+            t = np.clip((px * s.ex + py * s.ey) / np.maximum(s.ex * s.ex + s.ey * s.ey, 1e-18), 0.0, 1.0)
+            m = (px - t * s.ex) ** 2 + (py - t * s.ey) ** 2 <= self._limit2
+            hit = Segments(
+                np.ascontiguousarray(s.ax[m]), np.ascontiguousarray(s.ay[m]),
+                np.ascontiguousarray(s.ex[m]), np.ascontiguousarray(s.ey[m]), s.tag[m],
+            )
+            self._cells[key] = hit
+        return hit
+
+
+class _RoadCache:
+    """Per-road state shared by every builder on that road (a `ScenarioEnv` makes a builder per episode): fine
+    segment grids for the edge and line rays, and the padded multi-viewer segment stacks."""
+
+    def __init__(self, geometry: RoadGeometry) -> None:
+        e, ln = geometry.edges, geometry.lines
+        self.edges = _RayGrid(e.segments, reach=e.reach, cell=RAY_CELL_M)
+        self.lines = _RayGrid(ln.segments, reach=ln.reach, cell=RAY_CELL_M)
+        self.stacks: dict[tuple[int, ...], tuple[np.ndarray, ...]] = {}
+
+
+_ROAD_CACHE: weakref.WeakKeyDictionary[RoadGeometry, _RoadCache] = weakref.WeakKeyDictionary()
+
+
 def observation_space() -> spaces.Box:
     """``Box(OBS_LOW, OBS_HIGH, (100,), float32)``."""
     return spaces.Box(OBS_LOW.copy(), OBS_HIGH.copy(), dtype=np.float32)
@@ -120,7 +168,11 @@ class ObservationBuilder:
 
     def __init__(self, geometry: RoadGeometry) -> None:
         self.geometry = geometry
-        self._stacks: dict[tuple[int, ...], tuple[tuple[Segments, ...], tuple[np.ndarray, ...]]] = {}
+        cache = _ROAD_CACHE.get(geometry)
+        if cache is None:
+            cache = _RoadCache(geometry)
+            _ROAD_CACHE[geometry] = cache
+        self._edges, self._lines, self._stacks = cache.edges, cache.lines, cache.stacks
 
     def build(
         self,
@@ -164,26 +216,31 @@ class ObservationBuilder:
         with np.errstate(divide="ignore", invalid="ignore"):
             return self._build(states, routes, projections, boxes, self_rows)
 
-    def _segments(self, grid: SegmentGrid, xs: list[float], ys: list[float]) -> tuple[np.ndarray, ...]:
+    def _segments(self, grid: _RayGrid, xs: list[float], ys: list[float]) -> tuple[np.ndarray, ...]:
         """Segment starts and vectors ``ax, ay, ex, ey`` near each viewer: ``[M]`` arrays of its grid cell for one
-        viewer; for several, ``[V, 1, M]`` stacks of each viewer's own cell set, padded with NaN segments (never
-        hit) to the longest, so each viewer casts against as many segments as alone (cached per tuple of cells)."""
-        cells = tuple(grid.query(x, y) for x, y in zip(xs, ys, strict=True))
-        if len(cells) == 1:
-            c = cells[0]
+        viewer or several in one cell; else ``[V, 1, M]`` stacks of each viewer's own cell set, padded with NaN
+        segments (never hit) to the longest, so each viewer casts against as many segments as alone (cached per
+        tuple of cells: a grid keeps its cells, and the cache lives with the grid, so cell ids are never reused)."""
+        if len(xs) == 1:
+            c = grid.query(xs[0], ys[0])
             return c.ax, c.ay, c.ex, c.ey
-        key = tuple(id(c) for c in cells)
+        cells = [grid.query(x, y) for x, y in zip(xs, ys, strict=True)]
+        key = tuple(map(id, cells))
         hit = self._stacks.get(key)
-        if hit is None or any(a is not b for a, b in zip(hit[0], cells, strict=True)):  # ids are reused after GC
-            m = max(c.size for c in cells)
-            stacks = np.full((4, len(cells), 1, m), np.nan)
-            for v, c in enumerate(cells):
-                stacks[:, v, 0, : c.size] = (c.ax, c.ay, c.ex, c.ey)
+        if hit is None:
+            c0 = cells[0]
+            if all(c is c0 for c in cells):
+                hit = (c0.ax, c0.ay, c0.ex, c0.ey)
+            else:
+                m = max(c.size for c in cells)
+                stacks = np.full((4, len(cells), 1, m), np.nan)
+                for v, c in enumerate(cells):
+                    stacks[:, v, 0, : c.size] = (c.ax, c.ay, c.ex, c.ey)
+                hit = tuple(stacks)
             if len(self._stacks) > 4096:
                 self._stacks.clear()
-            hit = (cells, tuple(stacks))
             self._stacks[key] = hit
-        return hit[1]
+        return hit
 
     def _build(
         self,
@@ -208,15 +265,14 @@ class ObservationBuilder:
             dy = (ss[0] * _RAY_COS + cs[0] * _RAY_SIN)[None]
             x_r, y_r = xs[0], ys[0]
         else:
-            c_v, s_v = np.array(cs)[:, None, None], np.array(ss)[:, None, None]
+            c_v, s_v, x_r, y_r = np.array((cs, ss, xs, ys))[:, :, None, None]  # each [V, 1, 1]
             dx = c_v * _RAY_COS - s_v * _RAY_SIN
             dy = s_v * _RAY_COS + c_v * _RAY_SIN
-            x_r, y_r = np.array(xs)[:, None, None], np.array(ys)[:, None, None]
         dx30, dy30, dx12, dy12 = dx[:, :N_EDGE_RAYS], dy[:, :N_EDGE_RAYS], dx[:, N_EDGE_RAYS:], dy[:, N_EDGE_RAYS:]
 
-        ax, ay, ex, ey = self._segments(geom.edges, xs, ys)
+        ax, ay, ex, ey = self._segments(self._edges, xs, ys)
         obs[:, EDGE_RAYS] = _cast_many(dx30, dy30, ax - x_r, ay - y_r, ex, ey, EDGE_RANGE_M) / EDGE_RANGE_M
-        ax, ay, ex, ey = self._segments(geom.lines, xs, ys)
+        ax, ay, ex, ey = self._segments(self._lines, xs, ys)
         obs[:, LINE_RAYS] = _cast_many(dx12, dy12, ax - x_r, ay - y_r, ex, ey, LINE_RANGE_M) / LINE_RANGE_M
 
         # Viewer state and route (scalar maths).
@@ -249,15 +305,19 @@ class ObservationBuilder:
         # one viewer's reach are beyond its range anyway), and each viewer's nearest three.
         near = np.zeros(0, dtype=np.int64)
         if boxes.shape[0]:
-            rx = boxes[:, 0] - np.array(xs)[:, None]  # [V, N]
-            ry = boxes[:, 1] - np.array(ys)[:, None]
+            if n_view == 1:
+                rx = (boxes[:, 0] - x_r)[None]  # [V, N]
+                ry = (boxes[:, 1] - y_r)[None]
+            else:
+                rx = boxes[:, 0] - x_r[:, 0]
+                ry = boxes[:, 1] - y_r[:, 0]
             d2 = rx * rx + ry * ry
-            near = np.flatnonzero((d2 < _LIDAR_REACH2).any(axis=0)) if n_view > 1 else np.flatnonzero(
-                d2[0] < _LIDAR_REACH2)
+            reach = d2 < _LIDAR_REACH2
+            near = np.flatnonzero(np.logical_or.reduce(reach, axis=0) if n_view > 1 else reach[0])
         if not near.size:
             obs[:, LIDAR] = 1.0
             obs[:, NEAREST] = 0.0
-            np.clip(obs, OBS_LOW, OBS_HIGH, out=obs)
+            _clip_obs(obs)
             return obs
         o = boxes[near]
         rxn, ryn, dn = rx[:, near], ry[:, near], d2[:, near]  # [V, n] (copies)
@@ -270,26 +330,39 @@ class ObservationBuilder:
         obs[:, LIDAR] = _box_lidar(dx30, dy30, rxn, ryn, np.cos(o[:, 2]), np.sin(o[:, 2]), 0.5 * o[:, 5],
                                    0.5 * o[:, 6], LIDAR_RANGE_M) / LIDAR_RANGE_M
 
-        # The nearest three within lidar range, nearest first (a plain loop: at most three per viewer).
-        nearest = np.zeros((n_view, N_NEAREST * NEAREST_SLOTS))
+        # The nearest three within lidar range, nearest first (a plain loop over Python floats: at most three per
+        # viewer, so list look-ups beat numpy scalar indexing); absent slots stay 0.
+        rx_l, ry_l, vel_l = rxn.tolist(), ryn.tolist(), o[:, 3:5].tolist()
+        nearest = []
         for v in range(n_view):
             dv = dn[v]
             cand = np.flatnonzero(dv < LIDAR_RANGE_M * LIDAR_RANGE_M)
             c, s, speed = cs[v], ss[v], states[v].speed
             vx, vy = speed * c, speed * s
-            for k, i in enumerate(cand[np.argsort(dv[cand])][:N_NEAREST].tolist()):
-                px, py = float(rxn[v, i]), float(ryn[v, i])
-                dvx, dvy = float(o[i, 3]) - vx, float(o[i, 4]) - vy
-                nearest[v, k * NEAREST_SLOTS : (k + 1) * NEAREST_SLOTS] = (
+            rxv, ryv = rx_l[v], ry_l[v]
+            slots = []
+            for i in cand[np.argsort(dv[cand])][:N_NEAREST].tolist():
+                px, py = rxv[i], ryv[i]
+                ovx, ovy = vel_l[i]
+                dvx, dvy = ovx - vx, ovy - vy
+                slots += (
                     1.0,
                     (px * c + py * s) / LIDAR_RANGE_M,
                     (py * c - px * s) / LIDAR_RANGE_M,
                     (dvx * c + dvy * s) / REL_SPEED_SCALE,
                     (dvy * c - dvx * s) / REL_SPEED_SCALE,
                 )
+            slots += [0.0] * (N_NEAREST * NEAREST_SLOTS - len(slots))
+            nearest.append(slots)
         obs[:, NEAREST] = nearest
-        np.clip(obs, OBS_LOW, OBS_HIGH, out=obs)
+        _clip_obs(obs)
         return obs
+
+
+def _clip_obs(obs: np.ndarray) -> None:
+    """Clip ``[V, OBS_DIM]`` in place to the observation bounds (`np.clip` without its dispatch overhead)."""
+    np.maximum(obs, OBS_LOW, out=obs)
+    np.minimum(obs, OBS_HIGH, out=obs)
 
 
 def _box_lidar(

@@ -90,12 +90,13 @@ class Route:
         self._x_list, self._y_list = ext[:, 0].tolist(), ext[:, 1].tolist()
         self._spd = np.concatenate([spd[:1], spd, spd[-1:]])
         self._spd_list = self._spd.tolist()
-        self._a = ext[:-1]
-        self._e = seg
+        # Segment starts and vectors as contiguous rows ``ax, ay, ex, ey`` [4, n] (one slice per projection) and
+        # per-segment scalars as lists: `project` runs every step for the ego and a reactive adversary.
+        self._cols = np.ascontiguousarray(np.vstack([ext[:-1].T, seg.T]))
         self._len2 = seg_len**2
-        self._seg_s0 = cum[:-1]
-        self._seg_len = seg_len
-        self._seg_heading = np.arctan2(seg[:, 1], seg[:, 0])
+        self._seg_s0 = cum[:-1].tolist()
+        self._seg_len = seg_len.tolist()
+        self._seg_heading = np.arctan2(seg[:, 1], seg[:, 0]).tolist()
         self.length = float(cum[-2])
         """Length of the route polyline without extensions (m)."""
         self.start_s = float(cum[start_kept + 1])
@@ -122,24 +123,36 @@ class Route:
     def project(self, x: float, y: float, hint: int | None = None) -> RouteProjection:
         """Closest route point to (x, y); with ``hint`` (a previous segment index) only nearby segments count,
         so routes that come back near themselves (loops, U-turns) do not make the projection jump."""
+        n = len(self._seg_len)
         if hint is None:
-            lo, hi = 0, self.n_segments
+            lo, hi = 0, n
         else:
-            lo, hi = max(0, hint - _WINDOW_BACK), min(self.n_segments, hint + _WINDOW_AHEAD)
-        a = self._a[lo:hi]
-        e = self._e[lo:hi]
-        px, py = x - a[:, 0], y - a[:, 1]
-        t = np.clip((px * e[:, 0] + py * e[:, 1]) / self._len2[lo:hi], 0.0, 1.0)
-        dx, dy = px - t * e[:, 0], py - t * e[:, 1]
-        k = int(np.argmin(dx * dx + dy * dy))
+            lo, hi = max(0, hint - _WINDOW_BACK), min(n, hint + _WINDOW_AHEAD)
+        # In place where possible (few, small numpy calls); the same operations as the textbook form
+        # t = clip((p . e) / |e|^2, 0, 1), d = p - t e, argmin |d|^2.
+        ax, ay, ex, ey = self._cols[:, lo:hi]
+        px = x - ax
+        py = y - ay
+        t = px * ex
+        t += py * ey
+        t /= self._len2[lo:hi]
+        np.maximum(t, 0.0, out=t)
+        np.minimum(t, 1.0, out=t)
+        dx = t * ex
+        np.subtract(px, dx, out=dx)
+        dy = t * ey
+        np.subtract(py, dy, out=dy)
+        dx *= dx
+        dy *= dy
+        dx += dy
+        k = int(dx.argmin())
         i = lo + k
-        tk = float(t[k])
-        ex, ey = float(e[k, 0]), float(e[k, 1])
-        lateral = (ex * float(py[k]) - ey * float(px[k])) / float(self._seg_len[i])
+        seg_len = self._seg_len[i]
+        lateral = (float(ex[k]) * float(py[k]) - float(ey[k]) * float(px[k])) / seg_len
         return RouteProjection(
-            s=float(self._seg_s0[i] + tk * self._seg_len[i]),
+            s=self._seg_s0[i] + float(t[k]) * seg_len,
             lateral=lateral,
-            heading=float(self._seg_heading[i]),
+            heading=self._seg_heading[i],
             segment=i,
         )
 

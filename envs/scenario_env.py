@@ -317,6 +317,7 @@ class ScenarioEnv(gym.Env):
         idx = np.arange(n_agents)
         self._not_ego = idx != self._ego_idx
         self._not_ego_adv = self._not_ego & (idx != self._adv_idx)
+        self._viewer_idx = np.array([self._ego_idx, self._adv_idx])
         ego_track = self._log[self._ego_idx]
         self._route = Route.from_track(ego_track, CURRENT_STEP)
         self._exempt = self._exempt_for(scenario, ego_track) if self.config["check_continuous_lines"] else None
@@ -408,9 +409,13 @@ class ScenarioEnv(gym.Env):
         self._adv_hint = proj.segment
         if last or not behavior.observes(self._t):
             return self._builder.build(self._ego, self._route, self._cur[self._others_ego, :7], self._proj)
-        present = self._present
-        row = np.cumsum(present) - 1  # row of each present agent among the present ones
-        rows = [int(row[i]) if present[i] else -1 for i in (self._ego_idx, self._adv_idx)]
+        # A viewer's row among the present agents is its rank among their indices (-1 if absent: at reset an
+        # adversary may have no log row yet).
+        mask = self._present
+        present = np.flatnonzero(mask)
+        rows = present.searchsorted(self._viewer_idx).tolist()
+        if not (mask[self._ego_idx] and mask[self._adv_idx]):
+            rows = [r if mask[i] else -1 for r, i in zip(rows, (self._ego_idx, self._adv_idx), strict=True)]
         both = self._builder.build_many(
             (self._ego, adv), (self._route, self._adv_route), (self._proj, proj), self._cur[present, :7], rows,
         )

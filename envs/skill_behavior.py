@@ -76,6 +76,7 @@ class SkillSwitchBehavior(AdversaryBehavior):
         self._given = given
         self._track: np.ndarray | None = given
         self._tracker: TrackingBehavior | None = None
+        self._routes: dict[tuple[str, int] | None, tuple[Scenario | None, Route]] = {}
         self.episode_seed: int | None = None
         """Seed the policy got at the last reset."""
 
@@ -89,8 +90,17 @@ class SkillSwitchBehavior(AdversaryBehavior):
         self.policy.reset(self.episode_seed)
 
     def make_route(self, scenario: Scenario) -> Route:
-        track = self._given if self._given is not None else scenario.track(scenario.adv_id)
-        return Route.from_track(track)
+        # Cached (a route is immutable): building one walks the track in Python, every episode otherwise. Keyed
+        # by the scenario object, whose logged adversary track it is (a given track serves every scenario).
+        key = None if self._given is not None else (scenario.scenario_id, id(scenario))
+        hit = self._routes.get(key)
+        if hit is None or hit[0] is not (None if key is None else scenario):
+            track = self._given if self._given is not None else scenario.track(scenario.adv_id)
+            if len(self._routes) > 1024:
+                self._routes.clear()
+            hit = (None if key is None else scenario, Route.from_track(track))
+            self._routes[key] = hit
+        return hit[1]
 
     def observes(self, t: int) -> bool:
         return t >= self.switch_step

@@ -10,8 +10,9 @@ They run in interleaved blocks so that load changes on a shared machine hit all 
 second and per CPU second of this process. Cost ratio = reference steps/s / variant steps/s (target <= 1.5).
 
 Where the extra cost goes: the adversary's own observation (built with the ego's in one vectorised pass,
-`envs.observation.ObservationBuilder.build_many`, about 1.4 single builds for the two), its route projection, and
-the skill policy step (`skill_policy_step_us`, numpy decoder).
+`envs.observation.ObservationBuilder.build_many`, about 1.4-1.6 single builds for the two: the ray casts and the
+box lidar scale with the number of viewers), its route projection, and the skill policy step
+(`skill_policy_step_us`, numpy decoder); its route is built once per scenario (`SkillSwitchBehavior.make_route`).
 """
 
 from __future__ import annotations

@@ -180,3 +180,54 @@ def test_observations_stay_in_the_space(curve) -> None:
             obs, _, terminated, truncated, _ = env.step(rng.uniform(-1, 1, 2))
             assert env.observation_space.contains(obs)
             done = terminated or truncated
+
+
+def test_fine_ray_grid_gives_the_distances_of_all_road_segments(all_scenarios) -> None:
+    """The observation's 5 m ray grid only drops segments out of ray range: edge and line rays equal a cast against
+    every segment of the road, bit for bit."""
+    rng = np.random.default_rng(3)
+    checked = 0
+    for scenario in all_scenarios[:6]:
+        geom = RoadGeometry(scenario.road)
+        builder = ob.ObservationBuilder(geom)
+        track = scenario.tracks[scenario.ego_index]
+        for row in track[track[:, 7] > 0.5][::7]:
+            x, y = row[0] + rng.normal(0.0, 3.0), row[1] + rng.normal(0.0, 3.0)
+            heading = row[2] + rng.normal(0.0, 0.5)
+            obs = builder.build(AgentState(x, y, heading, 10.0, 4.5, 1.8), ROUTE, NO_OTHERS)
+            c, s = math.cos(heading), math.sin(heading)
+            for grid, ang, rng_m, sl in (
+                (geom.edges, ob._EDGE_ANG, ob.EDGE_RANGE_M, ob.EDGE_RAYS),
+                (geom.lines, ob._LINE_ANG, ob.LINE_RANGE_M, ob.LINE_RAYS),
+            ):
+                seg = grid.segments
+                dx, dy = c * np.cos(ang) - s * np.sin(ang), s * np.cos(ang) + c * np.sin(ang)
+                full = cast_rays(dx, dy, seg.ax - x, seg.ay - y, seg.ex, seg.ey, rng_m) / rng_m
+                np.testing.assert_array_equal(obs[sl], np.clip(full, 0.0, 1.0).astype(np.float32))
+            checked += 1
+    assert checked > 20
+
+
+def test_route_projection_matches_the_textbook_form() -> None:
+    """`Route.project` (in-place numpy) equals clip((p . e) / |e|^2, 0, 1) on the windowed segments, bit for bit."""
+    rng = np.random.default_rng(0)
+    pts = np.cumsum(rng.normal(0.0, 3.0, (40, 2)) + [4.0, 0.0], axis=0)
+    route = Route(pts, speeds=np.full(40, 10.0))
+    a_all, e_all = route._cols[0:2].T, route._cols[2:4].T  # segment starts and vectors of the extended polyline
+    s_all = np.concatenate([[0.0], np.cumsum(np.hypot(e_all[:, 0], e_all[:, 1]))]) - 50.0
+    heading_all = np.arctan2(e_all[:, 1], e_all[:, 0])
+    for _ in range(200):
+        x, y = pts[rng.integers(40)] + rng.normal(0.0, 4.0, 2)
+        hint = None if rng.random() < 0.3 else int(rng.integers(route.n_segments))
+        lo, hi = (0, route.n_segments) if hint is None else (max(0, hint - 8), min(route.n_segments, hint + 40))
+        a, e = a_all[lo:hi], e_all[lo:hi]
+        seg_len = np.hypot(e[:, 0], e[:, 1])
+        px, py = x - a[:, 0], y - a[:, 1]
+        t = np.clip((px * e[:, 0] + py * e[:, 1]) / seg_len**2, 0.0, 1.0)
+        k = int(np.argmin((px - t * e[:, 0]) ** 2 + (py - t * e[:, 1]) ** 2))
+        s0 = s_all[lo + k]
+        p = route.project(x, y, hint)
+        assert p.segment == lo + k
+        assert p.s == pytest.approx(s0 + float(t[k]) * float(seg_len[k]), abs=1e-9)
+        assert p.lateral == (float(e[k, 0]) * float(py[k]) - float(e[k, 1]) * float(px[k])) / float(seg_len[k])
+        assert p.heading == heading_all[lo + k]

@@ -195,3 +195,17 @@ def test_policy_clone_has_its_own_episode_state() -> None:
     assert not np.array_equal(a, b) and not np.array_equal(policy.z, clone.z)
     policy.reset(2)
     np.testing.assert_array_equal(policy.act(obs), b)  # same seed, same skill: the clone did not disturb it
+
+
+def test_skill_adversary_route_is_built_once_per_scenario(highway) -> None:
+    """`make_route` is cached per scenario (and once for a given track), with the points `Route.from_track` gives."""
+    from envs.route import Route
+
+    behavior = SkillSwitchBehavior(_policy())
+    a, b = highway[0], highway[1]
+    ra = behavior.make_route(a)
+    assert behavior.make_route(a) is ra and behavior.make_route(b) is not ra
+    np.testing.assert_array_equal(ra.points, Route.from_track(a.track(a.adv_id)).points)
+    given = SkillSwitchBehavior(_policy(), track=b.track(b.adv_id))
+    assert given.make_route(a) is given.make_route(b)
+    np.testing.assert_array_equal(given.make_route(a).points, behavior.make_route(b).points)
