@@ -17,6 +17,7 @@ from typing import Any
 import torch
 from torch import nn
 
+from seal.config_keys import check_keys
 from seal.objective.features import FEATURE_NAMES, N_FEATURES, pair_features
 from seal.scenario import N_FUTURE
 
@@ -62,10 +63,7 @@ class ObjectiveConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], where: str = "objective config") -> ObjectiveConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"{where}: unknown key(s) {unknown}; known: {sorted(known)}")
+        check_keys(cls, d, where)
         types = {f.name: f.type for f in fields(cls)}
         cast = {"float": float, "bool": bool}
         return cls(**{k: cast.get(types[k], int)(v) for k, v in d.items()})

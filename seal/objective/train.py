@@ -19,12 +19,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
 import torch
 
+from seal.config_keys import check_keys
 from seal.objective.labels import LOGGED_ROW, LabelSet
 from seal.objective.metrics import spearman
 from seal.objective.model import ObjectiveModel
@@ -97,10 +98,7 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], where: str = "objective training config") -> TrainConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"{where}: unknown key(s) {unknown}; known: {sorted(known)}")
+        check_keys(cls, d, where)
         return cls(**d)
 
 

@@ -17,13 +17,14 @@ log-determinant, so `log_prob` is the exact density of ``z`` itself. Sampling in
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
 import torch
 from torch import nn
 
+from seal.config_keys import check_keys
 from seal.skills.vae import mlp
 
 _MIN_STD = 1e-3
@@ -55,10 +56,7 @@ class RealNVPConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], where: str = "RealNVP config") -> RealNVPConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"{where}: unknown key(s) {unknown}; known: {sorted(known)}")
+        check_keys(cls, d, where)
         return cls(**d)
 
 

@@ -17,7 +17,7 @@ import io
 import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +25,7 @@ import numpy as np
 import torch
 
 from seal.atomic import atomic_write_bytes
+from seal.config_keys import check_keys
 from seal.skills.demos import gather_windows
 from seal.skills.realnvp import ConditionalRealNVP
 from seal.skills.vae import SkillVAE
@@ -68,10 +69,7 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], where: str = "training config") -> TrainConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"{where}: unknown key(s) {unknown}; known: {sorted(known)}")
+        check_keys(cls, d, where)
         return cls(**d)
 
 

@@ -10,12 +10,14 @@ posterior ``N(mu, exp(logvar))`` from ``N(0, I)`` (summed over latent dimensions
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
 import torch
 from torch import nn
+
+from seal.config_keys import check_keys
 
 _MIN_STD = 1e-3
 
@@ -59,10 +61,7 @@ class VAEConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], where: str = "VAE config") -> VAEConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"{where}: unknown key(s) {unknown}; known: {sorted(known)}")
+        check_keys(cls, d, where)
         d = dict(d)
         for key in ("decoder_hidden", "decoder_ignore"):
             if key in d:
