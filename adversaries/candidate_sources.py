@@ -90,3 +90,15 @@ def make_candidate_source(
     if prior is not None:
         return prior_source(prior, prior_threads)
     return named_source(str(candidates))
+
+
+def adversary_candidates(source: CandidateSource, scenario: Scenario, generator: str) -> Candidates:
+    """``source(scenario)``, checked to be the candidates of the scenario's adversary (the error names
+    ``generator``)."""
+    cands = source(scenario)
+    if cands.agent_index != scenario.adv_index:
+        raise ValueError(
+            f"{generator}: candidates are for agent index {cands.agent_index}, the adversary of scenario "
+            f"{scenario.scenario_id!r} is index {scenario.adv_index}"
+        )
+    return cands

@@ -17,7 +17,12 @@ import numpy as np
 
 from adversaries.base import AdversaryGenerator, Generation, register
 from adversaries.candidate_path import candidate_track
-from adversaries.candidate_sources import PRIOR_THREADS, CandidateSource, make_candidate_source
+from adversaries.candidate_sources import (
+    PRIOR_THREADS,
+    CandidateSource,
+    adversary_candidates,
+    make_candidate_source,
+)
 from adversaries.cat_select import DECAY, N_KEPT_MODES, STRIDE_STEPS, cat_select
 from envs.behaviors import AdversaryBehavior, ReplayBehavior, TrackingBehavior
 from envs.rollout import Rollout
@@ -75,14 +80,9 @@ class CATGenerator(AdversaryGenerator):
         if not history:
             raise ValueError(f"cat: empty roll-out history for scenario {scenario.scenario_id!r}")
         start = time.perf_counter()
-        cands = self.candidate_source(scenario)
+        cands = adversary_candidates(self.candidate_source, scenario, "cat")
         candidate_s = time.perf_counter() - start
         adv = scenario.adv_index
-        if cands.agent_index != adv:
-            raise ValueError(
-                f"cat: candidates are for agent index {cands.agent_index}, the adversary of scenario "
-                f"{scenario.scenario_id!r} is index {adv}"
-            )
         ego_xy, ego_heading, ego_valid = stack_ego_rollouts(history)
         now = scenario.tracks[:, CURRENT_STEP]
         sel = cat_select(

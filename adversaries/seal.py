@@ -27,7 +27,12 @@ import numpy as np
 
 from adversaries.base import AdversaryGenerator, Generation, register
 from adversaries.candidate_path import candidate_track
-from adversaries.candidate_sources import PRIOR_THREADS, CandidateSource, make_candidate_source
+from adversaries.candidate_sources import (
+    PRIOR_THREADS,
+    CandidateSource,
+    adversary_candidates,
+    make_candidate_source,
+)
 from adversaries.cat import stack_ego_rollouts
 from adversaries.cat_select import DECAY, N_KEPT_MODES, STRIDE_STEPS
 from adversaries.seal_contact import predict_contact
@@ -111,14 +116,9 @@ class SEALGenerator(AdversaryGenerator):
         if not history:
             raise ValueError(f"seal: empty roll-out history for scenario {scenario.scenario_id!r}")
         start = time.perf_counter()
-        cands = self.candidate_source(scenario)
+        cands = adversary_candidates(self.candidate_source, scenario, "seal")
         candidate_s = time.perf_counter() - start
         adv, ego = scenario.adv_index, scenario.ego_index
-        if cands.agent_index != adv:
-            raise ValueError(
-                f"seal: candidates are for agent index {cands.agent_index}, the adversary of scenario "
-                f"{scenario.scenario_id!r} is index {adv}"
-            )
         now = scenario.tracks[:, CURRENT_STEP]
         adv_size = (float(now[adv, LENGTH]), float(now[adv, WIDTH]))
         ego_size = (float(now[ego, LENGTH]), float(now[ego, WIDTH]))

@@ -15,8 +15,8 @@ from typing import Protocol
 
 import numpy as np
 
-from envs.behaviors import AdversaryBehavior, BehaviorOutput, TrackingBehavior
-from envs.kinematics import AgentState, placement_state
+from envs.behaviors import AdversaryBehavior, BehaviorOutput, ReplayBehavior, TrackingBehavior
+from envs.kinematics import AgentState
 from envs.route import Route
 from seal.scenario import CURRENT_STEP, VALID, Scenario
 
@@ -74,18 +74,20 @@ class SkillSwitchBehavior(AdversaryBehavior):
         self.follow = follow
         self.seed = seed
         self._given = given
-        self._track: np.ndarray | None = given
-        self._tracker: TrackingBehavior | None = None
+        self._follower: AdversaryBehavior | None = None
+        """Drives the adversary before the switch (a `ReplayBehavior` or `TrackingBehavior` of the track)."""
         self._routes: dict[tuple[str, int] | None, tuple[Scenario | None, Route]] = {}
         self.episode_seed: int | None = None
         """Seed the policy got at the last reset."""
 
     def reset(self, scenario: Scenario, rng: np.random.Generator) -> None:
-        self._track = self._given if self._given is not None else scenario.track(scenario.adv_id).astype(np.float64)
         if self.follow == "track":
-            valid = np.flatnonzero(self._track[:, VALID] > 0.5)
-            self._tracker = TrackingBehavior(self._track[: valid[-1] + 1], start_step=0)
-            self._tracker.reset(scenario, rng)
+            track = self._given if self._given is not None else scenario.track(scenario.adv_id).astype(np.float64)
+            valid = np.flatnonzero(track[:, VALID] > 0.5)
+            self._follower = TrackingBehavior(track[: valid[-1] + 1], start_step=0)
+        else:
+            self._follower = ReplayBehavior(self._given)
+        self._follower.reset(scenario, rng)
         self.episode_seed = int(rng.integers(2**63)) if self.seed is None else int(self.seed)
         self.policy.reset(self.episode_seed)
 
@@ -113,11 +115,5 @@ class SkillSwitchBehavior(AdversaryBehavior):
                 raise RuntimeError("SkillSwitchBehavior: the env passed no observation after the switch")
             steering, acceleration = self.policy.act(observation).tolist()
             return BehaviorOutput.act(steering, acceleration)
-        if self._tracker is not None:
-            return self._tracker.step(t, state, observation)
-        track = self._track
-        assert track is not None, "reset() first"
-        k = t + 1
-        if k >= track.shape[0] or track[k, VALID] < 0.5:
-            return BehaviorOutput.absent()
-        return BehaviorOutput.place(placement_state(state, track[k]))
+        assert self._follower is not None, "reset() first"
+        return self._follower.step(t, state, observation)

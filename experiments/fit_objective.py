@@ -73,27 +73,12 @@ def load_preset(name: str) -> dict[str, Any]:
     return presets.load_preset("objective", name, PRESETS, DEFAULTS)
 
 
-def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
-    out = dict(base)
-    for k, v in over.items():
-        out[k] = {**out[k], **v} if isinstance(v, dict) and isinstance(out.get(k), dict) else v
-    return out
-
-
 def resolve_config(preset: str | None = "standard", config_file: str | Path | None = None,
                    **overrides: Any) -> dict[str, Any]:
     """Defaults < preset < YAML config file < explicit overrides (None values ignored); validated."""
     from seal.objective import ObjectiveConfig, TrainConfig
 
-    config = dict(DEFAULTS)
-    if preset is not None:
-        config = _merge(config, load_preset(preset))
-    if config_file is not None:
-        config = _merge(config, presets.read_options(Path(config_file), DEFAULTS))
-    unknown = sorted(set(overrides) - set(DEFAULTS))
-    if unknown:
-        raise ValueError(f"unknown option(s) {unknown}; known: {sorted(DEFAULTS)}")
-    config = _merge(config, {k: v for k, v in overrides.items() if v is not None})
+    config = presets.layered_options("objective", PRESETS, DEFAULTS, preset, config_file, overrides)
     ObjectiveConfig.from_dict(config["model"], "config key 'model'")
     TrainConfig.from_dict(config["train"], "config key 'train'")
     for key in ("workers", "chunk_size", "n_candidates", "threads"):

@@ -76,17 +76,6 @@ def load_preset(name: str) -> dict[str, Any]:
     return presets.load_preset("skills", name, PRESETS, DEFAULTS)
 
 
-def _read_yaml(path: Path) -> dict[str, Any]:
-    return presets.read_options(path, DEFAULTS)
-
-
-def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
-    out = dict(base)
-    for k, v in over.items():
-        out[k] = {**out[k], **v} if isinstance(v, dict) and isinstance(out.get(k), dict) else v
-    return out
-
-
 def resolve_config(preset: str | None = "standard", config_file: str | Path | None = None,
                    **overrides: Any) -> dict[str, Any]:
     """Defaults < preset < YAML config file < explicit overrides (None values ignored); validated by building
@@ -96,15 +85,7 @@ def resolve_config(preset: str | None = "standard", config_file: str | Path | No
     from seal.skills.train import TrainConfig
     from seal.skills.vae import VAEConfig
 
-    config = dict(DEFAULTS)
-    if preset is not None:
-        config = _merge(config, load_preset(preset))
-    if config_file is not None:
-        config = _merge(config, _read_yaml(Path(config_file)))
-    unknown = sorted(set(overrides) - set(DEFAULTS))
-    if unknown:
-        raise ValueError(f"unknown option(s) {unknown}; known: {sorted(DEFAULTS)}")
-    config = _merge(config, {k: v for k, v in overrides.items() if v is not None})
+    config = presets.layered_options("skills", PRESETS, DEFAULTS, preset, config_file, overrides)
     DemoConfig.from_dict(config["demos"], "config key 'demos'")
     WindowSpec(**config["windows"])
     VAEConfig.from_dict(config["vae"], "config key 'vae'")

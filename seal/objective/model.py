@@ -26,6 +26,7 @@ import torch
 
 from seal.atomic import atomic_write_bytes, atomic_write_json
 from seal.objective.network import ObjectiveConfig, ObjectiveNet
+from seal.weights_file import read_weights_file
 
 FORMAT = "seal-objective-model"
 FORMAT_VERSION = 2
@@ -126,13 +127,7 @@ class ObjectiveModel:
     def load(cls, path: str | os.PathLike[str]) -> ObjectiveModel:
         """Load a model written by `save` (``torch.load(weights_only=True)``)."""
         path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"objective model file {path} not found (train one with `seal fit objective`)")
-        try:
-            state = torch.load(path, map_location="cpu", weights_only=True)
-        except Exception as exc:  # torch raises several types for truncated / foreign files
-            raise ObjectiveFileError(f"objective model file {path} cannot be read ({type(exc).__name__}: {exc})"
-                                     ) from None
+        state = read_weights_file(path, "objective model file", "seal fit objective", ObjectiveFileError)
         where = f"objective model file {path}"
         if not isinstance(state, dict) or state.get("format") != FORMAT:
             raise ObjectiveFileError(f"{where}: field 'format' is not {FORMAT!r} (is this a pi_score model?)")

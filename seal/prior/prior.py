@@ -20,6 +20,7 @@ from seal.prior.features import ContextTables, build_tables, featurise, history_
 from seal.prior.lanes import ChunkCache
 from seal.prior.network import PriorConfig, PriorNet
 from seal.scenario import CURRENT_STEP, Scenario
+from seal.weights_file import read_weights_file
 
 FORMAT = "seal-trajectory-prior"
 FORMAT_VERSION = 1
@@ -137,12 +138,7 @@ class TrajectoryPrior:
     def load(cls, path: str | os.PathLike[str]) -> TrajectoryPrior:
         """Load a model written by `save` (``torch.load(weights_only=True)``: no arbitrary unpickling)."""
         path = Path(path)
-        if not path.exists():
-            raise FileNotFoundError(f"model file {path} not found (train one with `seal fit prior`)")
-        try:
-            state = torch.load(path, map_location="cpu", weights_only=True)
-        except Exception as exc:  # torch raises several types for truncated / foreign files
-            raise PriorFileError(f"model file {path} cannot be read ({type(exc).__name__}: {exc})") from None
+        state = read_weights_file(path, "model file", "seal fit prior", PriorFileError)
         return cls.from_state(state, where=f"model file {path}")
 
     # ---------------------------------------------------------------------------------------------- inference

@@ -18,6 +18,7 @@ import torch
 from seal.atomic import atomic_write_bytes
 from seal.skills.realnvp import ConditionalRealNVP, RealNVPConfig
 from seal.skills.vae import SkillVAE, VAEConfig
+from seal.weights_file import read_weights_file
 
 FORMAT = "seal-skill-model"
 FORMAT_VERSION = 1
@@ -58,12 +59,7 @@ def load_model(path: str | os.PathLike[str], kind: str | None = None) -> tuple[S
                                                                                 dict[str, Any]]:
     """Model and info from a file written by `save_model`; ``kind`` (``vae`` / ``prior``) is checked if given."""
     path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"skill model file {path} not found (train with `seal fit skills`)")
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises several types for truncated / foreign files
-        raise SkillModelError(f"skill model file {path} cannot be read ({type(exc).__name__}: {exc})") from None
+    state = read_weights_file(path, "skill model file", "seal fit skills", SkillModelError)
     where = f"skill model file {path}"
     if not isinstance(state, dict) or state.get("format") != FORMAT:
         raise SkillModelError(f"{where}: field 'format' is not {FORMAT!r}")
