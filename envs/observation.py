@@ -99,6 +99,7 @@ _LIDAR_COS, _LIDAR_SIN = np.cos(_LIDAR_ANG), np.sin(_LIDAR_ANG)
 assert np.allclose(_LIDAR_ANG, _EDGE_ANG)  # the lidar reuses the edge rays' directions
 _RAY_COS = np.concatenate([_EDGE_COS, _LINE_COS])[:, None]  # [42, 1]: rays x segments broadcasting
 _RAY_SIN = np.concatenate([_EDGE_SIN, _LINE_SIN])[:, None]
+_LIDAR_RANGE2 = LIDAR_RANGE_M * LIDAR_RANGE_M
 _LIDAR_REACH2 = (LIDAR_RANGE_M + 8.0) ** 2
 """Vehicles whose centre is farther than this (squared, m^2) cannot reach into lidar range (8 m > half the
 diagonal of a 15 m truck)."""
@@ -312,6 +313,11 @@ class ObservationBuilder:
                 rx = boxes[:, 0] - x_r[:, 0]
                 ry = boxes[:, 1] - y_r[:, 0]
             d2 = rx * rx + ry * ry
+            if max(self_rows) >= 0:  # a viewer's own box: a NaN centre never hits, out of everybody's reach
+                seen = [(v, r) for v, r in enumerate(self_rows) if r >= 0]
+                own = tuple(zip(*seen, strict=True))
+                rx[own] = np.nan
+                d2[own] = np.inf
             reach = d2 < _LIDAR_REACH2
             near = np.flatnonzero(np.logical_or.reduce(reach, axis=0) if n_view > 1 else reach[0])
         if not near.size:
@@ -321,27 +327,22 @@ class ObservationBuilder:
             return obs
         o = boxes[near]
         rxn, ryn, dn = rx[:, near], ry[:, near], d2[:, near]  # [V, n] (copies)
-        if max(self_rows) >= 0:  # a viewer's own box: a NaN centre never hits, and it is nobody's nearest
-            own = np.searchsorted(near, self_rows).tolist()
-            for v, (r, k) in enumerate(zip(self_rows, own, strict=True)):
-                if r >= 0 and k < near.size and near[k] == r:
-                    rxn[v, k] = np.nan
-                    dn[v, k] = np.inf
         obs[:, LIDAR] = _box_lidar(dx30, dy30, rxn, ryn, np.cos(o[:, 2]), np.sin(o[:, 2]), 0.5 * o[:, 5],
                                    0.5 * o[:, 6], LIDAR_RANGE_M) / LIDAR_RANGE_M
 
-        # The nearest three within lidar range, nearest first (a plain loop over Python floats: at most three per
-        # viewer, so list look-ups beat numpy scalar indexing); absent slots stay 0.
-        rx_l, ry_l, vel_l = rxn.tolist(), ryn.tolist(), o[:, 3:5].tolist()
+        # The nearest three within lidar range, nearest first (one argsort for every viewer, then a plain loop over
+        # Python floats: at most three per viewer, so list look-ups beat numpy scalar indexing); absent slots stay 0.
+        order = np.argsort(dn, axis=1)[:, :N_NEAREST].tolist()
+        rx_l, ry_l, d_l, vel_l = rxn.tolist(), ryn.tolist(), dn.tolist(), o[:, 3:5].tolist()
         nearest = []
         for v in range(n_view):
-            dv = dn[v]
-            cand = np.flatnonzero(dv < LIDAR_RANGE_M * LIDAR_RANGE_M)
             c, s, speed = cs[v], ss[v], states[v].speed
             vx, vy = speed * c, speed * s
-            rxv, ryv = rx_l[v], ry_l[v]
+            rxv, ryv, dv = rx_l[v], ry_l[v], d_l[v]
             slots = []
-            for i in cand[np.argsort(dv[cand])][:N_NEAREST].tolist():
+            for i in order[v]:
+                if not dv[i] < _LIDAR_RANGE2:
+                    break
                 px, py = rxv[i], ryv[i]
                 ovx, ovy = vel_l[i]
                 dvx, dvy = ovx - vx, ovy - vy

@@ -39,7 +39,8 @@ def cmd_bench_env(args: argparse.Namespace) -> int:
     if args.adversary == "seal":
         from experiments.bench_skills import run_skill_bench
 
-        result = run_skill_bench(args.dataset, skills=args.skills, n_steps=args.steps, seed=args.seed)
+        result = run_skill_bench(args.dataset, skills=args.skills, n_steps=args.steps, seed=args.seed,
+                                 repeats=args.repeats)
         print_result(result, args.json)
         return 0
     from experiments.bench_env import run_env_bench
@@ -99,6 +100,8 @@ def register(tree: CommandTree) -> None:
                       "vs the replayed adversary in the same run, and the cost ratio (target <= 1.5)")
     benv.add_argument("--skills", default=None,
                       help="with --adversary seal: skills folder from `seal fit skills` (default: untrained models)")
+    benv.add_argument("--repeats", type=positive_int("--repeats"), default=3,
+                      help="with --adversary seal: identical measurements; each variant's fastest counts (default 3)")
     benv.add_argument("--json", action="store_true", help="print JSON")
     benv.set_defaults(func=cmd_bench_env)
     bdata = bench_sub.add_parser(
