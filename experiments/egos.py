@@ -114,8 +114,8 @@ def _find_algo(model: Path) -> str:
                     return str(algo).upper()
                 raise ValueError(f"{cfg_path}: no 'algo' (e.g. td3, sac, ppo) to load {model} with")
     raise FileNotFoundError(
-        f"no {' / '.join(CONFIG_FILES)} with the algorithm name next to {model}: ego training runs (which write "
-        "it) arrive with issue 7; put a config.yaml with 'algo: td3|sac|ppo' beside the model to load it"
+        f"no {' / '.join(CONFIG_FILES)} with the algorithm name next to {model}: pass a `seal train` run folder "
+        "(it writes one), or put a config.yaml with 'algo: td3|sac|ppo' beside the model to load it"
     )
 
 

@@ -154,7 +154,7 @@ def test_run_ego_loads_sb3_models_without_pickle(tmp_path: Path, algo: str) -> N
     kwargs = {"n_steps": 16, "batch_size": 16} if algo == "ppo" else {"buffer_size": 100}
     model = getattr(sb3, algo.upper())("MlpPolicy", env, seed=0, device="cpu", **kwargs)
     model.save(tmp_path / "model.zip")
-    with pytest.raises(FileNotFoundError, match="issue 7"):
+    with pytest.raises(FileNotFoundError, match="algo: td3"):
         make_ego(str(tmp_path))
     (tmp_path / "config.yaml").write_text(f"algo: {algo}\n")
     loaded = load_sb3_model(tmp_path)
