@@ -106,6 +106,10 @@ def test_trained_run_real_dataset_and_cli(dataset: Path, tmp_path: Path, capsys)
         assert {(r["pipeline"], r["seed"]) for r in rows} == {("cat", 3)}
         assert sorted({r["setting"] for r in rows}) == ["cat", "normal", f"real:{dataset.resolve()}"]
         assert store.runs()[0]["config"]["algo"] == "td3"
+    # the short form `seal eval RUN...`; everything is stored already, so nothing new is written
+    assert main(["eval", str(run), "--settings", "normal", "--store", str(store_path), "--k", "1", "--no-replay-ego",
+                 "--no-progress"]) == 0
+    assert "normal: 0" in capsys.readouterr().out
     code = main(["eval", "runs", "--settings", "normal,goose", "--store", str(store_path), "--dataset",
                  str(dataset), "--no-progress"])
     assert code == 2
@@ -136,3 +140,15 @@ def test_videos_replay_the_scored_pass(dataset: Path, tmp_path: Path) -> None:
     paths = render_generator_videos(rows, runs, settings, tmp_path / "videos", per_generator=1, fmt="gif",
                                     progress=False)
     assert len(paths) == 1 and paths[0].suffix == ".gif" and paths[0].stat().st_size > 1000
+
+
+def test_eval_without_subcommand_means_eval_runs() -> None:
+    from seal.cli import build_tree
+
+    parser, tree = build_tree()
+    assert tree.expand_default(["eval", "runs/cat-s0", "--settings", "normal"]) == [
+        "eval", "runs", "runs/cat-s0", "--settings", "normal"]
+    for argv in (["eval", "generators", "DS"], ["eval", "runs", "R"], ["eval", "--help"], ["train", "--resume", "R"]):
+        assert tree.expand_default(argv) == argv
+    args = parser.parse_args(tree.expand_default(["eval", "a", "b", "--settings", "hard"]))
+    assert (args.eval_command, args.runs, args.settings) == ("runs", ["a", "b"], "hard")

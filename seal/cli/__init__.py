@@ -27,6 +27,11 @@ COMMAND_MODULES = (
 
 
 def build_parser() -> argparse.ArgumentParser:
+    return build_tree()[0]
+
+
+def build_tree() -> tuple[argparse.ArgumentParser, CommandTree]:
+    """The parser and its command tree (which knows the groups' default subcommands)."""
     from seal import __version__
 
     parser = argparse.ArgumentParser(
@@ -38,12 +43,12 @@ def build_parser() -> argparse.ArgumentParser:
     tree = CommandTree(parser.add_subparsers(dest="command", metavar="COMMAND", required=True))
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(tree)
-    return parser
+    return parser, tree
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    parser, tree = build_tree()
+    args = parser.parse_args(tree.expand_default(list(sys.argv[1:] if argv is None else argv)))
     from seal.dataset import DatasetError
     from seal.road import RoadError
     from seal.scenario import ScenarioError

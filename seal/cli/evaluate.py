@@ -1,9 +1,9 @@
 """``seal eval runs``: evaluate trained egos (plus the Replay ego) on Normal, Hard, X-Gen and real-data settings,
 results into the SQLite results store.
 
-It is a subcommand of the ``eval`` group (``seal eval runs RUN...``) rather than ``seal eval RUN...``: ``eval``
-already has subcommands (``prior``, ``generators``), and argparse cannot mix a subcommand with free positional
-run paths without guessing whether the first word is a command or a folder.
+It is the ``eval`` group's default subcommand: ``seal eval RUN...`` means ``seal eval runs RUN...`` whenever the first
+word is not another ``eval`` subcommand (``prior``, ``generators``, ``objective``); a run folder with such a name
+needs the explicit ``seal eval runs`` form (`seal.cli.tree.CommandTree.set_default`).
 """
 
 from __future__ import annotations
@@ -42,6 +42,7 @@ def cmd_eval_runs(args: argparse.Namespace) -> int:
 
 
 def register(tree: CommandTree) -> None:
+    tree.set_default("eval", "runs")  # `seal eval RUN... --settings ...`, the protocol's command
     p = tree.group("eval").add_parser(
         "runs",
         help="evaluate trained egos (+ Replay ego) on normal / hard / X-Gen / real:DIR settings into a results store",
