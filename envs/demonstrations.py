@@ -19,10 +19,7 @@ Noise model (`DemoConfig`), per agent:
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
-import multiprocessing as mp
 import shutil
 import zlib
 from collections.abc import Callable, Sequence
@@ -35,7 +32,7 @@ import numpy as np
 from envs import observation as ob
 from envs.heuristic import HeuristicDriver
 from envs.multi_agent import MultiAgentSim, SimConfig
-from seal.atomic import atomic_write_json
+from seal.chunked import fingerprint, run_chunked
 from seal.scenario import DT_S, N_STEPS, Scenario
 from seal.skills.demos import Demonstrations
 
@@ -232,8 +229,7 @@ def _run_chunk(args: tuple[int, list[Scenario], dict[str, Any]]) -> tuple[int, D
 
 
 def _fingerprint(config: DemoConfig, scenario_ids: Sequence[str], chunk_size: int) -> str:
-    text = json.dumps({"config": config.to_dict(), "ids": list(scenario_ids), "chunk": chunk_size}, sort_keys=True)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
+    return fingerprint({"config": config.to_dict(), "ids": list(scenario_ids), "chunk": chunk_size})
 
 
 def parts_dir(out: str | Path) -> Path:
@@ -256,7 +252,6 @@ def build_demonstrations(
     Resumable: finished chunks of ``chunk_size`` scenarios are kept in `parts_dir` (atomic writes) and reused by a
     re-run with the same config and scenarios; the folder is removed once ``out`` is written.
     """
-    from tqdm import tqdm
 
     cfg = config or DemoConfig()
     if not scenarios:
@@ -264,40 +259,11 @@ def build_demonstrations(
     out = Path(out)
     parts = parts_dir(out)
     ids = [s.scenario_id for s in scenarios]
-    fp = _fingerprint(cfg, ids, chunk_size)
-    state = parts / "state.json"
-    if parts.exists():
-        try:
-            same = json.loads(state.read_text()).get("fingerprint") == fp
-        except (OSError, json.JSONDecodeError):
-            same = False
-        if not same:
-            log(f"demonstrations: {parts} holds chunks of other settings; starting over")
-            shutil.rmtree(parts)
-    parts.mkdir(parents=True, exist_ok=True)
-    atomic_write_json(state, {"fingerprint": fp, "n_scenarios": len(ids), "chunk_size": chunk_size})
-    chunks = [list(scenarios[i : i + chunk_size]) for i in range(0, len(scenarios), chunk_size)]
-    todo = [i for i in range(len(chunks)) if not (parts / f"part_{i:05d}.npz").exists()]
-    if len(todo) < len(chunks):
-        log(f"demonstrations: resuming, {len(chunks) - len(todo)} of {len(chunks)} chunks done")
-    bar = tqdm(total=len(scenarios), desc="demonstrations", unit="scenario", disable=not progress,
-               initial=sum(len(chunks[i]) for i in range(len(chunks)) if i not in set(todo)))
-    jobs = [(i, chunks[i], cfg.to_dict()) for i in todo]
-    if workers > 1 and len(jobs) > 1:
-        # Spawn, not fork: the parent may hold torch / OpenMP state that does not survive a fork.
-        with mp.get_context("spawn").Pool(min(workers, len(jobs))) as pool:
-            for i, demos in pool.imap_unordered(_run_chunk, jobs):
-                demos.save(parts / f"part_{i:05d}.npz", compress=False)
-                bar.update(len(chunks[i]))
-    else:
-        for job in jobs:
-            i, demos = _run_chunk(job)
-            demos.save(parts / f"part_{i:05d}.npz", compress=False)
-            bar.update(len(chunks[i]))
-    bar.close()
-    merged = Demonstrations.concat(
-        [Demonstrations.load(parts / f"part_{i:05d}.npz") for i in range(len(chunks))], cfg.to_dict()
+    paths = run_chunked(
+        scenarios, parts, _fingerprint(cfg, ids, chunk_size), {}, _run_chunk, (cfg.to_dict(),),
+        lambda demos, file: demos.save(file, compress=False), workers, chunk_size, progress, "demonstrations", log,
     )
+    merged = Demonstrations.concat([Demonstrations.load(p) for p in paths], cfg.to_dict())
     merged.save(out)
     shutil.rmtree(parts)
     return merged

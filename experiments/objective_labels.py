@@ -26,16 +26,13 @@ Building is resumable and parallel: scenarios are cut into chunks of ``chunk_siz
 from __future__ import annotations
 
 import hashlib
-import json
-import multiprocessing as mp
-import shutil
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from seal.atomic import atomic_write_json
+from seal.chunked import fingerprint, run_chunked
 from seal.objective.labels import LabelSet
 from seal.scenario import CURRENT_STEP, HEADING, LENGTH, N_FUTURE, VALID, WIDTH, Scenario, X, Y
 
@@ -164,9 +161,8 @@ def _fingerprint(spec: str, ids: Sequence[str], chunk_size: int, n_candidates: i
     source = spec
     if spec.startswith("prior:"):  # the prior's content, not just its path
         source = hashlib.sha256(Path(spec[len("prior:"):]).read_bytes()).hexdigest()
-    text = json.dumps({"source": source, "ids": list(ids), "chunk": chunk_size, "n": n_candidates,
-                       "format": LABEL_FORMAT}, sort_keys=True)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
+    return fingerprint({"source": source, "ids": list(ids), "chunk": chunk_size, "n": n_candidates,
+                        "format": LABEL_FORMAT})
 
 
 def build_labels(
@@ -194,46 +190,15 @@ def build_labels(
         desc: the bar's label.
         log: where to report resuming / restarting.
     """
-    from tqdm import tqdm
-
     if not scenarios:
         raise ValueError("build_labels: no scenarios")
     out = Path(out)
     ids = [s.scenario_id for s in scenarios]
-    fp = _fingerprint(spec, ids, chunk_size, n_candidates)
-    state = out / "state.json"
-    if out.exists() and any(out.glob("part_*.npz")):
-        try:
-            same = json.loads(state.read_text()).get("fingerprint") == fp
-        except (OSError, json.JSONDecodeError):
-            same = False
-        if not same:
-            log(f"{desc}: {out} holds chunks of other scenarios or settings; starting over")
-            shutil.rmtree(out)
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write_json(state, {"fingerprint": fp, "n_scenarios": len(ids), "chunk_size": chunk_size,
-                              "n_candidates": n_candidates, "source": spec})
-    chunks = [list(scenarios[i : i + chunk_size]) for i in range(0, len(scenarios), chunk_size)]
-    path = [out / f"part_{i:05d}.npz" for i in range(len(chunks))]
-    todo = [i for i in range(len(chunks)) if not path[i].exists()]
-    if len(todo) < len(chunks):
-        log(f"{desc}: resuming, {len(chunks) - len(todo)} of {len(chunks)} chunks already done")
-    done = set(range(len(chunks))) - set(todo)
-    bar = tqdm(total=len(scenarios), desc=desc, unit="scenario", disable=not progress,
-               initial=sum(len(chunks[i]) for i in done))
-    jobs = [(i, chunks[i], spec, n_candidates) for i in todo]
-    if workers > 1 and len(jobs) > 1:
-        # Spawn, not fork: the parent may hold torch / OpenMP state that does not survive a fork.
-        with mp.get_context("spawn").Pool(min(workers, len(jobs))) as pool:
-            for i, labels in pool.imap_unordered(_run_chunk, jobs):
-                labels.save(path[i])
-                bar.update(len(chunks[i]))
-    else:
-        for job in jobs:
-            i, labels = _run_chunk(job)
-            labels.save(path[i])
-            bar.update(len(chunks[i]))
-    bar.close()
+    path = run_chunked(
+        scenarios, out, _fingerprint(spec, ids, chunk_size, n_candidates),
+        {"n_candidates": n_candidates, "source": spec}, _run_chunk, (spec, n_candidates),
+        lambda labels, file: labels.save(file), workers, chunk_size, progress, desc, log,
+    )
     merged = LabelSet.concat([LabelSet.load(p) for p in path])
     if list(merged.scenario_ids) != ids:
         raise ValueError(f"{desc}: chunk files in {out} do not match the scenarios; delete the folder and re-run")

@@ -26,7 +26,7 @@ import torch
 
 from seal.atomic import atomic_write_bytes, atomic_write_json
 from seal.objective.network import ObjectiveConfig, ObjectiveNet
-from seal.weights_file import read_weights_file
+from seal.weights_file import check_header, read_weights_file
 
 FORMAT = "seal-objective-model"
 FORMAT_VERSION = 2
@@ -129,14 +129,8 @@ class ObjectiveModel:
         path = Path(path)
         state = read_weights_file(path, "objective model file", "seal fit objective", ObjectiveFileError)
         where = f"objective model file {path}"
-        if not isinstance(state, dict) or state.get("format") != FORMAT:
-            raise ObjectiveFileError(f"{where}: field 'format' is not {FORMAT!r} (is this a pi_score model?)")
-        if state.get("format_version") != FORMAT_VERSION:
-            raise ObjectiveFileError(f"{where}: field 'format_version' is {state.get('format_version')!r}; this "
-                                     f"seal reads {FORMAT_VERSION}")
-        for key in ("config", "state_dict", "info_json"):
-            if key not in state:
-                raise ObjectiveFileError(f"{where}: missing field {key!r}")
+        check_header(state, where, FORMAT, FORMAT_VERSION, ("config", "state_dict", "info_json"), ObjectiveFileError,
+                     " (is this a pi_score model?)")
         try:
             config = ObjectiveConfig.from_dict(dict(state["config"]), where=f"{where}, field 'config'")
             net = ObjectiveNet(config)

@@ -20,7 +20,7 @@ from seal.prior.features import ContextTables, build_tables, featurise, history_
 from seal.prior.lanes import ChunkCache
 from seal.prior.network import PriorConfig, PriorNet
 from seal.scenario import CURRENT_STEP, Scenario
-from seal.weights_file import read_weights_file
+from seal.weights_file import check_header, read_weights_file
 
 FORMAT = "seal-trajectory-prior"
 FORMAT_VERSION = 1
@@ -114,15 +114,8 @@ class TrajectoryPrior:
 
     @classmethod
     def from_state(cls, state: dict[str, Any], where: str = "model") -> TrajectoryPrior:
-        if not isinstance(state, dict) or state.get("format") != FORMAT:
-            raise PriorFileError(f"{where}: not a seal trajectory prior (field 'format' is not {FORMAT!r})")
-        if state.get("format_version") != FORMAT_VERSION:
-            raise PriorFileError(
-                f"{where}: field 'format_version' is {state.get('format_version')!r}; this seal reads {FORMAT_VERSION}"
-            )
-        for key in ("config", "state_dict"):
-            if key not in state:
-                raise PriorFileError(f"{where}: missing field {key!r}")
+        check_header(state, where, FORMAT, FORMAT_VERSION, ("config", "state_dict"), PriorFileError,
+                     " (not a seal trajectory prior)")
         try:
             cfg = PriorConfig.from_dict(state["config"])
         except (TypeError, ValueError) as exc:

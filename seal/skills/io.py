@@ -18,7 +18,7 @@ import torch
 from seal.atomic import atomic_write_bytes
 from seal.skills.realnvp import ConditionalRealNVP, RealNVPConfig
 from seal.skills.vae import SkillVAE, VAEConfig
-from seal.weights_file import read_weights_file
+from seal.weights_file import check_header, read_weights_file
 
 FORMAT = "seal-skill-model"
 FORMAT_VERSION = 1
@@ -61,17 +61,10 @@ def load_model(path: str | os.PathLike[str], kind: str | None = None) -> tuple[S
     path = Path(path)
     state = read_weights_file(path, "skill model file", "seal fit skills", SkillModelError)
     where = f"skill model file {path}"
-    if not isinstance(state, dict) or state.get("format") != FORMAT:
-        raise SkillModelError(f"{where}: field 'format' is not {FORMAT!r}")
-    if state.get("format_version") != FORMAT_VERSION:
-        raise SkillModelError(f"{where}: field 'format_version' is {state.get('format_version')!r}; "
-                              f"this seal reads {FORMAT_VERSION}")
+    check_header(state, where, FORMAT, FORMAT_VERSION, ("config", "state_dict"), SkillModelError)
     found = state.get("kind")
     if found not in ("vae", "prior") or (kind is not None and found != kind):
         raise SkillModelError(f"{where}: field 'kind' is {found!r}, expected {kind or 'vae or prior'!r}")
-    for key in ("config", "state_dict"):
-        if key not in state:
-            raise SkillModelError(f"{where}: missing field {key!r}")
     try:
         if found == "vae":
             model: SkillVAE | ConditionalRealNVP = SkillVAE(VAEConfig.from_dict(state["config"], where))
