@@ -63,11 +63,13 @@ def run_skill_bench(
         raise ValueError(f"repeats must be >= 1, got {repeats}")
     scenarios, source = bench_scenarios(dataset, seed)
     policy, models = skill_policy_for_bench(skills, seed)
+    # One policy per env: a policy carries its episode's state (skill, step count, noise generator), and the
+    # variants' episodes interleave.
     variants = {
         "replay": None,
         "skill_from_start": SkillSwitchBehavior(policy, switch_step=CURRENT_STEP),
         f"skill_after_{TYPICAL_SWITCH_DELAY_STEPS}": SkillSwitchBehavior(
-            policy, switch_step=CURRENT_STEP + TYPICAL_SWITCH_DELAY_STEPS),
+            skill_policy_for_bench(skills, seed)[0], switch_step=CURRENT_STEP + TYPICAL_SWITCH_DELAY_STEPS),
     }
     envs = {}
     for name, adversary in variants.items():
