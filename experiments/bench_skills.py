@@ -5,7 +5,8 @@ Three `ScenarioEnv` variants play the same scenarios with the heuristic ego: the
 (reference), the skill adversary from the first step (`SkillSwitchBehavior` with ``switch_step = CURRENT_STEP``:
 its own observation and a skill-policy step every env step, the worst case) and the skill adversary switching
 30 steps in (a typical SEAL episode: replay, then 1 s before a collision predicted 4 s in, the skill policy).
-They run in interleaved blocks so that load changes on a shared machine hit all three alike. Only time inside
+They play the same scenario sequence from the same seed (so they differ only in the adversary, not in their
+mix of roads) in interleaved blocks, so that load changes on a shared machine hit all three alike. Only time inside
 ``env.step`` / ``env.reset`` counts (the adversary's policy runs inside ``step``; the ego's does not), per wall
 second and per CPU second of this process. Cost ratio = reference steps/s / variant steps/s (target <= 1.5),
 from each variant's fastest of ``repeats`` identical measurements (`timeit`'s rule: other load only adds time).
@@ -107,14 +108,21 @@ def run_skill_bench(
 
 
 def _timed_repeat(envs: dict[str, Any], n_steps: int, seed: int, block: int) -> dict[str, dict[str, Any]]:
-    """One measurement: every env re-seeded (so each repeat plays the same episodes), ``n_steps`` heuristic-ego
-    steps each in interleaved blocks (load changes hit all variants alike); time inside step / reset only."""
+    """One measurement: ``n_steps`` heuristic-ego steps per env in interleaved blocks (load changes hit all variants
+    alike); time inside step / reset only.
+
+    Every env plays the same scenario sequence (a seeded shuffle, cycled) from the same reset seed, so the variants
+    differ only in their adversary, not in their mix of roads and situations; and every repeat plays the same
+    episodes."""
     from envs.heuristic import HeuristicDriver
 
     driver = HeuristicDriver()
+    first = next(iter(envs.values()))
+    ids = [s.scenario_id for s in first.scenarios]
+    order = [ids[i] for i in np.random.default_rng(seed).permutation(len(ids))]
     state: dict[str, dict[str, Any]] = {}
-    for k, (name, env) in enumerate(envs.items()):
-        obs, _ = env.reset(seed=seed + k)
+    for name, env in envs.items():
+        obs, _ = env.reset(seed=seed, options={"scenario_id": order[0]})
         state[name] = {"env": env, "obs": obs, "wall": 0.0, "cpu": 0.0, "steps": 0, "episodes": 1, "outcomes": {}}
     while any(st["steps"] < n_steps for st in state.values()):
         for st in state.values():
@@ -125,7 +133,7 @@ def _timed_repeat(envs: dict[str, Any], n_steps: int, seed: int, block: int) -> 
                 obs, _, terminated, truncated, info = env.step(action)
                 if terminated or truncated:
                     st["outcomes"][info["outcome"]] = st["outcomes"].get(info["outcome"], 0) + 1
-                    obs, _ = env.reset()
+                    obs, _ = env.reset(options={"scenario_id": order[st["episodes"] % len(order)]})
                     st["episodes"] += 1
                 st["wall"] += time.perf_counter() - t0
                 st["cpu"] += time.process_time() - c0
