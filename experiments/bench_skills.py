@@ -12,9 +12,11 @@ second and per CPU second of this process. Cost ratio = reference steps/s / vari
 from each variant's fastest of ``repeats`` identical measurements (`timeit`'s rule: other load only adds time).
 
 Where the extra cost goes: the adversary's own observation (built with the ego's in one vectorised pass,
-`envs.observation.ObservationBuilder.build_many`, about 1.4-1.6 single builds for the two: the ray casts and the
-box lidar scale with the number of viewers), its route projection, and the skill policy step
-(`skill_policy_step_us`, numpy decoder); its route is built once per scenario (`SkillSwitchBehavior.make_route`).
+`envs.observation.ObservationBuilder.build_many`: about 1.4 single builds for the two in a tight loop; the ray
+casts and the box lidar scale with the number of viewers), its route projection, and the skill policy step
+(`skill_policy_step_us`, numpy decoder, measured alone; inside the env it takes about twice as long, its weights
+and the env's arrays competing for the caches); its route is built once per scenario
+(`SkillSwitchBehavior.make_route`).
 """
 
 from __future__ import annotations
