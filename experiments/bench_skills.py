@@ -125,7 +125,8 @@ def _timed_repeat(envs: dict[str, Any], n_steps: int, seed: int, block: int) -> 
     state: dict[str, dict[str, Any]] = {}
     for name, env in envs.items():
         obs, _ = env.reset(seed=seed, options={"scenario_id": order[0]})
-        state[name] = {"env": env, "obs": obs, "wall": 0.0, "cpu": 0.0, "steps": 0, "episodes": 1, "outcomes": {}}
+        state[name] = {"env": env, "obs": obs, "wall": 0.0, "cpu": 0.0, "steps": 0, "episodes": 1, "outcomes": {},
+                       "scenario_ids": [order[0]]}
     while any(st["steps"] < n_steps for st in state.values()):
         for st in state.values():
             env = st["env"]
@@ -135,7 +136,9 @@ def _timed_repeat(envs: dict[str, Any], n_steps: int, seed: int, block: int) -> 
                 obs, _, terminated, truncated, info = env.step(action)
                 if terminated or truncated:
                     st["outcomes"][info["outcome"]] = st["outcomes"].get(info["outcome"], 0) + 1
-                    obs, _ = env.reset(options={"scenario_id": order[st["episodes"] % len(order)]})
+                    next_id = order[st["episodes"] % len(order)]
+                    obs, _ = env.reset(options={"scenario_id": next_id})
+                    st["scenario_ids"].append(next_id)
                     st["episodes"] += 1
                 st["wall"] += time.perf_counter() - t0
                 st["cpu"] += time.process_time() - c0

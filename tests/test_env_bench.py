@@ -35,6 +35,12 @@ def test_skill_bench_repeats_play_the_same_episodes(tmp_path: Path, highway: lis
         assert first[name]["outcomes"] == second[name]["outcomes"]
         assert first[name]["steps"] == 120
         assert first[name]["obs"].tobytes() == second[name]["obs"].tobytes()
+        assert first[name]["scenario_ids"] == second[name]["scenario_ids"]
+    # The variants play the same scenario sequence (they differ only in the adversary), in a seeded order.
+    replay_ids, skill_ids = first["replay"]["scenario_ids"], first["skill"]["scenario_ids"]
+    common = min(len(replay_ids), len(skill_ids))
+    assert replay_ids[:common] == skill_ids[:common]
+    assert len(set(replay_ids)) >= 2
 
     write_dataset(tmp_path / "ds", highway)
     result = run_skill_bench(tmp_path / "ds", n_steps=40, seed=0, repeats=2)
