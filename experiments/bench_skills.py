@@ -66,13 +66,13 @@ def run_skill_bench(
         raise ValueError(f"repeats must be >= 1, got {repeats}")
     scenarios, source = bench_scenarios(dataset, seed)
     policy, models = skill_policy_for_bench(skills, seed)
-    # One policy per env: a policy carries its episode's state (skill, step count, noise generator), and the
-    # variants' episodes interleave.
+    # One policy per env (`SkillPolicy.clone`: shared weights): a policy carries its episode's state (skill, step
+    # count, noise generator), and the variants' episodes interleave.
     variants = {
         "replay": None,
         "skill_from_start": SkillSwitchBehavior(policy, switch_step=CURRENT_STEP),
         f"skill_after_{TYPICAL_SWITCH_DELAY_STEPS}": SkillSwitchBehavior(
-            skill_policy_for_bench(skills, seed)[0], switch_step=CURRENT_STEP + TYPICAL_SWITCH_DELAY_STEPS),
+            policy.clone(), switch_step=CURRENT_STEP + TYPICAL_SWITCH_DELAY_STEPS),
     }
     envs = {}
     for name, adversary in variants.items():
