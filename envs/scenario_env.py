@@ -221,8 +221,10 @@ class ScenarioEnv(gym.Env):
                 crash_id = int(self._agent_ids[self._adv_idx]) if adv_hit.size else int(ids[0])
                 self._ego_crashes.extend((t, int(i)) for i in ids)
         adv_crashed = False
+        self._others_adv = None
         if adv is not None:
             others_adv = np.flatnonzero(present & self._not_ego_adv)
+            self._others_adv = others_adv
             cand = self._near(adv, others_adv)
             if cand.size:
                 hits = cand[_overlaps(adv, cur[cand])]
@@ -328,6 +330,8 @@ class ScenarioEnv(gym.Env):
         self._adv_hint: int | None = None
         self._adv_obs: np.ndarray | None = None
         """The adversary's observation of the current step, built with the ego's (`_observe`)."""
+        self._others_adv: np.ndarray | None = None
+        """Present agents other than the ego and the adversary, found by `step` for `_observe` (None at reset)."""
 
         t = CURRENT_STEP
         self._t = t
@@ -409,15 +413,23 @@ class ScenarioEnv(gym.Env):
         self._adv_hint = proj.segment
         if last or not behavior.observes(self._t):
             return self._builder.build(self._ego, self._route, self._cur[self._others_ego, :7], self._proj)
-        # A viewer's row among the present agents is its rank among their indices (-1 if absent: at reset an
-        # adversary may have no log row yet).
-        mask = self._present
-        present = np.flatnonzero(mask)
-        rows = present.searchsorted(self._viewer_idx).tolist()
-        if not (mask[self._ego_idx] and mask[self._adv_idx]):
-            rows = [r if mask[i] else -1 for r, i in zip(rows, (self._ego_idx, self._adv_idx), strict=True)]
+        others, self._others_adv = self._others_adv, None
+        if others is not None:
+            # After a step both are placed: the viewers' boxes first, then the other present agents (`step` found
+            # those for the adversary's collision check).
+            boxes = self._cur[np.concatenate((self._viewer_idx, others)), :7]
+            rows = [0, 1]
+        else:
+            # At reset: a viewer's row among the present agents is its rank among their indices (-1 if absent: an
+            # adversary may have no log row yet).
+            mask = self._present
+            present = np.flatnonzero(mask)
+            rows = present.searchsorted(self._viewer_idx).tolist()
+            if not (mask[self._ego_idx] and mask[self._adv_idx]):
+                rows = [r if mask[i] else -1 for r, i in zip(rows, (self._ego_idx, self._adv_idx), strict=True)]
+            boxes = self._cur[present, :7]
         both = self._builder.build_many(
-            (self._ego, adv), (self._route, self._adv_route), (self._proj, proj), self._cur[present, :7], rows,
+            (self._ego, adv), (self._route, self._adv_route), (self._proj, proj), boxes, rows,
         )
         self._adv_obs = both[1]
         return both[0]
