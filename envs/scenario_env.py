@@ -403,7 +403,7 @@ class ScenarioEnv(gym.Env):
     def _observe(self, last: bool = False) -> np.ndarray:
         """The ego's observation of the current step; when the adversary will act on its own observation this
         step (not on the ``last`` step of an episode), that one too, in the same pass (`build_many`: the two cost
-        about 1.3 builds), kept for `_move_adversary`."""
+        about 1.4 builds), kept for `_move_adversary`."""
         adv, behavior = self._adv, self._behavior
         if adv is None or not behavior.needs_observation:
             return self._builder.build(self._ego, self._route, self._cur[self._others_ego, :7], self._proj)
