@@ -221,10 +221,9 @@ class ScenarioEnv(gym.Env):
                 crash_id = int(self._agent_ids[self._adv_idx]) if adv_hit.size else int(ids[0])
                 self._ego_crashes.extend((t, int(i)) for i in ids)
         adv_crashed = False
-        self._others_adv = None
+        others_adv = None
         if adv is not None:
             others_adv = np.flatnonzero(present & self._not_ego_adv)
-            self._others_adv = others_adv
             cand = self._near(adv, others_adv)
             if cand.size:
                 hits = cand[_overlaps(adv, cur[cand])]
@@ -262,7 +261,7 @@ class ScenarioEnv(gym.Env):
         truncated = bool(not terminated and t - CURRENT_STEP >= cfg["horizon_steps"])
         self._return += reward
 
-        obs = self._observe(last=terminated or truncated)
+        obs = self._observe(last=terminated or truncated, others_adv=others_adv)
         info = self._info(crashed, crash_id, adv_crashed, out_of_road, success)
         if terminated or truncated:
             self._done = True
@@ -330,8 +329,6 @@ class ScenarioEnv(gym.Env):
         self._adv_hint: int | None = None
         self._adv_obs: np.ndarray | None = None
         """The adversary's observation of the current step, built with the ego's (`_observe`)."""
-        self._others_adv: np.ndarray | None = None
-        """Present agents other than the ego and the adversary, found by `step` for `_observe` (None at reset)."""
 
         t = CURRENT_STEP
         self._t = t
@@ -400,10 +397,11 @@ class ScenarioEnv(gym.Env):
         d2 = (b[:, 0] - state.x) ** 2 + (b[:, 1] - state.y) ** 2
         return idx[d2 < reach * reach]
 
-    def _observe(self, last: bool = False) -> np.ndarray:
+    def _observe(self, last: bool = False, others_adv: np.ndarray | None = None) -> np.ndarray:
         """The ego's observation of the current step; when the adversary will act on its own observation this
         step (not on the ``last`` step of an episode), that one too, in the same pass (`build_many`: the two cost
-        about 1.4 builds), kept for `_move_adversary`."""
+        about 1.4 builds), kept for `_move_adversary`. ``others_adv``: the present agents other than the ego and
+        the adversary, when `step` has found them (None at reset)."""
         adv, behavior = self._adv, self._behavior
         if adv is None or not behavior.needs_observation:
             return self._builder.build(self._ego, self._route, self._cur[self._others_ego, :7], self._proj)
@@ -413,11 +411,9 @@ class ScenarioEnv(gym.Env):
         self._adv_hint = proj.segment
         if last or not behavior.observes(self._t):
             return self._builder.build(self._ego, self._route, self._cur[self._others_ego, :7], self._proj)
-        others, self._others_adv = self._others_adv, None
-        if others is not None:
-            # After a step both are placed: the viewers' boxes first, then the other present agents (`step` found
-            # those for the adversary's collision check).
-            boxes = self._cur[np.concatenate((self._viewer_idx, others)), :7]
+        if others_adv is not None:
+            # After a step both are placed: the viewers' boxes first, then the other present agents.
+            boxes = self._cur[np.concatenate((self._viewer_idx, others_adv)), :7]
             rows = [0, 1]
         else:
             # At reset: a viewer's row among the present agents is its rank among their indices (-1 if absent: an

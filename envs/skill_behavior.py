@@ -76,7 +76,7 @@ class SkillSwitchBehavior(AdversaryBehavior):
         self._given = given
         self._follower: AdversaryBehavior | None = None
         """Drives the adversary before the switch (a `ReplayBehavior` or `TrackingBehavior` of the track)."""
-        self._routes: dict[tuple[str, int] | None, tuple[Scenario | None, Route]] = {}
+        self._routes: dict[int, tuple[Scenario | None, Route]] = {}
         self.episode_seed: int | None = None
         """Seed the policy got at the last reset."""
 
@@ -93,15 +93,16 @@ class SkillSwitchBehavior(AdversaryBehavior):
 
     def make_route(self, scenario: Scenario) -> Route:
         # Cached (a route is immutable): building one walks the track in Python, every episode otherwise. Keyed
-        # by the scenario object, whose logged adversary track it is (a given track serves every scenario).
-        key = None if self._given is not None else (scenario.scenario_id, id(scenario))
-        hit = self._routes.get(key)
-        if hit is None or hit[0] is not (None if key is None else scenario):
+        # by the scenario object, whose logged adversary track it is (a given track serves every scenario); the
+        # entry keeps the object, so its id is not reused while cached.
+        owner = None if self._given is not None else scenario
+        hit = self._routes.get(id(owner))
+        if hit is None or hit[0] is not owner:
             track = self._given if self._given is not None else scenario.track(scenario.adv_id)
             if len(self._routes) > 1024:
                 self._routes.clear()
-            hit = (None if key is None else scenario, Route.from_track(track))
-            self._routes[key] = hit
+            hit = (owner, Route.from_track(track))
+            self._routes[id(owner)] = hit
         return hit[1]
 
     def observes(self, t: int) -> bool:
