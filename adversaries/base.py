@@ -16,9 +16,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from envs.behaviors import AdversaryBehavior
-from envs.rollout import Rollout
-from seal.scenario import Scenario
+from seal.core.scenario import Scenario
+from seal.envs.behaviors import AdversaryBehavior
+from seal.envs.rollout import Rollout
 
 K_ROLLOUTS = 5
 """Length of the per-scenario ego roll-out queue (CAT / SEAL)."""
@@ -63,11 +63,11 @@ class AdversaryGenerator(ABC):
 _REGISTRY: dict[str, Callable[..., AdversaryGenerator]] = {}
 
 GENERATOR_MODULES: dict[str, str] = {
-    "replay": "adversaries.replay",
-    "rule": "adversaries.rule",
-    "cat": "adversaries.cat",
-    "goose": "adversaries.goose",
-    "seal": "adversaries.seal",
+    "replay": "seal.adversaries.replay",
+    "rule": "seal.adversaries.rule",
+    "cat": "seal.adversaries.cat.generator",
+    "goose": "seal.adversaries.goose.generator",
+    "seal": "seal.adversaries.seal.generator",
 }
 """Module that registers each built-in generator, imported on first lookup (so a name resolves without importing
 every generator, and even when ``adversaries/__init__.py`` did not run). Add a line per new generator."""

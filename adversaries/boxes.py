@@ -1,10 +1,10 @@
 """Oriented-box overlap in centre form, broadcast over any leading axes (CAT's candidates x roll-outs x times).
 
-`seal.geometry.boxes_overlap` works on corner arrays and projects all 8 corners on 4 axes; here the separating
+`seal.core.geometry.boxes_overlap` works on corner arrays and projects all 8 corners on 4 axes; here the separating
 axis test uses each box's half extents directly (``|d . u| > r_a + r_b`` on the 4 box axes, with the projection
 radius ``r = l/2 |cos| + w/2 |sin|`` of a box on an axis at relative angle), which is ~30x faster on the few
 thousand pairs CAT tests per scenario and allocates no ``[..., 4, 4]`` intermediates. Touching boxes count as
-overlapping, as in `seal.geometry.boxes_overlap`.
+overlapping, as in `seal.core.geometry.boxes_overlap`.
 """
 
 from __future__ import annotations

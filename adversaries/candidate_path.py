@@ -12,7 +12,21 @@ from __future__ import annotations
 
 import numpy as np
 
-from seal.scenario import CURRENT_STEP, DT_S, HEADING, LENGTH, N_FUTURE, N_STEPS, VALID, VX, VY, WIDTH, Scenario, X, Y
+from seal.core.scenario import (
+    CURRENT_STEP,
+    DT_S,
+    HEADING,
+    LENGTH,
+    N_FUTURE,
+    N_STEPS,
+    VALID,
+    VX,
+    VY,
+    WIDTH,
+    Scenario,
+    X,
+    Y,
+)
 
 STILL_MPS = 0.2
 """Below this finite-difference speed (m/s) the heading is held instead of following the (noisy) velocity."""

@@ -2,9 +2,9 @@
 
 A candidate source is any ``Callable[[Scenario], Candidates]`` returning the adversary's candidates. Built-ins:
 
-* ``prior_source(path)``: the trained trajectory prior pi_gen (`seal.prior.TrajectoryPrior`, imported lazily).
-* ``"lanes"``: map-based heuristic futures (`adversaries.lane_candidates`), no learning.
-* ``"constant_velocity"``: `seal.prior.constant_velocity_candidates`, a fan of 32 (imported lazily).
+* ``prior_source(path)``: the trained trajectory prior pi_gen (`seal.models.prior.TrajectoryPrior`, imported lazily).
+* ``"lanes"``: map-based heuristic futures (`seal.adversaries.lane_candidates`), no learning.
+* ``"constant_velocity"``: `seal.models.prior.constant_velocity_candidates`, a fan of 32 (imported lazily).
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from seal.prior.candidates import Candidates
-from seal.scenario import Scenario
+from seal.core.scenario import Scenario
+from seal.models.prior.candidates import Candidates
 
 CandidateSource = Callable[[Scenario], Candidates]
 NAMED_SOURCES = ("lanes", "constant_velocity")
@@ -31,16 +31,17 @@ def prior_source(path: str | Path, threads: int | None = PRIOR_THREADS) -> Candi
     """The trained trajectory prior at ``path`` as a candidate source for the adversary (batch of one).
 
     Args:
-        path: a file written by `seal.prior.TrajectoryPrior.save`.
+        path: a file written by `seal.models.prior.TrajectoryPrior.save`.
         threads: torch intra-op threads to set (process-wide) for inference, or None to leave torch's setting.
     """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"trajectory prior file {path} does not exist (fit one with the prior commands)")
     try:
-        from seal.prior import TrajectoryPrior
+        from seal.models.prior import TrajectoryPrior
     except ImportError as exc:
-        raise ValueError(f"seal.prior.TrajectoryPrior is not available ({exc}); cannot load prior {path}") from exc
+        raise ValueError(f"seal.models.prior.TrajectoryPrior is not available ({exc}); cannot load prior "
+            f"{path}") from exc
     prior = TrajectoryPrior.load(path)
     if threads is not None:
         import torch
@@ -56,14 +57,14 @@ def prior_source(path: str | Path, threads: int | None = PRIOR_THREADS) -> Candi
 def named_source(name: str) -> CandidateSource:
     """A built-in candidate source by name (one of `NAMED_SOURCES`)."""
     if name == "lanes":
-        from adversaries.lane_candidates import lane_candidates
+        from seal.adversaries.lane_candidates import lane_candidates
 
         return lane_candidates
     if name == "constant_velocity":
         try:
-            from seal.prior import constant_velocity_candidates
+            from seal.models.prior import constant_velocity_candidates
         except ImportError as exc:
-            raise ValueError(f"seal.prior.constant_velocity_candidates is not available ({exc})") from exc
+            raise ValueError(f"seal.models.prior.constant_velocity_candidates is not available ({exc})") from exc
 
         def predict(scenario: Scenario) -> Candidates:
             return constant_velocity_candidates(scenario, scenario.adv_index, n_candidates=N_CV_CANDIDATES)

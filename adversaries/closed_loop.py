@@ -25,12 +25,12 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from adversaries.base import K_ROLLOUTS, AdversaryGenerator, make_generator
-from adversaries.history import RolloutHistory, rollout_digest
-from envs.behaviors import AdversaryBehavior, ReplayBehavior
-from envs.road_geometry import get_road_geometry, reserve_road_cache
-from envs.scenario_env import ScenarioEnv
-from seal.scenario import Scenario
+from seal.adversaries.base import K_ROLLOUTS, AdversaryGenerator, make_generator
+from seal.adversaries.history import RolloutHistory, rollout_digest
+from seal.core.scenario import Scenario
+from seal.envs.behaviors import AdversaryBehavior, ReplayBehavior
+from seal.envs.road_geometry import get_road_geometry, reserve_road_cache
+from seal.envs.scenario_env import ScenarioEnv
 
 
 class ClosedLoopAdversary:

@@ -4,11 +4,12 @@ Each scenario's queue starts as K copies of the logged ego future (`logged_rollo
 of that scenario is appended, dropping the oldest, so it always holds exactly K roll-outs, oldest first.
 
 Where the queues live when environments run in several processes: inside each env process. A training or
-evaluation job partitions the scenarios across its workers (`adversaries.closed_loop.partition_scenarios`), so a
+evaluation job partitions the scenarios across its workers (`seal.adversaries.closed_loop.partition_scenarios`), so a
 scenario is always played by the same worker and the roll-out of one episode reaches the queue used the next
 time that scenario is perturbed without any inter-process traffic (no shared store, no locks, nothing on disk).
 `RolloutHistory` is plain picklable data, so a job can still fetch the queues from its workers (SB3's
-``get_attr``) to inspect them; to checkpoint them (`experiments.train`) `RolloutHistory.get_state` turns them into
+``get_attr``) to inspect them; to checkpoint them (`seal.experiments.training.train`) `RolloutHistory.get_state` turns
+them into
 numpy arrays plus JSON (saved with ``np.savez``, loaded with ``allow_pickle=False``) and `RolloutHistory.set_state`
 rebuilds them.
 """
@@ -23,10 +24,10 @@ from typing import Any
 
 import numpy as np
 
-from adversaries.base import K_ROLLOUTS
-from envs.rollout import Rollout
-from seal.geometry import box_corners, boxes_overlap
-from seal.scenario import CURRENT_STEP, HEADING, LENGTH, VALID, WIDTH, Scenario, X, Y
+from seal.adversaries.base import K_ROLLOUTS
+from seal.core.geometry import box_corners, boxes_overlap
+from seal.core.scenario import CURRENT_STEP, HEADING, LENGTH, VALID, WIDTH, Scenario, X, Y
+from seal.envs.rollout import Rollout
 
 
 def logged_rollout(scenario: Scenario) -> Rollout:

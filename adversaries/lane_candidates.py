@@ -17,9 +17,9 @@ import math
 
 import numpy as np
 
-from seal.prior.candidates import Candidates
-from seal.road import RoadDescription
-from seal.scenario import CURRENT_STEP, DT_S, HEADING, N_FUTURE, VX, VY, Scenario, X, Y
+from seal.core.road import RoadDescription
+from seal.core.scenario import CURRENT_STEP, DT_S, HEADING, N_FUTURE, VX, VY, Scenario, X, Y
+from seal.models.prior.candidates import Candidates
 
 ACCELERATIONS_MPS2 = (-4.0, -2.0, -1.0, 0.0, 1.0, 2.0, 3.0)
 YAW_RATES_RADPS = (-0.2, -0.1, 0.0, 0.1, 0.2)

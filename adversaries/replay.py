@@ -6,10 +6,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from adversaries.base import AdversaryGenerator, Generation, register
-from envs.behaviors import ReplayBehavior
-from envs.rollout import Rollout
-from seal.scenario import Scenario
+from seal.adversaries.base import AdversaryGenerator, Generation, register
+from seal.core.scenario import Scenario
+from seal.envs.behaviors import ReplayBehavior
+from seal.envs.rollout import Rollout
 
 
 @register("replay")

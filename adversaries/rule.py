@@ -18,11 +18,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from adversaries.base import AdversaryGenerator, Generation, register
-from adversaries.candidate_path import candidate_track
-from envs.behaviors import ReplayBehavior
-from envs.rollout import Rollout
-from seal.scenario import CURRENT_STEP, DT_S, HEADING, N_FUTURE, VALID, VX, VY, Scenario, X, Y
+from seal.adversaries.base import AdversaryGenerator, Generation, register
+from seal.adversaries.candidate_path import candidate_track
+from seal.core.scenario import CURRENT_STEP, DT_S, HEADING, N_FUTURE, VALID, VX, VY, Scenario, X, Y
+from seal.envs.behaviors import ReplayBehavior
+from seal.envs.rollout import Rollout
 
 MIN_ARRIVAL_S = 1.0
 _N_CURVE = 64

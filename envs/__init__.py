@@ -1,8 +1,8 @@
 """Gymnasium environments on highway-env roads: ScenarioEnv, observation, behaviours, heuristic driver,
 rendering and base-scenario generation.
 
-Importing ``envs`` registers ``seal/Scenario-v0`` (entry point ``envs.scenario_env:ScenarioEnv``) with
-Gymnasium; heavy modules load only when used (``envs.ScenarioEnv`` is resolved lazily).
+Importing ``envs`` registers ``seal/Scenario-v0`` (entry point ``seal.envs.scenario_env:ScenarioEnv``) with
+Gymnasium; heavy modules load only when used (``seal.envs.ScenarioEnv`` is resolved lazily).
 """
 
 from __future__ import annotations
@@ -14,20 +14,20 @@ import gymnasium
 ENV_ID = "seal/Scenario-v0"
 
 if ENV_ID not in gymnasium.registry:
-    gymnasium.register(id=ENV_ID, entry_point="envs.scenario_env:ScenarioEnv")
+    gymnasium.register(id=ENV_ID, entry_point="seal.envs.scenario_env:ScenarioEnv")
 
 _LAZY = {
-    "ScenarioEnv": "envs.scenario_env",
-    "DEFAULT_CONFIG": "envs.scenario_env",
-    "Rollout": "envs.rollout",
-    "AdversaryBehavior": "envs.behaviors",
-    "BehaviorOutput": "envs.behaviors",
-    "ReplayBehavior": "envs.behaviors",
-    "TrackingBehavior": "envs.behaviors",
-    "PolicyBehavior": "envs.behaviors",
-    "HeuristicDriver": "envs.heuristic",
-    "ObservationBuilder": "envs.observation",
-    "AgentState": "envs.kinematics",
+    "ScenarioEnv": "seal.envs.scenario_env",
+    "DEFAULT_CONFIG": "seal.envs.scenario_env",
+    "Rollout": "seal.envs.rollout",
+    "AdversaryBehavior": "seal.envs.behaviors",
+    "BehaviorOutput": "seal.envs.behaviors",
+    "ReplayBehavior": "seal.envs.behaviors",
+    "TrackingBehavior": "seal.envs.behaviors",
+    "PolicyBehavior": "seal.envs.behaviors",
+    "HeuristicDriver": "seal.envs.heuristic",
+    "ObservationBuilder": "seal.envs.observation",
+    "AgentState": "seal.envs.kinematics",
 }
 
 __all__ = ["ENV_ID", *_LAZY]

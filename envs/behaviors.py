@@ -3,7 +3,7 @@
 Each env step the env calls ``behavior.step(t, state, observation)`` to move the adversary from scenario step
 ``t`` to ``t + 1``. The behaviour answers with a `BehaviorOutput`: either a placement (the next state, or None
 for "absent at t + 1") or a normalised action ``[steering, acceleration]`` that the env integrates with the
-bicycle model (`envs.kinematics`). The env builds the adversary's own observation (same builder as the ego's,
+bicycle model (`seal.envs.kinematics`). The env builds the adversary's own observation (same builder as the ego's,
 from the adversary's viewpoint, on the route `AdversaryBehavior.make_route` returns) only for behaviours with
 ``needs_observation = True``, and only on steps where `AdversaryBehavior.observes` says so.
 """
@@ -17,9 +17,9 @@ from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
-from envs.kinematics import MAX_ACCEL_MPS2, MAX_BETA_RAD, MAX_STEER_RAD, AgentState, placement_state
-from envs.route import Route
-from seal.scenario import CURRENT_STEP, DT_S, N_FUTURE, N_STEPS, VALID, Scenario
+from seal.core.scenario import CURRENT_STEP, DT_S, N_FUTURE, N_STEPS, VALID, Scenario
+from seal.envs.kinematics import MAX_ACCEL_MPS2, MAX_BETA_RAD, MAX_STEER_RAD, AgentState, placement_state
+from seal.envs.route import Route
 
 
 @dataclass(frozen=True, slots=True)

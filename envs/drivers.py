@@ -10,7 +10,7 @@ Three kinds (`DRIVER_KINDS`):
   lane-change decisions and does not notice that it has to yield; some lane changes overlook the blind spot.
 
 `Driver` is a highway-env `IDMVehicle` whose decisions use the precomputed lane geometry and neighbour
-search of `envs.traffic.TrafficRoad` (``road.index`` / ``road.neighbours``) instead of highway-env's loops
+search of `seal.envs.traffic.TrafficRoad` (``road.index`` / ``road.neighbours``) instead of highway-env's loops
 over all lanes and vehicles; the kinematics are highway-env's bicycle model, reimplemented with scalar maths.
 Units: m, s, m/s, m/s^2, rad.
 """
@@ -19,16 +19,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
-from highway_env.road.road import LaneIndex
+from highway_env.road.road import LaneIndex, RoadNetwork
 from highway_env.vehicle.behavior import IDMVehicle
 
-from seal.scenario import DT_S
-
-if TYPE_CHECKING:
-    from envs.traffic import TrafficRoad
+from seal.core.scenario import DT_S
+from seal.envs.network_index import NetworkIndex
 
 DRIVER_KINDS = ("normal", "inattentive", "aggressive")
 
@@ -126,10 +124,26 @@ def _not_zero(x: float, eps: float = 1e-2) -> float:
     return eps if x >= 0 else -eps
 
 
-class Driver(IDMVehicle):
-    """An IDM + MOBIL vehicle with a `DriverProfile`, driving on an `envs.traffic.TrafficRoad`."""
+class TrafficRoad(Protocol):
+    """What a `Driver` asks of its road (`seal.envs.traffic.TrafficRoad` provides it; a protocol here keeps the
+    driver below the road in the import graph)."""
 
-    road: TrafficRoad
+    network: RoadNetwork
+    index: NetworkIndex
+
+    def on_edge(self, edge: tuple[str, str]) -> list[Driver]:
+        """The drivers on road ``edge`` (from node, to node)."""
+        ...
+
+    def neighbours(self, vehicle: Driver, lane_index: LaneIndex) -> tuple[Driver | None, float, Driver | None, float]:
+        """(front, its distance ahead, rear, minus its distance behind) of ``vehicle`` along ``lane_index``."""
+        ...
+
+
+class Driver(IDMVehicle):
+    """An IDM + MOBIL vehicle with a `DriverProfile`, driving on a `TrafficRoad`."""
+
+    road: TrafficRoad  # type: ignore[assignment]  # highway-env types it as its plain Road
 
     def __init__(
         self,

@@ -3,7 +3,7 @@
 Runs are numbered 0, 1, 2, ...; run ``r`` draws everything (layout parameters, traffic, drivers, windows,
 ego/adversary roles) from its own generator seeded with ``SeedSequence(seed, spawn_key=(r,))``. Runs are
 processed in chunks of `runs_per_chunk` runs; one chunk is one shard of the dataset, written atomically by
-`seal.dataset.DatasetBuilder`, so an interrupted build resumes at the first missing chunk. The layout of each
+`seal.core.dataset.DatasetBuilder`, so an interrupted build resumes at the first missing chunk. The layout of each
 run of a chunk is chosen before the chunk starts, from the scenario counts of the chunks before it: each run
 goes to the layout with the fewest (projected) scenarios, so layouts stay balanced even when one yields fewer
 scenarios per run. Chunks are built until at least ``n`` scenarios exist, then the dataset is trimmed to
@@ -26,11 +26,12 @@ import numpy as np
 from tqdm import tqdm
 
 import seal
-from envs.layouts import LAYOUTS, describe_network, sample_params
-from envs.traffic import Simulation
-from envs.windows import find_windows, window_tracks
-from seal.dataset import Dataset, DatasetBuilder
-from seal.scenario import Scenario
+from seal.core.dataset import Dataset, DatasetBuilder
+from seal.core.scenario import Scenario
+from seal.envs.layouts import LAYOUTS, sample_params
+from seal.envs.network_topology import describe_network
+from seal.envs.traffic_run import Simulation
+from seal.envs.windows import find_windows, window_tracks
 
 GENERATOR_VERSION = 1
 """Bump when the generated content changes for the same arguments (it is part of the build parameters)."""
@@ -209,7 +210,7 @@ def generate_dataset(
         out: dataset directory (created; an unfinished build there with the same arguments is resumed).
         n: number of scenarios.
         seed: build seed; the same arguments give the same dataset for any ``workers``.
-        layouts: subset of `envs.layouts.LAYOUTS`; scenarios are spread evenly over them.
+        layouts: subset of `seal.envs.layouts.LAYOUTS`; scenarios are spread evenly over them.
         workers: processes (None: ``os.cpu_count()``; 1: in this process).
         inattentive_share: share of drivers with distraction episodes.
         aggressive_share: share of aggressive drivers.
@@ -291,7 +292,7 @@ def generate_dataset(
         if bar is not None:
             bar.close()
     provenance = {
-        "generator": "envs.generate.generate_dataset",
+        "generator": "seal.envs.generate.generate_dataset",
         "source": SOURCE,
         "seed": seed,
         "layouts": list(layouts),

@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from envs import observation as ob
-from envs.kinematics import MAX_ACCEL_MPS2, MAX_BETA_RAD, MAX_SPEED_MPS, MAX_STEER_RAD
+from seal.envs import observation as ob
+from seal.envs.kinematics import MAX_ACCEL_MPS2, MAX_BETA_RAD, MAX_SPEED_MPS, MAX_STEER_RAD
 
 _LIDAR_ANG = ob._LIDAR_ANG
 _EDGE_COS, _EDGE_SIN = np.cos(ob._EDGE_ANG), np.sin(ob._EDGE_ANG)

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from seal.scenario import DT_S, HEADING, LENGTH, VALID, VX, VY, WIDTH, X, Y
+from seal.core.scenario import DT_S, HEADING, LENGTH, VALID, VX, VY, WIDTH, X, Y
 
 MAX_STEER_RAD = math.pi / 3
 MAX_ACCEL_MPS2 = 6.0

@@ -2,7 +2,7 @@
 demonstrations: thesis 6.3.3, "all agents in the scenario follow the IDM policy").
 
 `ScenarioEnv` drives one ego and one adversary; here every ``vehicle`` agent is driven, with the same pieces:
-the bicycle model (`envs.kinematics`), the observation builder (`envs.observation`, from each agent's own
+the bicycle model (`seal.envs.kinematics`), the observation builder (`seal.envs.observation`, from each agent's own
 viewpoint on a route = its logged track) and the road checks of `ScenarioEnv`. Agents of other types replay
 their log.
 
@@ -35,12 +35,15 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from envs.kinematics import AgentState, bicycle_step
-from envs.observation import OBS_DIM, ObservationBuilder
-from envs.road_geometry import RoadGeometry, get_road_geometry
-from envs.route import Route, RouteProjection
-from seal.scenario import N_STEPS, VALID, Scenario
-from seal.skills.demos import COLLISION, END_REASONS, FINISHED, HORIZON, OUT_OF_ROAD
+from seal.core.scenario import N_STEPS, VALID, Scenario
+from seal.envs.kinematics import AgentState, bicycle_step
+from seal.envs.observation import OBS_DIM, ObservationBuilder
+from seal.envs.road_geometry import RoadGeometry, get_road_geometry
+from seal.envs.route import Route, RouteProjection
+
+END_REASONS = ("horizon", "finished", "collision", "out_of_road")
+"""Why an agent's segment ended (the stored code is the index)."""
+HORIZON, FINISHED, COLLISION, OUT_OF_ROAD = range(len(END_REASONS))
 
 __all__ = ["COLLISION", "END_REASONS", "FINISHED", "HORIZON", "OUT_OF_ROAD", "AgentEnd", "MultiAgentSim", "SimConfig",
            "box_overlaps"]

@@ -47,10 +47,10 @@ from collections.abc import Sequence
 import numpy as np
 from gymnasium import spaces
 
-from envs.kinematics import MAX_SPEED_MPS, AgentState
-from envs.rays import ray_angles
-from envs.road_geometry import RoadGeometry, SegmentGrid, Segments
-from envs.route import Route, RouteProjection
+from seal.envs.kinematics import MAX_SPEED_MPS, AgentState
+from seal.envs.rays import ray_angles
+from seal.envs.road_geometry import RoadGeometry, SegmentGrid, Segments
+from seal.envs.route import Route, RouteProjection
 
 N_EDGE_RAYS = 30
 EDGE_RANGE_M = 50.0
@@ -419,7 +419,7 @@ def _hit_distances(
     dx: np.ndarray, dy: np.ndarray, ax: np.ndarray, ay: np.ndarray, ex: np.ndarray, ey: np.ndarray,
     max_range: float,
 ) -> np.ndarray:
-    """`envs.rays._cast` before its minimum over segments, for any broadcastable layout of rays ``dx, dy`` (unit
+    """`seal.envs.rays._cast` before its minimum over segments, for any broadcastable layout of rays ``dx, dy`` (unit
     world-frame directions), segment starts relative to the ray origin ``ax, ay`` and segment vectors ``ex, ey``:
     the distance along the ray to each segment it hits, ``max_range`` where it misses (a hit beyond range keeps
     its distance, which the observation's clip reads as ``max_range``; NaN segments never hit). The same

@@ -2,11 +2,11 @@
 
 The road is drawn once per road and view into a background: drivable area (union of lane polygons) in dark
 grey, then highway-env's ``LaneGraphics`` for the lane borders (``continuous`` solid, ``striped`` dashed) on a
-y-mirrored network (`envs.road_network`) so the world appears with y up. Vehicles are drawn as oriented boxes:
+y-mirrored network (`seal.envs.road_network`) so the world appears with y up. Vehicles are drawn as oriented boxes:
 ego green, adversary red, others blue, with their recent path. Everything is drawn on plain
 ``pygame.Surface`` objects (highway-env's own viewer renders blank frames under ``SDL_VIDEODRIVER=dummy``).
 
-`render_episode` runs one episode (heuristic ego by default) and writes an ``.mp4`` (imageio-ffmpeg) or ``.gif``.
+`seal.envs.episode_video.render_episode` runs one episode and writes it with `write_video`.
 """
 
 from __future__ import annotations
@@ -14,7 +14,6 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -24,11 +23,11 @@ import shapely
 from highway_env.road.graphics import LaneGraphics, WorldSurface
 from highway_env.road.lane import LineType
 
-from envs.road_geometry import get_road_geometry
-from envs.road_network import build_road_network
-from envs.rollout import Rollout
-from seal.road import RoadDescription
-from seal.scenario import CURRENT_STEP, HEADING, LENGTH, VALID, WIDTH, Scenario, X, Y
+from seal.core.road import RoadDescription
+from seal.core.scenario import CURRENT_STEP, HEADING, LENGTH, VALID, WIDTH, Scenario, X, Y
+from seal.envs.road_geometry import get_road_geometry
+from seal.envs.road_network import build_road_network
+from seal.envs.rollout import Rollout
 
 GRASS = (96, 118, 96)
 ROAD = (70, 70, 74)
@@ -241,52 +240,3 @@ def write_video(frames: list[np.ndarray], out_path: str | Path, fps: int = 10) -
     else:
         raise ValueError(f"unsupported video format {out.suffix!r}: use .mp4 or .gif")
     return out
-
-
-def render_episode(
-    scenario: Scenario,
-    out_path: str | Path,
-    policy: Any = None,
-    adversary: Any = None,
-    fps: int = 10,
-    terminate_on_crash: bool = True,
-    config: dict[str, Any] | None = None,
-) -> dict[str, Any]:
-    """Run one episode of ``scenario`` and write a top-down video of it.
-
-    Args:
-        policy: ego policy with SB3 ``predict``; None = `envs.heuristic.HeuristicDriver`.
-        adversary: `AdversaryBehavior` (or factory); None = replay of the logged adversary.
-        config: extra `ScenarioEnv` config.
-
-    Returns:
-        ``{"path", "frames", "outcome", "route_completion", "episode_return", "ego_crashes",
-        "out_of_road_step", "scenario_id"}``.
-    """
-    from envs.heuristic import HeuristicDriver
-    from envs.scenario_env import ScenarioEnv
-
-    if Path(out_path).suffix.lower() not in (".mp4", ".gif"):
-        raise ValueError(f"unsupported video format {Path(out_path).suffix!r}: use .mp4 or .gif")
-    policy = policy if policy is not None else HeuristicDriver()
-    env = ScenarioEnv([scenario], config={**(config or {}), "terminate_on_crash": terminate_on_crash},
-                      adversary=adversary)
-    obs, _ = env.reset(seed=0)
-    while True:
-        action, _ = policy.predict(obs, deterministic=True)
-        obs, _, terminated, truncated, info = env.step(action)
-        if terminated or truncated:
-            break
-    rollout: Rollout = info["rollout"]
-    frames = render_rollout(rollout, scenario.road, scenario)
-    path = write_video(frames, out_path, fps)
-    return {
-        "path": str(path),
-        "frames": len(frames),
-        "outcome": rollout.outcome,
-        "route_completion": rollout.route_completion,
-        "episode_return": rollout.episode_return,
-        "ego_crashes": rollout.ego_crashes,
-        "out_of_road_step": rollout.out_of_road_step,
-        "scenario_id": scenario.scenario_id,
-    }

@@ -11,7 +11,7 @@ then queried every step:
 * ``drivable``: the union of all lane polygons (shapely, prepared), for the "corner left the road" test.
 * ``centres``: lane centre segments tagged with their lane index, for the lane speed-limit lookup.
 
-Left / right follow `seal.road.LaneSpec`: seen when driving along the lane in the world frame (x right, y up,
+Left / right follow `seal.core.road.LaneSpec`: seen when driving along the lane in the world frame (x right, y up,
 headings counter-clockwise), the left border is at ``+width/2`` along the left normal ``(-sin h, cos h)``.
 
 Segment queries use a uniform grid: each cell memoises (on first use) the segments within ``reach`` metres of
@@ -28,7 +28,7 @@ from functools import cached_property
 import numpy as np
 import shapely
 
-from seal.road import RoadDescription
+from seal.core.road import RoadDescription
 
 CELL_M = 20.0
 SIMPLIFY_M = 0.1

@@ -2,7 +2,7 @@
 
 Every lane becomes a ``PolyLaneFixedWidth`` through its centre polyline, on its own edge
 ``(lane_id, lane_id + ">")``. highway-env draws ``line_types[0]`` at lateral ``-width/2`` and ``line_types[1]``
-at ``+width/2``; in `seal.road` "left" is ``+width/2`` (counter-clockwise side), so the order is (right, left).
+at ``+width/2``; in `seal.core.road` "left" is ``+width/2`` (counter-clockwise side), so the order is (right, left).
 
 ``mirror_y=True`` builds the network in ``(x, -y)`` coordinates (and swaps the sides, which mirroring
 exchanges): highway-env's screen has y pointing down, so a mirrored network renders the world with y up,
@@ -14,10 +14,10 @@ from __future__ import annotations
 from highway_env.road.lane import LineType, PolyLaneFixedWidth
 from highway_env.road.road import RoadNetwork
 
-from seal.road import RoadDescription
+from seal.core.road import RoadDescription
 
 LINE_TYPE = {"none": LineType.NONE, "striped": LineType.STRIPED, "continuous": LineType.CONTINUOUS}
-"""`seal.road` line type -> highway-env ``LineType`` (``CONTINUOUS`` follows curves, ``CONTINUOUS_LINE`` would
+"""`seal.core.road` line type -> highway-env ``LineType`` (``CONTINUOUS`` follows curves, ``CONTINUOUS_LINE`` would
 draw one straight chord)."""
 
 

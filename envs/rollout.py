@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from seal.scenario import CURRENT_STEP, VALID
+from seal.core.scenario import CURRENT_STEP, VALID
 
 
 @dataclass

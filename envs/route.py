@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from seal.scenario import CURRENT_STEP, VALID, VX, VY, X, Y
+from seal.core.scenario import CURRENT_STEP, VALID, VX, VY, X, Y
 
 EXTENSION_M = 50.0
 MIN_ROUTE_M = 1.0

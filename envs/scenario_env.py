@@ -4,7 +4,7 @@ Episode: starts at ``CURRENT_STEP`` (10) with every agent at its logged state. E
 scenario time by one 10 Hz step:
 
 1. the ego integrates the policy's action ``[steering, acceleration]`` in ``[-1, 1]^2`` with the kinematic
-   bicycle (`envs.kinematics`: +-pi/3 rad steering, +-6 m/s^2, speed clipped to [0, 40] m/s);
+   bicycle (`seal.envs.kinematics`: +-pi/3 rad steering, +-6 m/s^2, speed clipped to [0, 40] m/s);
 2. the adversary moves as its `AdversaryBehavior` says (default: `ReplayBehavior` of its log);
 3. every other agent is placed at its logged state of the new step (present while ``valid``; after its log
    ends - the 91 logged steps - it is gone);
@@ -32,7 +32,7 @@ are gone by then).
 ``info`` on every step: ``is_success``, ``crashed``, ``out_of_road``, ``route_completion``, ``crash_agent_id``
 (id of an agent the ego overlaps, -1 if none), ``crashed_with_adversary``, ``adversary_crashed`` (the adversary
 overlaps a third agent), ``scenario_id``, ``step`` (scenario step). On the last step also ``rollout``
-(`envs.rollout.Rollout`) and ``outcome``.
+(`seal.envs.rollout.Rollout`) and ``outcome``.
 """
 
 from __future__ import annotations
@@ -46,13 +46,13 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from envs.behaviors import AdversaryBehavior, BehaviorOutput, ReplayBehavior
-from envs.kinematics import AgentState, bicycle_step
-from envs.observation import ObservationBuilder, observation_space
-from envs.road_geometry import RoadGeometry, get_road_geometry
-from envs.rollout import Rollout
-from envs.route import Route, RouteProjection
-from seal.scenario import CURRENT_STEP, N_STEPS, VALID, Scenario
+from seal.core.scenario import CURRENT_STEP, N_STEPS, VALID, Scenario
+from seal.envs.behaviors import AdversaryBehavior, BehaviorOutput, ReplayBehavior
+from seal.envs.kinematics import AgentState, bicycle_step
+from seal.envs.observation import ObservationBuilder, observation_space
+from seal.envs.road_geometry import RoadGeometry, get_road_geometry
+from seal.envs.rollout import Rollout
+from seal.envs.route import Route, RouteProjection
 
 DEFAULT_CONFIG: dict[str, Any] = {
     "horizon_steps": 90,
@@ -116,12 +116,12 @@ class ScenarioEnv(gym.Env):
     """Gymnasium env over a set of scenarios (see the module docstring).
 
     Args:
-        scenarios: scenarios to play, a single scenario, or a dataset directory (loaded with `seal.dataset`,
+        scenarios: scenarios to play, a single scenario, or a dataset directory (loaded with `seal.core.dataset`,
             ``config["split"]`` selecting a split).
         config: overrides of `DEFAULT_CONFIG`.
         adversary: see `AdversarySpec`; change it later with `set_adversary`, or for one episode with
             ``reset(options={"adversary": behavior})``.
-        render_mode: None or ``"rgb_array"`` (top-down frame following the ego, `envs.render`).
+        render_mode: None or ``"rgb_array"`` (top-down frame following the ego, `seal.envs.render`).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -139,7 +139,7 @@ class ScenarioEnv(gym.Env):
             raise ValueError(f"unknown ScenarioEnv config keys {sorted(unknown)}; known: {sorted(DEFAULT_CONFIG)}")
         self.config = {**DEFAULT_CONFIG, **(config or {})}
         if isinstance(scenarios, str | Path):
-            from seal.dataset import load_scenarios
+            from seal.core.dataset import load_scenarios
 
             scenarios = load_scenarios(scenarios, split=self.config["split"])
         elif isinstance(scenarios, Scenario):
@@ -296,7 +296,7 @@ class ScenarioEnv(gym.Env):
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":
             return None
-        from envs.render import FrameRenderer
+        from seal.envs.render import FrameRenderer
 
         if self._renderer is None or self._renderer.road is not self.scenario.road:
             self._renderer = FrameRenderer(self.scenario.road)

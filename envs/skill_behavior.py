@@ -15,10 +15,10 @@ from typing import Protocol
 
 import numpy as np
 
-from envs.behaviors import AdversaryBehavior, BehaviorOutput, ReplayBehavior, TrackingBehavior
-from envs.kinematics import AgentState
-from envs.route import Route
-from seal.scenario import CURRENT_STEP, VALID, Scenario
+from seal.core.scenario import CURRENT_STEP, VALID, Scenario
+from seal.envs.behaviors import AdversaryBehavior, BehaviorOutput, ReplayBehavior, TrackingBehavior
+from seal.envs.kinematics import AgentState
+from seal.envs.route import Route
 
 SWITCH_OFFSET_STEPS = 10
 """Default steps between the switch to the skill policy and the predicted collision step (1 s)."""
@@ -26,7 +26,7 @@ FOLLOW_MODES = ("replay", "track")
 
 
 class StepPolicy(Protocol):
-    """What the behaviour needs from a skill policy (`seal.skills.policy.SkillPolicy`)."""
+    """What the behaviour needs from a skill policy (`seal.models.skills.policy.SkillPolicy`)."""
 
     def reset(self, seed: int | None = None) -> None: ...
 
@@ -49,7 +49,7 @@ class SkillSwitchBehavior(AdversaryBehavior):
     Args:
         policy: the skill policy (reset at every episode).
         track: ``[T, 8]`` track in the scenario layout indexed by scenario step (e.g.
-            `adversaries.candidate_path.candidate_track` of the chosen candidate); None for the logged adversary.
+            `seal.adversaries.candidate_path.candidate_track` of the chosen candidate); None for the logged adversary.
         switch_step: first scenario step whose move the policy decides (``CURRENT_STEP``: from the start).
         follow: ``"replay"`` (placement on the track) or ``"track"`` (bicycle-model tracking) before the switch.
         seed: seed of the policy's noise each episode; None draws it from the env's rng at reset (so

@@ -20,10 +20,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from envs.traffic import RunLog
-from seal.geometry import box_corners, box_gap
-from seal.interaction import in_own_lanes as own_lanes
-from seal.scenario import CURRENT_STEP, DT_S, N_STEPS
+from seal.core.geometry import box_corners, box_gap
+from seal.core.interaction import in_own_lanes as own_lanes
+from seal.core.scenario import CURRENT_STEP, DT_S, N_STEPS
+from seal.envs.traffic_run import RunLog
 
 EVENT_GAP_M = 5.0
 """Bodies closer than this (m) interact."""
@@ -60,7 +60,7 @@ def _corners(log: RunLog, row: int, steps: slice | np.ndarray) -> np.ndarray:
 
 
 def in_own_lanes(log: RunLog, i: int, j: int, steps: np.ndarray) -> np.ndarray:
-    """``[K]`` bool: at ``steps``, ``i`` and ``j`` keep to their own lanes (`seal.interaction.in_own_lanes`)."""
+    """``[K]`` bool: at ``steps``, ``i`` and ``j`` keep to their own lanes (`seal.core.interaction.in_own_lanes`)."""
     si, sj = log.states[i, steps], log.states[j, steps]
     return own_lanes(si[:, :2], si[:, 2], si[:, 5], sj[:, :2], sj[:, 2], sj[:, 5])
 
@@ -262,8 +262,8 @@ def _context(log: RunLog, ego: int, adv: int, t0: int) -> list[int]:
 
 
 def window_tracks(log: RunLog, w: Window) -> tuple[np.ndarray, np.ndarray]:
-    """(tracks ``[A, 91, 8]`` float32, `seal.scenario.TRACK_FIELDS` order, in the map frame (y mirrored, see
-    `envs.layouts.describe_network`); agent ids ``[A]``): ego, adv, then the others."""
+    """(tracks ``[A, 91, 8]`` float32, `seal.core.scenario.TRACK_FIELDS` order, in the map frame (y mirrored, see
+    `seal.envs.layouts.describe_network`); agent ids ``[A]``): ego, adv, then the others."""
     rows = np.array([w.ego, w.adv, *w.others], dtype=np.int64)
     s = log.states[rows, w.t0 : w.t0 + N_STEPS]
     valid = log.valid[rows, w.t0 : w.t0 + N_STEPS]

@@ -152,9 +152,9 @@ class RayBackend:
 
 def _import_roots() -> list[str]:
     """The directory this package is imported from (the repository or site-packages)."""
-    import experiments
+    import seal
 
-    return [os.path.dirname(os.path.dirname(os.path.abspath(experiments.__file__)))]
+    return [os.path.dirname(os.path.dirname(os.path.abspath(seal.__file__)))]
 
 
 def make_backend(

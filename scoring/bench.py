@@ -6,8 +6,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from scoring.store import default_workers, fit_dataset_primitives, score_scenarios
-from seal.dataset import Dataset
+from seal.core.dataset import Dataset
+from seal.scoring.store import default_workers, fit_dataset_primitives, score_scenarios
 
 
 def run_scoring_bench(dataset_dir: str | Path, workers: int | None = None, limit: int | None = None) -> dict[str, Any]:

@@ -11,14 +11,38 @@ SafeShift's map conflict points are crosswalks, stop signs, traffic lights and l
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
-from seal.geometry import wrap_angle
+from seal.core.geometry import wrap_angle
 
-if TYPE_CHECKING:
-    from scoring.frenet import RoadIndex
+
+class RoadIndex(Protocol):
+    """The lane geometry the conflict points are computed from (`seal.scoring.frenet.RoadIndex` provides it; a
+    protocol keeps this module below the Frenet index in the import graph)."""
+
+    @property
+    def n_lanes(self) -> int:
+        """Number of lanes."""
+        ...
+
+    centerlines: list[np.ndarray]
+    """Per lane ``[P, 2]`` centre-line points (m)."""
+    widths: np.ndarray
+    """``[L]`` lane widths (m)."""
+    successors: list[list[int]]
+    """Per lane the indices of the lanes it continues into."""
+    connected: np.ndarray
+    """``[L, L]`` bool: lanes connected by a successor / predecessor link (their crossings are no conflicts)."""
+    seg_a: np.ndarray
+    """``[S, 2]`` start point of every centre-line segment (m)."""
+    seg_d: np.ndarray
+    """``[S, 2]`` segment vector (m)."""
+    seg_lane: np.ndarray
+    """``[S]`` lane index of every segment."""
+    seg_heading: np.ndarray
+    """``[S]`` segment heading (rad)."""
 
 _DEDUP_M = 1.0  # conflict points closer than this are the same point
 _SHARED_START_M = 0.5

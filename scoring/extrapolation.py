@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from scoring.frenet import RoadIndex
-from scoring.tracks import AgentTracks, lane_attributes
-from seal.scenario import CURRENT_STEP, DT_S
+from seal.core.scenario import CURRENT_STEP, DT_S
+from seal.scoring.frenet import RoadIndex
+from seal.scoring.tracks import AgentTracks, lane_attributes
 
 
 def future_extrapolate(gt: AgentTracks, index: RoadIndex, current: int = CURRENT_STEP, dt: float = DT_S) -> AgentTracks:

@@ -1,4 +1,4 @@
-"""Lane projection (Frenet s, d) and lane chains on a `seal.road.RoadDescription`, vectorised with numpy.
+"""Lane projection (Frenet s, d) and lane chains on a `seal.core.road.RoadDescription`, vectorised with numpy.
 
 `RoadIndex` flattens all lane centre polylines into one array of segments so that many points are projected at
 once: for every point the closest segment among the lanes whose direction is compatible with the agent's heading
@@ -17,9 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from scoring.neighbours import close_pairs
-from seal.geometry import wrap_angle
-from seal.road import RoadDescription
+from seal.core.geometry import wrap_angle
+from seal.core.road import RoadDescription
+from seal.scoring.conflict_points import lane_conflict_points
+from seal.scoring.neighbours import close_pairs
 
 SIMPLIFY_TOL_M = 0.05
 MAX_HEADING_DIFF_RAD = np.pi / 3
@@ -105,10 +106,8 @@ class RoadIndex:
 
     @property
     def conflict_points(self) -> np.ndarray:
-        """``[C, 2]`` lane conflict points (m), see `scoring.conflict_points` (computed on first use)."""
+        """``[C, 2]`` lane conflict points (m), see `seal.scoring.conflict_points` (computed on first use)."""
         if self._conflict_points is None:
-            from scoring.conflict_points import lane_conflict_points
-
             self._conflict_points = lane_conflict_points(self)
         return self._conflict_points
 

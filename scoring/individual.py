@@ -9,15 +9,15 @@ Per agent, over its valid steps (max over time unless noted):
 * ``jerk`` (m/s^3): norm of the derivative of the acceleration vector, same differences;
 * ``waiting`` (s): total time of the steps moving less than 0.5 m (sum of all waiting intervals);
 * ``in_lane``: mean over valid steps of being within half a lane width of the assigned lane's centre line;
-* ``anomaly``: distance to the clustered motion primitives (`scoring.primitives`).
+* ``anomaly``: distance to the clustered motion primitives (`seal.scoring.primitives`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from scoring.tracks import AgentTracks
-from seal.scenario import DT_S
+from seal.core.scenario import DT_S
+from seal.scoring.tracks import AgentTracks
 
 WAIT_STEP_M = 0.5
 INDIVIDUAL_FEATURES = ("speed", "speed_over_limit", "acc", "jerk", "waiting", "in_lane", "anomaly")

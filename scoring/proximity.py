@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from seal.geometry import box_corners, box_gap, boxes_overlap
-from seal.scenario import CURRENT_STEP, HEADING, LENGTH, VALID, WIDTH, Scenario, X, Y
+from seal.core.geometry import box_corners, box_gap, boxes_overlap
+from seal.core.scenario import CURRENT_STEP, HEADING, LENGTH, VALID, WIDTH, Scenario, X, Y
 
 
 def _corners(tracks: np.ndarray) -> np.ndarray:

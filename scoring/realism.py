@@ -10,7 +10,7 @@
   front to front) and severe head-on collisions (head-on with a relative normal speed above 5 m/s). Rates are
   shares of all episodes; ``*_share`` are shares of the colliding episodes.
 
-Tracks are ``[T, 8]`` arrays with `seal.scenario.TRACK_FIELDS` (one per episode, lengths may differ) or one
+Tracks are ``[T, 8]`` arrays with `seal.core.scenario.TRACK_FIELDS` (one per episode, lengths may differ) or one
 ``[N, T, 8]`` array.
 """
 
@@ -20,8 +20,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from seal.geometry import box_corners, boxes_overlap, wrap_angle
-from seal.scenario import DT_S, HEADING, LENGTH, VALID, VX, VY, WIDTH, X, Y
+from seal.core.geometry import box_corners, boxes_overlap, wrap_angle
+from seal.core.scenario import DT_S, HEADING, LENGTH, VALID, VX, VY, WIDTH, X, Y
 
 YAW_RATE_BINS = np.linspace(-1.5, 1.5, 61)
 ACC_BINS = np.linspace(-10.0, 10.0, 81)

@@ -9,15 +9,15 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from scoring.extrapolation import future_extrapolate
-from scoring.individual import INDIVIDUAL_FEATURES
-from scoring.scores import VARIANTS, road_index
-from scoring.social import SOCIAL_FEATURES
-from scoring.store import ScoreTable, load_scores
-from scoring.tracks import from_tracks
-from seal.dataset import Dataset
-from seal.road import RoadDescription
-from seal.scenario import CURRENT_STEP, VALID, Scenario, X, Y
+from seal.core.dataset import Dataset
+from seal.core.road import RoadDescription
+from seal.core.scenario import CURRENT_STEP, VALID, Scenario, X, Y
+from seal.scoring.extrapolation import future_extrapolate
+from seal.scoring.individual import INDIVIDUAL_FEATURES
+from seal.scoring.scores import VARIANTS, road_index
+from seal.scoring.social import SOCIAL_FEATURES
+from seal.scoring.store import ScoreTable, load_scores
+from seal.scoring.tracks import from_tracks
 
 _COLORS = {"gt": "tab:blue", "fe": "tab:orange", "as": "tab:green", "ac": "tab:red"}
 _LINE_STYLES = {"continuous": "-", "striped": "--", "none": None}

@@ -1,7 +1,7 @@
 """SafeShift trajectory and scene scores of one scenario, for the variants GT, FE, AS and AC (thesis 3.3).
 
 * GT: individual score of the logged track + social scores of logged pairs.
-* FE: the same on the future-extrapolated tracks of all agents (`scoring.extrapolation`).
+* FE: the same on the future-extrapolated tracks of all agents (`seal.scoring.extrapolation`).
 * AS (asymmetric): agent i's individual score on its FE track + social scores of (i FE, j logged) for every j.
 * AC (asymmetric combined) = max(GT, AS) per trajectory (thesis: "the maximum value of these two scores"; the
   SafeShift code takes the max per score component instead, which is never smaller).
@@ -19,14 +19,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from scoring.extrapolation import future_extrapolate
-from scoring.frenet import RoadIndex
-from scoring.individual import INDIVIDUAL_FEATURES, individual_features, individual_score
-from scoring.primitives import Primitives, single_anomaly
-from scoring.social import SOCIAL_FEATURES, TrackContext, social_features, social_score
-from scoring.tracks import AgentTracks, from_tracks
-from seal.road import RoadDescription
-from seal.scenario import Scenario
+from seal.core.road import RoadDescription
+from seal.core.scenario import Scenario
+from seal.scoring.extrapolation import future_extrapolate
+from seal.scoring.frenet import RoadIndex
+from seal.scoring.individual import INDIVIDUAL_FEATURES, individual_features, individual_score
+from seal.scoring.primitives import Primitives, single_anomaly
+from seal.scoring.social import SOCIAL_FEATURES, TrackContext, social_features, social_score
+from seal.scoring.tracks import AgentTracks, from_tracks
 
 VARIANTS = ("gt", "fe", "as", "ac")
 

@@ -30,11 +30,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from scoring.frenet import RoadIndex
-from scoring.neighbours import close_pairs
-from scoring.primitives import Primitives, agent_windows, pair_anomaly
-from scoring.tracks import AgentTracks
-from seal.geometry import box_corners, boxes_overlap
+from seal.core.geometry import box_corners, boxes_overlap
+from seal.scoring.frenet import RoadIndex
+from seal.scoring.neighbours import close_pairs
+from seal.scoring.primitives import Primitives, agent_windows, pair_anomaly
+from seal.scoring.tracks import AgentTracks
 
 SOCIAL_FEATURES = (
     "inv_thw", "inv_ttc", "drac", "inv_mttcp_map", "inv_mttcp_agents", "collisions", "pair_anomaly",

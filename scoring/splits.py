@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from scoring.proximity import pair_proximity
-from scoring.store import load_scores
-from seal.dataset import Dataset, DatasetError
+from seal.core.dataset import Dataset, DatasetError
+from seal.scoring.proximity import pair_proximity
+from seal.scoring.store import load_scores
 
 
 class SplitError(DatasetError):

@@ -2,7 +2,7 @@
 
 ``scores.npz`` (numpy only, loads with ``allow_pickle=False``) is columnar like the shards:
 
-* per scene ``[N]``: ``scenario_ids``, ``scene_<variant>`` for every variant in `scoring.scores.VARIANTS`;
+* per scene ``[N]``: ``scenario_ids``, ``scene_<variant>`` for every variant in `seal.scoring.scores.VARIANTS`;
 * per agent ``[M]`` (scene k owns rows ``agent_offsets[k]:agent_offsets[k+1]``): ``agent_ids``, ``focal``,
   ``traj_<variant>``, ``weight_<variant>``, ``ind_score_<gt|fe>``, ``ind_features_<gt|fe>`` ``[M, F]``;
 * per pair ``[Q]`` (rows ``pair_offsets[k]:pair_offsets[k+1]``, only pairs active in some variant): ``pair_i``,
@@ -29,13 +29,13 @@ from typing import Any
 
 import numpy as np
 
-from scoring.individual import INDIVIDUAL_FEATURES
-from scoring.primitives import Primitives, fit_primitives
-from scoring.scores import VARIANTS, ScenarioScores, score_scenario
-from scoring.social import SOCIAL_FEATURES
-from seal.atomic import atomic_write
-from seal.dataset import Dataset, DatasetError
-from seal.scenario import HEADING, VALID, Scenario, X, Y
+from seal.core.atomic import atomic_write
+from seal.core.dataset import Dataset, DatasetError
+from seal.core.scenario import HEADING, VALID, Scenario, X, Y
+from seal.scoring.individual import INDIVIDUAL_FEATURES
+from seal.scoring.primitives import Primitives, fit_primitives
+from seal.scoring.scores import VARIANTS, ScenarioScores, score_scenario
+from seal.scoring.social import SOCIAL_FEATURES
 
 SCORES_FILE = "scores.npz"
 SCORES_VERSION = 1

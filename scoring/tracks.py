@@ -1,6 +1,6 @@
 """`AgentTracks`: one scenario's agents as float64 arrays plus their lane assignment, the input of all features.
 
-Built from logged tracks (`from_tracks`) or by `scoring.extrapolation` for the future-extrapolated variant.
+Built from logged tracks (`from_tracks`) or by `seal.scoring.extrapolation` for the future-extrapolated variant.
 """
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scoring.frenet import RoadIndex
-from seal.scenario import HEADING, LENGTH, VALID, VX, VY, WIDTH, X, Y
+from seal.core.scenario import HEADING, LENGTH, VALID, VX, VY, WIDTH, X, Y
+from seal.scoring.frenet import RoadIndex
 
 
 @dataclass(frozen=True)
@@ -68,7 +68,7 @@ def lane_attributes(index: RoadIndex, pos: np.ndarray, heading: np.ndarray, vali
 
 
 def from_tracks(tracks: np.ndarray, index: RoadIndex) -> AgentTracks:
-    """`AgentTracks` of logged scenario tracks ``[A, T, 8]`` (`seal.scenario.TRACK_FIELDS`)."""
+    """`AgentTracks` of logged scenario tracks ``[A, T, 8]`` (`seal.core.scenario.TRACK_FIELDS`)."""
     tr = np.asarray(tracks, dtype=np.float64)
     valid = tr[..., VALID] > 0.5
     pos = np.where(valid[..., None], tr[..., [X, Y]], 0.0)

@@ -1,7 +1,7 @@
 """seal core: scenario data model, dataset store, learned models, CLI."""
 
-from seal.road import LaneSpec, RoadDescription
-from seal.scenario import CURRENT_STEP, DT_S, N_FUTURE, N_HISTORY, N_STEPS, TRACK_FIELDS, Scenario, ScenarioError
+from seal.core.road import LaneSpec, RoadDescription
+from seal.core.scenario import CURRENT_STEP, DT_S, N_FUTURE, N_HISTORY, N_STEPS, TRACK_FIELDS, Scenario, ScenarioError
 
 __version__ = "0.1.0"
 

@@ -1,11 +1,11 @@
-"""Shared fixtures: hand-built scenarios from `envs.scenario_factory` (built once per session)."""
+"""Shared fixtures: hand-built scenarios from `scenario_factory` (built once per session)."""
 
 from __future__ import annotations
 
 import pytest
+import scenario_factory as sf
 
-from envs import scenario_factory as sf
-from seal.scenario import Scenario
+from seal.core.scenario import Scenario
 
 
 @pytest.fixture(scope="session")

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from experiments.evaluate_metrics import histogram_counts
-from scoring.realism import ACC_BINS, YAW_RATE_BINS
+from seal.experiments.evaluation.metrics import histogram_counts
+from seal.scoring.realism import ACC_BINS, YAW_RATE_BINS
 
 
 def hist(values, bins) -> list[int]:

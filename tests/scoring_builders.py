@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from seal.road import LaneSpec, RoadDescription
-from seal.scenario import DT_S, N_STEPS, Scenario
+from seal.core.road import LaneSpec, RoadDescription
+from seal.core.scenario import DT_S, N_STEPS, Scenario
 
 LENGTH_M, WIDTH_M = 4.5, 2.0
 

@@ -49,9 +49,9 @@ def build_tree() -> tuple[argparse.ArgumentParser, CommandTree]:
 def main(argv: Sequence[str] | None = None) -> int:
     parser, tree = build_tree()
     args = parser.parse_args(tree.expand_default(list(sys.argv[1:] if argv is None else argv)))
-    from seal.dataset import DatasetError
-    from seal.road import RoadError
-    from seal.scenario import ScenarioError
+    from seal.core.dataset import DatasetError
+    from seal.core.road import RoadError
+    from seal.core.scenario import ScenarioError
 
     try:
         return int(args.func(args) or 0)

@@ -11,7 +11,7 @@ from seal.cli.tree import CommandTree
 def cmd_bench_data(args: argparse.Namespace) -> int:
     import time
 
-    from seal.dataset import Dataset
+    from seal.core.dataset import Dataset
 
     start = time.perf_counter()
     scenarios = Dataset.open(args.dir).load(limit=args.n)
@@ -28,7 +28,7 @@ def cmd_bench_data(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_scoring(args: argparse.Namespace) -> int:
-    from scoring.bench import run_scoring_bench
+    from seal.scoring.bench import run_scoring_bench
 
     result = run_scoring_bench(args.dataset, workers=args.workers, limit=args.limit)
     print_result(result, args.json)
@@ -37,13 +37,13 @@ def cmd_bench_scoring(args: argparse.Namespace) -> int:
 
 def cmd_bench_env(args: argparse.Namespace) -> int:
     if args.adversary == "seal":
-        from experiments.bench_skills import run_skill_bench
+        from seal.experiments.bench.skills import run_skill_bench
 
         result = run_skill_bench(args.dataset, skills=args.skills, n_steps=args.steps, seed=args.seed,
                                  repeats=args.repeats)
         print_result(result, args.json)
         return 0
-    from experiments.bench_env import run_env_bench
+    from seal.experiments.bench.env import run_env_bench
 
     result = run_env_bench(args.dataset, n_steps=args.steps, seed=args.seed)
     print_result(result, args.json)
@@ -51,8 +51,8 @@ def cmd_bench_env(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_training(args: argparse.Namespace) -> int:
-    from experiments.bench_training import run_training_bench
-    from experiments.train_config import load_train_config
+    from seal.experiments.bench.training import run_training_bench
+    from seal.experiments.training.config import load_train_config
 
     over = {"pipeline": args.pipeline, "dataset": args.dataset, "n_envs": args.n_envs}
     if args.prior is not None:

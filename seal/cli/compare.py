@@ -15,7 +15,8 @@ def _names(text: str | None) -> list[str] | None:
 def cmd_compare(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from experiments.compare import ego_markdown, generator_markdown, write_report
+    from seal.experiments.report.compare import ego_markdown, generator_markdown
+    from seal.experiments.report.write import write_report
 
     if not Path(args.store).is_file():
         raise CliError(f"--store {args.store}: no such results store (fill one with `seal eval runs`)")

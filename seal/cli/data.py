@@ -11,7 +11,7 @@ from seal.cli.tree import CommandTree
 
 
 def cmd_data_generate(args: argparse.Namespace) -> int:
-    from envs.generate import generate_dataset
+    from seal.envs.generate import generate_dataset
 
     layouts = [name for group in args.layouts for name in group]
     ds = generate_dataset(
@@ -31,8 +31,8 @@ def cmd_data_generate(args: argparse.Namespace) -> int:
 
 
 def _print_info(root: Path, as_json: bool) -> None:
-    from scoring.proximity import pool_proximity
-    from seal.dataset import Dataset, summarize
+    from seal.core.dataset import Dataset, summarize
+    from seal.scoring.proximity import pool_proximity
 
     ds = Dataset.open(root)
     scenarios = ds.load()
@@ -70,7 +70,7 @@ def cmd_data_info(args: argparse.Namespace) -> int:
 
 
 def cmd_data_score(args: argparse.Namespace) -> int:
-    from scoring.store import score_dataset
+    from seal.scoring.store import score_dataset
 
     summary = score_dataset(args.dir, workers=args.workers, progress=not args.no_progress)
     print(json.dumps(summary, indent=2, default=str))
@@ -78,7 +78,7 @@ def cmd_data_score(args: argparse.Namespace) -> int:
 
 
 def cmd_data_split(args: argparse.Namespace) -> int:
-    from scoring.splits import make_splits
+    from seal.scoring.splits import make_splits
 
     result = make_splits(
         args.dir,
@@ -93,7 +93,7 @@ def cmd_data_split(args: argparse.Namespace) -> int:
 
 
 def cmd_data_report(args: argparse.Namespace) -> int:
-    from scoring.report import write_report
+    from seal.scoring.report import write_report
 
     for path in write_report(args.dir, args.out):
         print(f"wrote {path}")
@@ -101,8 +101,8 @@ def cmd_data_report(args: argparse.Namespace) -> int:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    from envs.render import render_episode
-    from seal.dataset import Dataset
+    from seal.core.dataset import Dataset
+    from seal.envs.episode_video import render_episode
 
     out = Path(args.out)
     if out.suffix.lower() not in (".mp4", ".gif"):
@@ -114,7 +114,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from experiments.demo import run_demo
+    from seal.experiments.pipeline.demo import run_demo
 
     run_demo(Path(args.out), n_scenarios=args.n, n_rollouts=args.rollouts, seed=args.seed, overwrite=args.overwrite)
     return 0

@@ -15,8 +15,8 @@ from seal.cli.tree import CommandTree
 
 
 def cmd_eval_runs(args: argparse.Namespace) -> int:
-    from experiments.eval_generators import apply_generator_options
-    from experiments.evaluate import evaluate_runs, read_run, resolve_eval_config
+    from seal.experiments.evaluation.evaluate import evaluate_runs, read_run, resolve_eval_config
+    from seal.experiments.evaluation.generators import apply_generator_options
 
     try:
         egos = [read_run(r) for r in args.runs]

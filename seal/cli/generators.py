@@ -10,7 +10,7 @@ from seal.cli.tree import CommandTree
 
 def _generator_options(args: argparse.Namespace) -> tuple[dict, dict]:
     """(resolved config, shared generator options) from the command line; bad generator names -> CliError."""
-    from experiments.eval_generators import resolve_config
+    from seal.experiments.evaluation.generators import resolve_config
 
     try:
         config = resolve_config(
@@ -26,8 +26,8 @@ def _generator_options(args: argparse.Namespace) -> tuple[dict, dict]:
 
 
 def cmd_eval_generators(args: argparse.Namespace) -> int:
-    from experiments.eval_generators import run_eval_generators
-    from experiments.generator_metrics import markdown_table
+    from seal.experiments.evaluation.generator_metrics import markdown_table
+    from seal.experiments.evaluation.generators import run_eval_generators
 
     config, _ = _generator_options(args)
     rows = run_eval_generators(args.dataset, args.out, config, progress=not args.no_progress)
@@ -37,8 +37,8 @@ def cmd_eval_generators(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_generators(args: argparse.Namespace) -> int:
-    from experiments.bench_generators import bench_generators, format_bench
-    from experiments.eval_generators import build_generator, load_eval_scenarios
+    from seal.experiments.bench.generators import bench_generators, format_bench
+    from seal.experiments.evaluation.generators import build_generator, load_eval_scenarios
 
     config, shared = _generator_options(args)
     scenarios = load_eval_scenarios(args.dataset, config["split"], config["limit"] or args.n)
@@ -72,7 +72,8 @@ def _common(p: argparse.ArgumentParser, default_generators: str) -> None:
         "--gen-opt", action="append", default=[], metavar="NAME.KEY=VALUE",
         help="constructor option of one generator, repeatable, e.g. goose.model=agent.pt or cat.follow=track",
     )
-    p.add_argument("--config", default=None, help="YAML config (keys as in experiments.eval_generators.DEFAULTS)")
+    p.add_argument("--config", default=None, help="YAML config (keys as in "
+        "seal.experiments.evaluation.generators.DEFAULTS)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
 
 

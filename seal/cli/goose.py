@@ -11,7 +11,7 @@ from seal.cli.tree import CommandTree
 def cmd_fit_goose(args: argparse.Namespace) -> int:
     import json
 
-    from experiments.fit_goose import fit_goose, format_summary, resolve_config
+    from seal.experiments.fitting.goose import fit_goose, format_summary, resolve_config
 
     config = resolve_config(
         preset=args.preset, config_file=args.config, algo=args.algo, total_steps=args.steps, seed=args.seed,
@@ -39,7 +39,7 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--preset", choices=("quick", "standard"), default="standard",
                    help="YAML preset from experiments/configs/goose_<preset>.yaml (default standard)")
     p.add_argument("--config", default=None,
-                   help="YAML config overriding the preset (keys: experiments.fit_goose.DEFAULTS)")
+                   help="YAML config overriding the preset (keys: seal.experiments.fitting.goose.DEFAULTS)")
     p.add_argument("--algo", choices=("sac", "td3"), default=None, help="RL algorithm (default from the preset: sac)")
     p.add_argument("--steps", type=positive_int("--steps"), default=None, help="training roll-outs (env steps)")
     p.add_argument("--split", default=None, help="training split (default train)")

@@ -8,7 +8,7 @@ import json
 from seal.cli.args import positive_int
 from seal.cli.tree import CommandTree
 
-_DESCRIPTIONS = {  # format: (help, description, default scenarios per file = seal.importers.FORMATS)
+_DESCRIPTIONS = {  # format: (help, description, default scenarios per file = seal.core.importers.FORMATS)
     "commonroad": (
         "import CommonRoad XML scenarios (2018b, 2020a)",
         "Read CommonRoad XML files (versions 2018b and 2020a): the road from the lanelets (centre lines and "
@@ -30,7 +30,7 @@ _DESCRIPTIONS = {  # format: (help, description, default scenarios per file = se
 
 
 def cmd_import(args: argparse.Namespace) -> int:
-    from seal.importers import import_files
+    from seal.core.importers import import_files
 
     ds, report = import_files(
         args.inputs,
@@ -56,7 +56,7 @@ def cmd_import(args: argparse.Namespace) -> int:
 
 
 def cmd_replay_check(args: argparse.Namespace) -> int:
-    from experiments.replay_check import run
+    from seal.experiments.evaluation.replay_check import run
 
     return run(args.dir, args.out, args.limit, progress=not args.no_progress)
 

@@ -10,7 +10,7 @@ from seal.cli.tree import CommandTree
 
 
 def _config(args: argparse.Namespace) -> dict:
-    from experiments.fit_objective import resolve_config
+    from seal.experiments.fitting.objective import resolve_config
 
     return resolve_config(preset=args.preset, config_file=args.config, prior=args.prior, candidates=args.candidates,
                           eval_split=args.eval_split, eval_limit=args.eval_limit, workers=args.workers, seed=args.seed,
@@ -20,7 +20,7 @@ def _config(args: argparse.Namespace) -> dict:
 def cmd_fit_objective(args: argparse.Namespace) -> int:
     import json
 
-    from experiments.fit_objective import fit_objective, format_summary
+    from seal.experiments.fitting.objective import fit_objective, format_summary
 
     report = fit_objective(args.dataset, args.out, _config(args), progress=not args.no_progress)
     print(json.dumps(report, indent=2, default=str) if args.json else format_summary(report))
@@ -30,7 +30,7 @@ def cmd_fit_objective(args: argparse.Namespace) -> int:
 def cmd_eval_objective(args: argparse.Namespace) -> int:
     import json
 
-    from experiments.fit_objective import eval_objective, format_report
+    from seal.experiments.fitting.objective import eval_objective, format_report
 
     model = Path(args.model)
     config = _config(args)
@@ -46,7 +46,7 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--preset", choices=("quick", "standard"), default="standard",
                    help="YAML preset experiments/configs/objective_<preset>.yaml (default standard)")
     p.add_argument("--config", default=None,
-                   help="YAML config overriding the preset (keys: experiments.fit_objective.DEFAULTS)")
+                   help="YAML config overriding the preset (keys: seal.experiments.fitting.objective.DEFAULTS)")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--prior", default=None, help="trajectory prior file (seal fit prior) giving the candidates")
     src.add_argument("--candidates", default=None, choices=("lanes", "constant_velocity"),

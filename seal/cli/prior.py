@@ -19,7 +19,7 @@ HELD_OUT_SPLITS = ("eval", "hard")
 def load_split(dataset: str, split: str, limit: int | None = None) -> tuple[list[Any], dict[str, Any]]:
     """Scenarios of ``split`` (a split name, ``all``, or ``all-but-eval`` = everything outside the eval and hard
     splits) and a description of what was loaded."""
-    from seal.dataset import Dataset
+    from seal.core.dataset import Dataset
 
     ds = Dataset.open(dataset)
     if split == ALL:
@@ -64,9 +64,9 @@ def _load_config(path: str | None) -> tuple[dict[str, Any], dict[str, Any]]:
 def cmd_fit_prior(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from seal.atomic import atomic_write_json
-    from seal.prior.network import PriorConfig
-    from seal.prior.train import TrainConfig, fit_prior
+    from seal.core.atomic import atomic_write_json
+    from seal.models.prior.network import PriorConfig
+    from seal.models.prior.train import TrainConfig, fit_prior
 
     model_d, train_d = _load_config(args.config)
     try:
@@ -129,8 +129,8 @@ def _print_eval(res: dict[str, Any]) -> None:
 
 
 def cmd_eval_prior(args: argparse.Namespace) -> int:
-    from seal.prior.evaluate import evaluate_prior
-    from seal.prior.prior import TrajectoryPrior
+    from seal.models.prior.evaluate import evaluate_prior
+    from seal.models.prior.prior import TrajectoryPrior
 
     prior = TrajectoryPrior.load(args.model)
     scenarios, _ = load_split(args.dataset, args.split, args.limit)
@@ -150,8 +150,8 @@ def cmd_eval_prior(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_prior(args: argparse.Namespace) -> int:
-    from seal.prior.bench import bench_prior
-    from seal.prior.prior import TrajectoryPrior
+    from seal.models.prior.bench import bench_prior
+    from seal.models.prior.prior import TrajectoryPrior
 
     if args.model is not None:
         prior = TrajectoryPrior.load(args.model)
@@ -163,7 +163,7 @@ def cmd_bench_prior(args: argparse.Namespace) -> int:
         scenarios, _ = load_split(args.dataset, ALL, limit=max(args.batch, 64))
         source = f"dataset {args.dataset}"
     else:
-        from experiments.bench_env import bench_scenarios
+        from seal.experiments.bench.env import bench_scenarios
 
         scenarios, source = bench_scenarios(None, seed=0, n_runs=8)
     res = bench_prior(prior, scenarios, repeats=args.repeats, batch=args.batch, threads=args.threads)

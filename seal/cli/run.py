@@ -12,8 +12,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     import json
     from pathlib import Path
 
-    from experiments.backends import make_backend
-    from experiments.run_pipeline import load_run_config, run_pipeline
+    from seal.experiments.backends import make_backend
+    from seal.experiments.pipeline.run import load_run_config, run_pipeline
 
     try:
         config = load_run_config(args.config)

@@ -11,7 +11,7 @@ from seal.cli.tree import CommandTree
 def cmd_fit_skills(args: argparse.Namespace) -> int:
     import json
 
-    from experiments.fit_skills import fit_skills, format_summary, resolve_config
+    from seal.experiments.fitting.skills import fit_skills, format_summary, resolve_config
 
     config = resolve_config(preset=args.preset, config_file=args.config, split=args.split, limit=args.limit,
                             seed=args.seed, workers=args.workers)
@@ -37,7 +37,7 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--preset", choices=("quick", "standard"), default="standard",
                    help="YAML preset experiments/configs/skills_<preset>.yaml (default standard)")
     p.add_argument("--config", default=None,
-                   help="YAML config overriding the preset (keys: experiments.fit_skills.DEFAULTS)")
+                   help="YAML config overriding the preset (keys: seal.experiments.fitting.skills.DEFAULTS)")
     p.add_argument("--split", default=None, help="split to learn from (default train)")
     p.add_argument("--limit", type=positive_int("--limit"), default=None, help="use only the first N scenarios")
     p.add_argument("--demos", default=None,

@@ -43,9 +43,9 @@ def cmd_train(args: argparse.Namespace) -> int:
     import sys
     from pathlib import Path
 
-    from experiments.train import train_run
-    from experiments.train_config import load_train_config
-    from experiments.train_state import RunFolderError, read_done
+    from seal.experiments.training.config import load_train_config
+    from seal.experiments.training.state import RunFolderError, read_done
+    from seal.experiments.training.train import train_run
 
     if (args.out is None) == (args.resume is None):
         raise CliError("give exactly one of --out RUN (a new run) or --resume RUN (continue a killed run)")

@@ -1,0 +1,118 @@
+"""How SEAL ranks its candidates (thesis 6.3.1; Fig. 6.5 "Learned Obj" vs "Heuristic Obj").
+
+* A learned objective file (`seal.models.objective.ObjectiveModel`, imported lazily): every candidate is scored with the
+  mean over the K past ego roll-outs of the predicted ``f_coll + f_diff``; the highest score wins.
+* ``"cat"``: CAT's heuristic selection (`seal.adversaries.cat.select.cat_select`: prior-weighted earliest box
+  intersection, closest candidate when none collides), the ablation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from seal.adversaries.cat.select import DECAY, N_KEPT_MODES, STRIDE_STEPS, cat_select
+from seal.models.prior.candidates import Candidates
+
+HEURISTIC = "cat"
+
+
+@dataclass(frozen=True)
+class Ranking:
+    """Which candidate an objective picked.
+
+    Attributes:
+        index: the chosen candidate.
+        scores: ``[N]`` the objective's score of every candidate (higher = better for the adversary).
+        extra: objective-specific JSON-serialisable details.
+    """
+
+    index: int
+    scores: np.ndarray
+    extra: dict[str, Any]
+
+
+class Objective(Protocol):
+    """Ranks the candidates against past ego roll-outs (arrays as from
+    `seal.adversaries.cat.generator.stack_ego_rollouts`)."""
+
+    name: str
+
+    def __call__(
+        self, cands: Candidates, adv_size_m: tuple[float, float], ego_xy: np.ndarray, ego_heading: np.ndarray,
+        ego_valid: np.ndarray, ego_size_m: tuple[float, float],
+    ) -> Ranking: ...
+
+
+class HeuristicObjective:
+    """CAT's selection as SEAL's objective (see the module docstring); options as in `cat_select`."""
+
+    name = HEURISTIC
+
+    def __init__(self, stride: int = STRIDE_STEPS, decay: float = DECAY, n_kept: int = N_KEPT_MODES) -> None:
+        self.stride, self.decay, self.n_kept = int(stride), float(decay), int(n_kept)
+
+    def __call__(
+        self, cands: Candidates, adv_size_m: tuple[float, float], ego_xy: np.ndarray, ego_heading: np.ndarray,
+        ego_valid: np.ndarray, ego_size_m: tuple[float, float],
+    ) -> Ranking:
+        sel = cat_select(
+            cands.xy, cands.heading, cands.probs, adv_size_m=adv_size_m, ego_xy=ego_xy, ego_heading=ego_heading,
+            ego_valid=ego_valid, ego_size_m=ego_size_m, stride=self.stride, decay=self.decay, n_kept=self.n_kept,
+        )
+        return Ranking(sel.index, sel.scores, {"collision_predicted_cat": sel.collided,
+                                               "cat_predicted_step": sel.predicted_step})
+
+
+class LearnedObjective:
+    """pi_score from a model file (`seal.models.objective.ObjectiveModel`): argmax of `ObjectiveModel.rank`.
+
+    Args:
+        path: a model file written by ``seal fit objective``.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        path = Path(path)
+        try:
+            from seal.models.objective import ObjectiveModel
+        except ImportError as exc:
+            raise ValueError(f"seal: objective={str(path)!r} needs the learned objective package "
+                f"seal.models.objective, "
+                             f"which is not available ({exc}); use objective=cat for CAT's heuristic") from exc
+        self.model = ObjectiveModel.load(path)
+        self.name = path.name
+        self.n_steps = int(self.model.config.n_steps)
+
+    def __call__(
+        self, cands: Candidates, adv_size_m: tuple[float, float], ego_xy: np.ndarray, ego_heading: np.ndarray,
+        ego_valid: np.ndarray, ego_size_m: tuple[float, float],
+    ) -> Ranking:
+        from seal.models.objective import align_ego_rollouts
+
+        n = self.n_steps
+        if cands.xy.shape[1] < n:
+            raise ValueError(f"seal: the objective model scores {n}-step futures, the candidates have "
+                             f"{cands.xy.shape[1]} steps (use a candidate source with {n} future steps)")
+        xy, heading, valid = align_ego_rollouts(ego_xy, ego_heading, ego_valid, n_steps=n)
+        scores = np.asarray(self.model.rank(cands.xy[:, :n], cands.heading[:, :n], xy, heading, valid),
+                            dtype=np.float64)
+        return Ranking(int(np.argmax(scores)), scores, {})
+
+
+def make_objective(spec: str | Path | Objective, **heuristic_options: Any) -> Objective:
+    """``"cat"`` -> `HeuristicObjective` (with ``heuristic_options``); a file path -> `LearnedObjective`; an
+    `Objective` object is returned as is."""
+    if spec is None:
+        raise ValueError("seal: option 'objective' is required: a learned objective file (seal fit objective) or "
+                         "'cat' for CAT's heuristic selection")
+    if not isinstance(spec, str | Path):
+        return spec
+    if str(spec) == HEURISTIC:
+        return HeuristicObjective(**heuristic_options)
+    if not Path(spec).is_file():
+        raise ValueError(f"seal: objective {str(spec)!r} is neither 'cat' nor an existing objective model file "
+                         "(train one with `seal fit objective`)")
+    return LearnedObjective(spec)

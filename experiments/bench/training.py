@@ -1,0 +1,141 @@
+"""``seal bench training``: env steps/s of ``seal train`` with learning included, against the same vec env
+driven by random actions (the reference measured in the same run), and what bounds the speed.
+
+Both measurements use the config's vec env (one `ClosedLoopEnv` worker per core, the pipeline's generator) with
+the perturbation probability fixed at the curriculum's mean over a run (0.675 for CAT's schedule), so generation
+costs what it costs on average in training. Before measuring, every worker builds its scenarios' road geometries
+and logged roll-out queues (`ClosedLoopEnv.warm_up`): a 1M-step run visits each train scenario hundreds of times,
+so the first-visit cost (~30 ms a scenario) does not count there; the generator's own per-road caches are not
+warmed (a cold CAT call is ~0.3 s instead of ~15 ms), which makes the generation share an upper bound.
+The training measurement runs the config's algorithm and hyper-parameters with ``learning_starts`` lowered to
+one batch, so every measured step pays its gradient updates.
+Reported: both steps/s, the generator's share of env-worker time, the cost of one gradient step, the gradient
+steps per env step of the config, and the estimated wall time of a 1M-step run (steps/s with learning).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+TARGET_S = 2 * 3600.0
+"""Target: a 1M-step run of the default preset in under 2 hours."""
+
+
+def mean_perturb_probability(slope: float, cap: float) -> float:
+    """Mean of p(t) = min(slope t / T, cap) over t in [0, T]."""
+    ramp_end = min(1.0, cap / slope) if slope > 0 else 1.0
+    return float(0.5 * slope * ramp_end**2 + cap * (1.0 - ramp_end)) if slope > 0 else 0.0
+
+
+def gradient_steps_per_env_step(config: Mapping[str, Any], n_envs: int) -> float:
+    h = config["hyperparams"]
+    if config["algo"] == "ppo":
+        return float(h["n_epochs"]) * (n_envs * h["n_steps"] // h["batch_size"]) / (n_envs * h["n_steps"])
+    grad = h["gradient_steps"]
+    return 1.0 if grad < 0 else float(grad) / (int(h["train_freq"]) * n_envs)
+
+
+class _GenerationTime:
+    """Sums the generation time of finished episodes from vec-env step infos."""
+
+    def __init__(self) -> None:
+        self.seconds, self.episodes, self.perturbed = 0.0, 0, 0
+
+    def add(self, infos: Any, dones: Any) -> None:
+        for info, done in zip(infos, dones, strict=True):
+            if done and "episode_adversary" in info:
+                adv = info["episode_adversary"]
+                self.episodes += 1
+                self.perturbed += bool(adv.get("perturbed"))
+                self.seconds += float(adv.get("generation_time_s") or 0.0)
+
+
+def run_training_bench(config: dict[str, Any], steps: int = 3000, progress: bool = True) -> dict[str, Any]:
+    """Measure (module docstring) with ``steps`` env steps per measurement; returns a flat result dict."""
+    import torch
+    from stable_baselines3.common.callbacks import BaseCallback
+    from tqdm import tqdm
+
+    from seal.experiments.training.train import build_model, build_vec_env, load_split, resolve_n_envs
+
+    torch.set_num_threads(int(config["torch_threads"]))
+    n_envs = resolve_n_envs(config)
+    scenarios = load_split(config["dataset"], config["train_split"], config["train_limit"], "train")
+    p = mean_perturb_probability(**config["curriculum"]) if config["generator"]["name"] else 0.0
+    venv = build_vec_env(config, scenarios, n_envs)
+    try:
+        venv.env_method("set_perturb_prob", p)
+        venv.env_method("warm_up")  # road geometries and logged queues, as in a long run (see the docstring)
+        rng = np.random.default_rng(int(config["seed"]))
+        venv.reset()
+        for _ in range(max(1, 100 // n_envs)):  # warm-up: lazy imports, the generator's first (cold) calls
+            venv.step(rng.uniform(-1, 1, (n_envs, 2)).astype(np.float32))
+        gen_env = _GenerationTime()
+        n_vec = max(1, steps // n_envs)
+        start = time.perf_counter()
+        for _ in tqdm(range(n_vec), desc="env only", unit="vec-step", disable=not progress):
+            _, _, dones, infos = venv.step(rng.uniform(-1, 1, (n_envs, 2)).astype(np.float32))
+            gen_env.add(infos, dones)
+        env_s = time.perf_counter() - start
+        env_sps = n_vec * n_envs / env_s
+
+        bench_config = {**config, "hyperparams": dict(config["hyperparams"])}
+        h = bench_config["hyperparams"]
+        if config["algo"] != "ppo":
+            h["learning_starts"] = int(h["batch_size"])
+            h["buffer_size"] = max(int(h["batch_size"]) * 4, min(int(h["buffer_size"]), 4 * steps))
+        model = build_model(bench_config, venv)
+        gen_train = _GenerationTime()
+
+        class Collect(BaseCallback):
+            def _on_step(self) -> bool:
+                gen_train.add(self.locals["infos"], self.locals["dones"])
+                bar.update(self.model.get_env().num_envs)
+                return True
+
+        warmup = int(h.get("learning_starts", 0)) + 2 * n_envs * int(h.get("n_steps", 1))
+        bar = tqdm(total=warmup + steps, desc="training", unit="step", disable=not progress)
+        model.learn(warmup, callback=Collect())  # fills a batch and compiles nothing; excluded from the timing
+        start = time.perf_counter()
+        model.learn(steps, callback=Collect(), reset_num_timesteps=False)
+        train_s = time.perf_counter() - start
+        bar.close()
+        measured = model.num_timesteps - warmup
+        train_sps = measured / train_s
+        grad_ms = float("nan")
+        if config["algo"] != "ppo":
+            n_grad = 50
+            start = time.perf_counter()
+            model.train(gradient_steps=n_grad, batch_size=int(h["batch_size"]))
+            grad_ms = 1e3 * (time.perf_counter() - start) / n_grad
+    finally:
+        venv.close()
+
+    ratio = gradient_steps_per_env_step(config, n_envs)
+    est_1m = 1e6 / train_sps
+    env_ms = 1e3 / env_sps
+    grad_per_step_ms = ratio * grad_ms if np.isfinite(grad_ms) else float("nan")
+    step_ms = 1e3 / train_sps
+    return {
+        "preset": config["preset"], "algo": config["algo"], "pipeline": config["pipeline"],
+        "generator": config["generator"]["name"] or "none", "n_envs": n_envs, "perturb_prob": round(p, 3),
+        "measured_steps": int(measured),
+        "env_only_steps_per_s": round(env_sps, 1),
+        "training_steps_per_s": round(train_sps, 1),
+        "ratio_training_vs_env_only": round(train_sps / env_sps, 3),
+        "generation_share_of_env_worker_time": round(gen_env.seconds / (env_s * n_envs), 3),
+        "generation_ms_per_perturbed_episode": round(1e3 * gen_env.seconds / max(gen_env.perturbed, 1), 1),
+        "gradient_steps_per_env_step": round(ratio, 4),
+        "gradient_step_ms": round(grad_ms, 2),
+        "ms_per_env_step_training": round(step_ms, 3),
+        "  of which env (wall, parallel workers)": round(env_ms, 3),
+        "  of which gradient updates": round(grad_per_step_ms, 3),
+        "  of which other (SB3 loop, buffer, IPC)": round(step_ms - env_ms - grad_per_step_ms, 3),
+        "estimated_1M_steps_h": round(est_1m / 3600, 2),
+        "target": "1M steps < 2 h",
+        "meets_target": bool(est_1m < TARGET_S),
+    }

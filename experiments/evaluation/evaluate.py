@@ -1,0 +1,364 @@
+"""``seal eval runs``: the ego evaluation protocol (thesis 6.4), results into the results store.
+
+Each ego (a trained run folder, plus the Replay ego by default) is evaluated on the requested settings:
+
+* ``normal``: the dataset's ``eval`` split (Normal scenarios), logged (replayed) adversary, one episode.
+* ``hard``: the ``hard`` split, replayed adversary.
+* ``<generator>`` (``cat``, ``goose``, ``seal``, ``rule``, ... any registered generator): "X-Gen", the Normal
+  eval scenarios perturbed by that generator. Per scenario one normal episode, then K sequential perturbation
+  passes against the same ego, each roll-out appended to the scenario's queue; the last pass is scored
+  (DESIGN section 4, `seal.experiments.evaluation.episodes`). The normal episode is shared with the ``normal`` setting
+  and
+  every generator setting (egos are deterministic).
+* ``real:DIR``: an imported dataset (``seal data import ...``): its ``eval`` split if it has one, else every
+  scenario; replayed adversary.
+
+Every scored episode becomes one results-store row keyed by (run, dataset, setting, scenario); scenarios already
+in the store are skipped, so evaluations are incremental and an interrupted evaluation resumes. Rows of one
+scenario are written in one transaction. Generators are rebuilt for every ego (some keep per-scenario state).
+"""
+
+from __future__ import annotations
+
+import zlib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from seal.adversaries.base import K_ROLLOUTS, available_generators
+from seal.experiments.evaluation.results_store import ResultsStore
+
+REPLAY_SETTINGS = ("normal", "hard")
+REAL_PREFIX = "real:"
+BUILTIN_EGOS = ("replay", "heuristic")
+
+DEFAULTS: dict[str, Any] = {
+    "generators": {},
+    "prior": None,
+    "candidates": None,
+    "k": K_ROLLOUTS,
+    "limit": None,
+    "seed": 0,
+    "env": {},
+}
+"""Eval config keys: ``generators`` (mapping generator name -> constructor kwargs, e.g. ``goose: {model: F}``),
+``prior`` / ``candidates`` (candidate source handed to every generator whose constructor takes one), ``k``
+(perturbation passes), ``limit`` (first N scenarios of each split), ``seed`` (episode / generator rng seed, the
+same for every ego), ``env`` (`ScenarioEnv` config overrides)."""
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One evaluation setting.
+
+    Attributes:
+        name: ``normal``, ``hard``, a generator name or ``real:<absolute dataset dir>``.
+        dataset: absolute dataset directory its scenarios come from.
+        split: dataset split, or None for every scenario.
+        generator: generator name for X-Gen settings, None for replayed-adversary settings.
+    """
+
+    name: str
+    dataset: str
+    split: str | None
+    generator: str | None = None
+
+    @property
+    def kind(self) -> str:
+        return "generator" if self.generator else "replay"
+
+
+def parse_settings(spec: str | Sequence[str], dataset: str | Path | None) -> list[Setting]:
+    """Settings from ``normal,hard,cat,goose,seal,real:DIR`` (text or list); ``dataset`` serves every setting
+    but ``real:DIR``. Errors name the unknown setting and list the valid ones."""
+    from seal.core.dataset import Dataset
+
+    names = [s.strip() for s in spec.split(",")] if isinstance(spec, str) else [str(s).strip() for s in spec]
+    names = [n for n in names if n]
+    if not names:
+        raise ValueError("--settings: no setting given (e.g. normal,hard,cat)")
+    base = str(Path(dataset).resolve()) if dataset is not None else None
+    settings: list[Setting] = []
+    for name in dict.fromkeys(names):
+        if name.startswith(REAL_PREFIX):
+            root = Path(name[len(REAL_PREFIX):]).expanduser().resolve()
+            ds = Dataset.open(root)  # fails with a message naming the directory
+            split = "eval" if ds.splits.get("eval") else None
+            settings.append(Setting(f"{REAL_PREFIX}{root}", str(root), split))
+            continue
+        if base is None:
+            raise ValueError(
+                f"--settings {name}: needs a dataset (--dataset DIR, or runs whose config.yaml names one)"
+            )
+        if name in REPLAY_SETTINGS:
+            settings.append(Setting(name, base, "eval" if name == "normal" else "hard"))
+        elif name in available_generators():
+            settings.append(Setting(name, base, "eval", generator=name))
+        else:
+            raise ValueError(
+                f"--settings: unknown setting {name!r}; use normal, hard, real:DIR or a generator name "
+                f"({', '.join(available_generators())})"
+            )
+    return settings
+
+
+def resolve_eval_config(
+    config_file: str | Path | None = None, run_configs: Sequence[Mapping[str, Any]] = (), **overrides: Any
+) -> dict[str, Any]:
+    """Defaults < generator kwargs of the runs' own configs (``generator: {name, kwargs}``, first run per name) <
+    the YAML ``config_file`` (keys `DEFAULTS`; a preset's ``eval:`` section is also accepted) < ``overrides``
+    (None ignored). The same resolved config serves every ego, so their settings are comparable."""
+    config: dict[str, Any] = {**DEFAULTS, "generators": {}, "env": {}}
+    for rc in run_configs:
+        gen = rc.get("generator") or {}
+        name = gen.get("name") if isinstance(gen, Mapping) else None
+        if name and name not in config["generators"]:
+            config["generators"][name] = dict(gen.get("kwargs") or {})
+    if config_file is not None:
+        path = Path(config_file)
+        loaded = yaml.safe_load(path.read_text()) or {}
+        if not isinstance(loaded, dict):
+            raise ValueError(f"{path}: expected a mapping of eval options")
+        if isinstance(loaded.get("eval"), dict):  # a `seal run` preset: use its eval section
+            loaded = {k: v for k, v in loaded["eval"].items() if k in DEFAULTS}
+        unknown = sorted(set(loaded) - set(DEFAULTS))
+        if unknown:
+            raise ValueError(f"{path}: unknown eval option(s) {unknown}; known: {sorted(DEFAULTS)}")
+        gens = loaded.pop("generators", None) or {}
+        if not isinstance(gens, Mapping):
+            raise ValueError(f"{path}: 'generators' must map generator names to constructor kwargs")
+        for name, kwargs in gens.items():
+            config["generators"][str(name)] = {**config["generators"].get(str(name), {}), **dict(kwargs or {})}
+        config.update(loaded)
+    config.update({k: v for k, v in overrides.items() if v is not None})
+    if int(config["k"]) < 1:
+        raise ValueError(f"k must be >= 1, got {config['k']}")
+    return config
+
+
+# ---------------------------------------------------------------------------------------------------- egos
+@dataclass(frozen=True)
+class EgoSpec:
+    """An ego to evaluate: ``run`` is the results-store key (absolute run folder, or a built-in ego name)."""
+
+    run: str
+    pipeline: str
+    seed: int
+    path: str | None
+    config: dict[str, Any]
+
+    @property
+    def ego(self) -> str:
+        return self.path or self.run
+
+
+def read_run(run: str | Path) -> EgoSpec:
+    """A built-in ego (``replay``, ``heuristic``) or a trained run folder (``config.yaml`` with ``pipeline`` /
+    ``seed`` / ``algo``, and a model; a model ``.zip`` inside a run folder also works)."""
+    text = str(run)
+    if text in BUILTIN_EGOS:
+        return EgoSpec(text, text, 0, None, {})
+    path = Path(run).expanduser().resolve()
+    if path.is_file() and path.suffix == ".zip":
+        path = path.parent
+    cfg_path = path / "config.yaml"
+    if not cfg_path.is_file():
+        raise FileNotFoundError(
+            f"{run}: not 'replay', 'heuristic' or a run folder with config.yaml (train one with `seal train`)"
+        )
+    cfg = yaml.safe_load(cfg_path.read_text()) or {}
+    if not isinstance(cfg, dict):
+        raise ValueError(f"{cfg_path}: expected a mapping")
+    return EgoSpec(str(path), str(cfg.get("pipeline") or "unknown"), int(cfg.get("seed") or 0), str(path), cfg)
+
+
+# ----------------------------------------------------------------------------------------------- protocol
+def _generator_stream(name: str) -> int:
+    """A stable rng stream id per generator name (independent of the order of --settings)."""
+    return zlib.crc32(name.encode())
+
+
+def episode_seed_of(seed: int, index: int) -> int:
+    """Env seed of the normal episode of the ``index``-th scenario of a split (passes use the next seeds)."""
+    return seed * 1_000_003 + 1000 * index
+
+
+def scored_pass(
+    env: Any, scenario: Any, index: int, policy: Any, generator: Any, k: int, seed: int, normal: Any
+) -> tuple[Any, list[float]]:
+    """The X-Gen protocol after the ``normal`` episode of the ``index``-th scenario of its split: K sequential
+    perturbation passes of ``generator`` against ``policy``; returns the last (scored) roll-out and the
+    generation times (s) of all passes. Deterministic for (seed, index, generator name)."""
+    from seal.adversaries.history import RolloutHistory
+    from seal.experiments.evaluation.episodes import perturbation_passes
+
+    history = RolloutHistory(k)
+    history.append(scenario, normal)
+    rng = np.random.default_rng([seed, index, _generator_stream(generator.name)])
+    passes = perturbation_passes(env, scenario, policy, generator, history, rng, k, seed=episode_seed_of(seed, index))
+    return passes[-1].rollout, [p.generation.generation_time_s for p in passes]
+
+
+def _base_row(ego: EgoSpec, setting: Setting, scenario_id: str, k: int) -> dict[str, Any]:
+    return {
+        "run": ego.run, "dataset": setting.dataset, "setting": setting.name, "scenario_id": scenario_id,
+        "pipeline": ego.pipeline, "seed": ego.seed, "ego": ego.ego, "split": setting.split, "k": k,
+    }
+
+
+def evaluate_ego(
+    store: ResultsStore, ego: EgoSpec, settings: Sequence[Setting], config: Mapping[str, Any],
+    progress: bool = True,
+) -> dict[str, int]:
+    """Evaluate one ego on ``settings`` (module docstring), skipping scenarios already in ``store``; returns
+    the number of episode rows written per setting."""
+    from tqdm import tqdm
+
+    from seal.envs.scenario_env import ScenarioEnv
+    from seal.experiments.evaluation.episodes import run_episode
+    from seal.experiments.evaluation.generator_metrics import LoggedAdversary
+    from seal.experiments.evaluation.generators import build_generator, load_eval_scenarios
+    from seal.experiments.evaluation.metrics import episode_metrics
+    from seal.experiments.training.egos import make_ego
+
+    k, seed = int(config["k"]), int(config["seed"])
+    shared = {"prior": config.get("prior"), "candidates": config.get("candidates")}
+    store.upsert_run(ego.run, ego.pipeline, ego.seed, ego.ego, ego.path, ego.config)
+    for s in settings:
+        kwargs = dict(config["generators"].get(s.generator, {})) if s.generator else {}
+        store.upsert_setting(s.dataset, s.name, s.kind, s.split, s.generator, {**_shared_for(s, shared), **kwargs},
+                             k if s.generator else 0, seed)
+
+    # Settings sharing scenarios (normal + every generator setting on the same split) share the normal episode.
+    groups: dict[tuple[str, str | None], list[Setting]] = {}
+    for s in settings:
+        groups.setdefault((s.dataset, s.split), []).append(s)
+    todo = []
+    for (dataset, split), members in groups.items():
+        scenarios = load_eval_scenarios(dataset, split, config.get("limit"))
+        done = {s.name: store.done_scenarios(ego.run, s.dataset, s.name) for s in members}
+        for i, sc in enumerate(scenarios):
+            missing = [s for s in members if sc.scenario_id not in done[s.name]]
+            if missing:
+                todo.append(((dataset, split), scenarios, i, missing))
+    written = {s.name: 0 for s in settings}
+    total = sum(len(m) for *_, m in todo)
+    if not total:
+        return written
+
+    policy = make_ego(ego.ego)
+    generators = {
+        s.generator: build_generator(s.generator, config["generators"].get(s.generator, {}), shared)
+        for s in settings if s.generator
+    }
+    envs: dict[tuple[str, str | None], Any] = {}  # one env per (dataset, split)
+    bar = tqdm(total=total, desc=f"eval {Path(ego.run).name}", unit="episode", disable=not progress)
+    for key, scenarios, i, missing in todo:
+        if key not in envs:
+            envs[key] = ScenarioEnv(list(scenarios), config=dict(config.get("env") or {}))
+        env, scenario = envs[key], scenarios[i]
+        logged = LoggedAdversary.of(scenario)
+        normal = run_episode(env, scenario, policy, seed=episode_seed_of(seed, i))
+        rows = []
+        for s in missing:
+            row = _base_row(ego, s, scenario.scenario_id, k if s.generator else 0)
+            if s.generator is None:
+                row.update(episode_metrics(scenario, normal, (), logged))
+            else:
+                rollout, times = scored_pass(env, scenario, i, policy, generators[s.generator], k, seed, normal)
+                row.update(episode_metrics(scenario, rollout, times, logged))
+            rows.append(row)
+            written[s.name] += 1
+        store.upsert_episodes(rows)  # one transaction per scenario: an interrupted evaluation resumes here
+        bar.update(len(missing))
+    bar.close()
+    for env in envs.values():
+        env.close()
+    return written
+
+
+def _shared_for(setting: Setting, shared: Mapping[str, Any]) -> dict[str, Any]:
+    """The shared options the setting's generator constructor accepts (recorded with the setting)."""
+    if not setting.generator:
+        return {}
+    import inspect
+
+    from seal.adversaries.base import generator_class
+
+    params = inspect.signature(generator_class(setting.generator)).parameters
+    return {k: v for k, v in shared.items() if v is not None and k in params}
+
+
+def default_dataset(egos: Sequence[EgoSpec]) -> str | None:
+    """The dataset the first trained run was trained on (its config's ``dataset``), if any."""
+    for ego in egos:
+        ds = ego.config.get("dataset")
+        if ds:
+            return str(ds)
+    return None
+
+
+def evaluate_job(job: Mapping[str, Any]) -> dict[str, Any]:
+    """One ego's evaluation as a picklable job for `seal.experiments.backends` (keys: ``store``, ``run``,
+    ``settings`` (list of `Setting` fields), ``config``, ``progress``)."""
+    import torch
+
+    torch.set_num_threads(1)
+    ego = read_run(job["run"])
+    settings = [Setting(**s) for s in job["settings"]]
+    with ResultsStore(job["store"]) as store:
+        written = evaluate_ego(store, ego, settings, job["config"], progress=bool(job.get("progress", False)))
+    return {"run": ego.run, "written": written}
+
+
+def evaluate_runs(
+    runs: Sequence[str], settings_spec: str | Sequence[str], store_path: str | Path, dataset: str | Path | None = None,
+    config: Mapping[str, Any] | None = None, replay_ego: bool = True, workers: int = 1, progress: bool = True,
+    backend: Any = None,
+) -> list[dict[str, Any]]:
+    """Evaluate every run (plus the Replay ego unless ``replay_ego`` is False) on the settings; returns one
+    ``{"run", "written"}`` per ego. ``workers`` > 1 evaluates egos in parallel processes (or pass a
+    `seal.experiments.backends` backend)."""
+    egos = [read_run(r) for r in runs]
+    if replay_ego and not any(e.run == "replay" for e in egos):
+        egos.append(read_run("replay"))
+    if not egos:
+        raise ValueError("nothing to evaluate: give run folders (or keep the Replay ego)")
+    dataset = dataset or default_dataset(egos)
+    settings = parse_settings(settings_spec, dataset)
+    config = dict(config) if config is not None else resolve_eval_config(run_configs=[e.config for e in egos])
+    for s in settings:
+        if s.generator:
+            _check_generator_config(s.generator, config)
+    jobs = [
+        {"store": str(store_path), "run": e.ego if e.path else e.run,
+         "settings": [vars(s) for s in settings], "config": config, "progress": progress and workers <= 1}
+        for e in egos
+    ]
+    if backend is None and workers <= 1:
+        return [evaluate_job(job) for job in jobs]
+    from seal.experiments.backends import LocalBackend
+
+    results = (backend or LocalBackend(workers)).map(evaluate_job, jobs, desc="egos")
+    failed = [r for r in results if not r.ok]
+    if failed:
+        raise RuntimeError("; ".join(f"{r.job['run']}: {r.error}" for r in failed))
+    return [r.value for r in results]
+
+
+def _check_generator_config(name: str, config: Mapping[str, Any]) -> None:
+    """Build the generator once up front, so a missing model file fails before any episode runs."""
+    from seal.experiments.evaluation.generators import build_generator
+
+    shared = {"prior": config.get("prior"), "candidates": config.get("candidates")}
+    try:
+        build_generator(name, config["generators"].get(name, {}), shared)
+    except (TypeError, ValueError, FileNotFoundError) as exc:
+        raise ValueError(
+            f"setting {name!r}: cannot build generator {name!r} ({exc}); give its options with --config YAML "
+            f"(generators: {{{name}: {{...}}}}), --gen-opt {name}.KEY=VALUE, --prior or --candidates"
+        ) from None

@@ -1,0 +1,223 @@
+"""``seal eval generators``: compare adversary generators against one ego with the X-Gen protocol.
+
+For every scenario of the split: one normal episode (logged adversary), then for each generator K sequential
+perturbation passes against the same ego, each pass's roll-out appended to that generator's queue for the
+scenario (queues start as K copies of the logged ego future, then the normal episode is appended); the last pass
+is scored. The normal episode is played once and shared by the generators (egos are deterministic). Output in
+``out``: ``config.yaml`` (the resolved config), ``generators.csv`` / ``generators.md`` / ``generators.json``
+(one row per generator, `seal.experiments.evaluation.generator_metrics`) and ``episodes.csv`` (one row per scenario and
+generator).
+"""
+
+from __future__ import annotations
+
+import csv
+import inspect
+import io
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from seal.adversaries.base import K_ROLLOUTS, AdversaryGenerator, available_generators, generator_class
+from seal.adversaries.history import RolloutHistory
+from seal.core.atomic import atomic_write_bytes, atomic_write_json
+from seal.core.scenario import Scenario
+from seal.envs.scenario_env import ScenarioEnv
+from seal.experiments.evaluation.episodes import perturbation_passes, run_episode
+from seal.experiments.evaluation.generator_metrics import EpisodeRecord, LoggedAdversary, markdown_table, summarize
+from seal.experiments.training.egos import make_ego
+
+DEFAULTS: dict[str, Any] = {
+    "generators": ["replay", "rule", "cat"],
+    "ego": "replay",
+    "split": "eval",
+    "limit": None,
+    "k": K_ROLLOUTS,
+    "seed": 0,
+    "prior": None,
+    "candidates": None,
+    "objective": None,
+    "skills": None,
+    "env": {},
+}
+"""Config keys: ``generators`` (names, or a mapping name -> constructor kwargs), ``ego`` (heuristic | replay |
+run path), ``split`` (None = every scenario), ``limit`` (first N scenarios of the split), ``k`` (passes = queue
+length), ``seed``, ``prior`` / ``candidates`` (candidate source handed to every generator that takes one),
+``objective`` / ``skills`` (SEAL's learned objective file or ``cat``, and skill model folder, likewise handed on),
+``env`` (`ScenarioEnv` config overrides)."""
+
+SHARED_OPTIONS = ("prior", "candidates", "objective", "skills")
+"""Options passed to every generator whose constructor has a parameter of that name."""
+
+
+def parse_generators(spec: str | Sequence[str] | Mapping[str, Any]) -> dict[str, dict[str, Any]]:
+    """Generator names (comma-separated text, a list, or a mapping name -> kwargs) checked against the
+    registry; unknown names raise an error listing the available ones.
+
+    In a mapping, an entry may name its generator with a ``generator`` key, so one generator can be compared in
+    several configurations under labels of its own (e.g. ``seal_benign: {generator: seal, switch: benign}``)."""
+    if isinstance(spec, str):
+        spec = [s.strip() for s in spec.split(",") if s.strip()]
+    parsed = {str(k): dict(v or {}) for k, v in spec.items()} if isinstance(spec, Mapping) else {
+        str(name): {} for name in spec
+    }
+    if not parsed:
+        raise ValueError("--generators: no generator given")
+    unknown = [f"{name} (generator: {generator_name(name, kw)})" if "generator" in kw else name
+               for name, kw in parsed.items() if generator_name(name, kw) not in available_generators()]
+    if unknown:
+        raise ValueError(
+            f"--generators: unknown generator(s) {', '.join(unknown)}; available: {', '.join(available_generators())}"
+        )
+    return parsed
+
+
+def generator_name(label: str, kwargs: Mapping[str, Any]) -> str:
+    """The registered generator behind a ``generators`` entry: its ``generator`` key, else the label itself."""
+    return str(kwargs.get("generator", label))
+
+
+def apply_generator_options(generators: dict[str, dict[str, Any]], options: Sequence[str]) -> None:
+    """Apply ``NAME.KEY=VALUE`` options (VALUE read as YAML: numbers, booleans, strings) to ``generators``."""
+    for option in options:
+        target, sep, text = option.partition("=")
+        name, dot, key = target.partition(".")
+        if not (sep and dot and name and key):
+            raise ValueError(f"--gen-opt {option!r}: expected NAME.KEY=VALUE, e.g. goose.model=agent.pt")
+        if name not in generators:
+            raise ValueError(f"--gen-opt {option!r}: generator {name!r} is not among {', '.join(generators)}")
+        generators[name][key] = yaml.safe_load(text)
+
+
+def resolve_config(
+    config_file: str | Path | None = None, gen_opts: Sequence[str] = (), **overrides: Any
+) -> dict[str, Any]:
+    """Defaults < YAML config file < explicit overrides (None values are ignored) < ``gen_opts``
+    (`apply_generator_options`); generators normalised to a mapping name -> constructor kwargs."""
+    config = dict(DEFAULTS)
+    if config_file is not None:
+        path = Path(config_file)
+        loaded = yaml.safe_load(path.read_text()) or {}
+        if not isinstance(loaded, dict):
+            raise ValueError(f"{path}: expected a mapping of options")
+        unknown = set(loaded) - set(DEFAULTS)
+        if unknown:
+            raise ValueError(f"{path}: unknown option(s) {sorted(unknown)}; known: {sorted(DEFAULTS)}")
+        config.update(loaded)
+    config.update({k: v for k, v in overrides.items() if v is not None})
+    config["generators"] = parse_generators(config["generators"])
+    apply_generator_options(config["generators"], gen_opts)
+    if int(config["k"]) < 1:
+        raise ValueError(f"k must be >= 1, got {config['k']}")
+    return config
+
+
+def build_generator(name: str, kwargs: Mapping[str, Any], shared: Mapping[str, Any]) -> AdversaryGenerator:
+    """Instantiate entry ``name`` (a generator name, or a label whose ``kwargs`` name the generator, see
+    `parse_generators`) with ``kwargs`` plus each shared option its constructor accepts."""
+    cls = generator_class(generator_name(name, kwargs))
+    kwargs = {k: v for k, v in kwargs.items() if k != "generator"}
+    params = inspect.signature(cls).parameters
+    merged = {k: v for k, v in shared.items() if v is not None and k in params and k not in kwargs}
+    return cls(**merged, **kwargs)
+
+
+def load_eval_scenarios(dataset: str | Path, split: str | None, limit: int | None) -> list[Scenario]:
+    """Scenarios of ``split`` (None = all), at most ``limit``."""
+    from seal.core.dataset import Dataset
+
+    ds = Dataset.open(dataset)
+    if split is not None and split not in ds.splits:
+        raise ValueError(
+            f"dataset {dataset} has no split {split!r}; splits: {sorted(ds.splits) or 'none'} "
+            "(--all-scenarios ignores splits)"
+        )
+    scenarios = ds.load(split=split, limit=limit)
+    if not scenarios:
+        raise ValueError(f"dataset {dataset}: no scenarios in split {split!r}")
+    return scenarios
+
+
+def evaluate_generators(
+    scenarios: Sequence[Scenario], generators: Mapping[str, AdversaryGenerator], ego_spec: str, k: int = K_ROLLOUTS,
+    seed: int = 0, env_config: Mapping[str, Any] | None = None, progress: bool = True,
+) -> tuple[list[dict[str, Any]], list[EpisodeRecord]]:
+    """Run the protocol (module docstring); returns the summary rows (one per generator) and the episode records."""
+    from tqdm import tqdm
+
+    env = ScenarioEnv(list(scenarios), config=dict(env_config or {}))
+    ego = make_ego(ego_spec)
+    records: dict[str, list[EpisodeRecord]] = {name: [] for name in generators}
+    logged: list[LoggedAdversary] = []
+    for i, scenario in enumerate(tqdm(scenarios, desc="scenarios", unit="scenario", disable=not progress)):
+        episode_seed = seed * 1_000_003 + 1000 * i
+        normal = run_episode(env, scenario, ego, seed=episode_seed)
+        logged.append(LoggedAdversary.of(scenario))
+        for g, (name, generator) in enumerate(generators.items()):
+            history = RolloutHistory(k)
+            history.append(scenario, normal)
+            rng = np.random.default_rng([seed, i, g])
+            passes = perturbation_passes(env, scenario, ego, generator, history, rng, k, seed=episode_seed)
+            last = passes[-1]
+            records[name].append(
+                EpisodeRecord.from_rollout(
+                    scenario, name, last.rollout, [p.generation.generation_time_s for p in passes],
+                    predicted_step=last.generation.predicted_step,
+                    chosen_candidate=last.generation.chosen_candidate,
+                    extra=last.generation.extra,
+                )
+            )
+    env.close()
+    rows = [summarize(records[name], logged) for name in generators]
+    return rows, [r for name in generators for r in records[name]]
+
+
+def _csv(rows: Sequence[dict[str, Any]]) -> bytes:
+    buf = io.StringIO()
+    fields = list(dict.fromkeys(key for row in rows for key in row))  # union, in order of first appearance
+    writer = csv.DictWriter(buf, fieldnames=fields, restval="")
+    writer.writeheader()
+    writer.writerows(rows)
+    return buf.getvalue().encode()
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, np.generic):
+        return _jsonable(value.item())
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    return value
+
+
+def run_eval_generators(
+    dataset: str | Path, out: str | Path, config: dict[str, Any], progress: bool = True
+) -> list[dict[str, Any]]:
+    """Evaluate the configured generators on ``dataset`` and write the results into ``out``; returns the rows."""
+    out = Path(out)
+    scenarios = load_eval_scenarios(dataset, config["split"], config["limit"])
+    shared = {key: config.get(key) for key in SHARED_OPTIONS}
+    generators = {name: build_generator(name, kw, shared) for name, kw in config["generators"].items()}
+    resolved = {**config, "dataset": str(dataset), "scenarios": len(scenarios)}
+    atomic_write_bytes(out / "config.yaml", yaml.safe_dump(_jsonable(resolved), sort_keys=True).encode())
+    rows, records = evaluate_generators(
+        scenarios, generators, config["ego"], k=int(config["k"]), seed=int(config["seed"]),
+        env_config=config["env"], progress=progress,
+    )
+    table = markdown_table(rows)
+    atomic_write_bytes(out / "generators.csv", _csv(rows))
+    atomic_write_json(out / "generators.json", _jsonable({"config": resolved, "rows": rows}))
+    atomic_write_bytes(out / "episodes.csv", _csv([r.row() for r in records]))
+    header = (
+        f"# Generator evaluation\n\nDataset `{dataset}`, split `{config['split']}`, {len(scenarios)} scenarios, "
+        f"ego `{config['ego']}`, K = {config['k']} perturbation passes (the last is scored).\n\n"
+    )
+    atomic_write_bytes(out / "generators.md", (header + table).encode())
+    return rows

@@ -1,0 +1,287 @@
+"""``seal fit goose``: train GOOSE's goal-conditioned agent (SB3 SAC or TD3 + HER) in `GooseEnv` against the
+heuristic reactive ego, then measure its goal success on held-out scenarios against reference policies.
+
+Outputs: the agent file ``--out`` (`seal.adversaries.goose.agent`, written atomically) and a run folder with the
+resolved ``config.yaml``, SB3's ``progress.csv`` (+ TensorBoard events when tensorboard is installed),
+``success.csv`` (goal success rate per ``log_every`` environment steps = observed roll-outs), ``eval.json``
+(held-out success of the zero / random / untrained / trained policies) and ``summary.json``.
+"""
+
+from __future__ import annotations
+
+import csv
+import importlib.util
+import io
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from tqdm import tqdm
+
+from seal.adversaries.goose.agent import ALGOS, GooseAgent, load_goose_agent, policy_kwargs, save_goose_agent
+from seal.adversaries.goose.env import GooseEnv
+from seal.adversaries.goose.spec import GooseSpec
+from seal.core.atomic import atomic_write_bytes, atomic_write_json
+from seal.experiments import presets
+from seal.experiments.evaluation.goose_eval import evaluate, random_actor, zero_actor
+
+PRESETS = ("quick", "standard")
+
+DEFAULTS: dict[str, Any] = {
+    "algo": "sac",
+    "total_steps": 5000,
+    "learning_starts": 300,
+    "batch_size": 128,
+    "buffer_size": 50_000,
+    "learning_rate": 0.001,
+    "gamma": 0.9,
+    "tau": 0.02,
+    "train_freq": 1,
+    "gradient_steps": 1,
+    "net_arch": [128, 128],
+    "gru_hidden": 32,
+    "her_n_sampled_goal": 4,
+    "her_strategy": "future",
+    "td3_action_noise": 0.2,
+    "seed": 0,
+    "split": "train",
+    "limit": None,
+    "eval_split": "eval",
+    "eval_limit": None,
+    "log_every": 500,
+    "spec": {},
+}
+"""Config keys: SB3 hyper-parameters (``algo`` sac | td3, ``total_steps`` = env steps = observed roll-outs,
+``learning_starts`` random-action steps, ``batch_size``, ``buffer_size``, ``learning_rate``, ``gamma``, ``tau``,
+``train_freq``, ``gradient_steps``, ``net_arch``, ``gru_hidden``, ``her_n_sampled_goal``, ``her_strategy``
+future | final | episode, ``td3_action_noise`` Gaussian sigma for TD3), data (``split`` / ``limit`` training
+scenarios, ``eval_split`` / ``eval_limit`` held-out scenarios, None = skip the evaluation when the split is
+None), ``seed``, ``log_every`` (steps per success.csv row) and ``spec`` (`GooseSpec` overrides)."""
+
+
+def load_preset(name: str) -> dict[str, Any]:
+    """The YAML preset ``experiments/configs/goose_<name>.yaml``."""
+    return presets.load_preset("goose", name, PRESETS, DEFAULTS)
+
+
+def _read_yaml(path: Path) -> dict[str, Any]:
+    return presets.read_options(path, DEFAULTS)
+
+
+def resolve_config(preset: str | None = "standard", config_file: str | Path | None = None,
+                   **overrides: Any) -> dict[str, Any]:
+    """Defaults < preset < YAML config file < explicit overrides (None values ignored); validated."""
+    config = dict(DEFAULTS)
+    if preset is not None:
+        config.update(load_preset(preset))
+    if config_file is not None:
+        config.update(_read_yaml(Path(config_file)))
+    unknown = sorted(set(overrides) - set(DEFAULTS))
+    if unknown:
+        raise ValueError(f"unknown option(s) {unknown}; known: {sorted(DEFAULTS)}")
+    config.update({k: v for k, v in overrides.items() if v is not None})
+    if config["algo"] not in ALGOS:
+        raise ValueError(f"algo must be one of {ALGOS}, got {config['algo']!r}")
+    if config["her_strategy"] not in ("future", "final", "episode"):
+        raise ValueError(f"her_strategy must be future, final or episode, got {config['her_strategy']!r}")
+    for key in ("total_steps", "batch_size", "buffer_size", "log_every", "gru_hidden", "train_freq"):
+        if int(config[key]) < 1:
+            raise ValueError(f"{key} must be >= 1, got {config[key]}")
+    GooseSpec.from_dict(config["spec"] or {}, where="config key 'spec'")
+    return config
+
+
+class _Progress:
+    """SB3 callback: a tqdm bar over env steps and the goal-success curve (``success.csv``, one row per
+    ``log_every`` steps: episodes ended in the window and their success rate)."""
+
+    FIELDS = ("steps", "episodes", "success_rate", "success_rate_all", "mean_final_gap_m", "elapsed_s", "steps_per_s")
+
+    def __init__(self, total: int, log_every: int, path: Path, progress: bool) -> None:
+        from stable_baselines3.common.callbacks import BaseCallback
+
+        outer = self
+
+        class Callback(BaseCallback):
+            def _on_training_start(self) -> None:
+                outer.start(self.num_timesteps)
+
+            def _on_step(self) -> bool:
+                outer.on_step(self.num_timesteps, self.locals["dones"], self.locals["infos"])
+                return True
+
+            def _on_training_end(self) -> None:
+                outer.close(self.num_timesteps)
+
+        self.callback = Callback()
+        self.total, self.log_every, self.path, self.show = total, log_every, path, progress
+        self.rows: list[dict[str, Any]] = []
+        self._window: list[tuple[bool, float]] = []
+        self._all: list[bool] = []
+        self._bar: Any = None
+        self._t0 = time.perf_counter()
+
+    def start(self, steps: int) -> None:
+        self._t0 = time.perf_counter()
+        self._bar = tqdm(total=self.total, initial=steps, desc="fit goose", unit="roll-out", disable=not self.show)
+
+    def on_step(self, steps: int, dones: np.ndarray, infos: list[dict[str, Any]]) -> None:
+        for done, info in zip(dones, infos, strict=True):
+            if done:
+                gap = float(info.get("achieved_goal", [np.nan])[0])
+                self._window.append((bool(info.get("is_success", False)), gap))
+                self._all.append(bool(info.get("is_success", False)))
+        self._bar.update(1)
+        if steps % self.log_every == 0:
+            self._flush(steps)
+
+    def _flush(self, steps: int) -> None:
+        elapsed = time.perf_counter() - self._t0
+        w = self._window
+        row = {
+            "steps": steps,
+            "episodes": len(w),
+            "success_rate": round(float(np.mean([s for s, _ in w])), 4) if w else "",
+            "success_rate_all": round(float(np.mean(self._all)), 4) if self._all else "",
+            "mean_final_gap_m": round(float(np.nanmean([g for _, g in w])), 3) if w else "",
+            "elapsed_s": round(elapsed, 1),
+            "steps_per_s": round(steps / max(elapsed, 1e-9), 2),
+        }
+        self.rows.append(row)
+        self._window = []
+        self._bar.set_postfix(success=row["success_rate"], refresh=False)
+        buf = io.StringIO()
+        writer = csv.DictWriter(buf, fieldnames=self.FIELDS)
+        writer.writeheader()
+        writer.writerows(self.rows)
+        atomic_write_bytes(self.path, buf.getvalue().encode())
+
+    def close(self, steps: int) -> None:
+        if self._window:
+            self._flush(steps)
+        if self._bar is not None:
+            self._bar.close()
+
+
+def _scenarios(dataset: str | Path, split: str | None, limit: int | None) -> list:
+    from seal.core.dataset import Dataset
+
+    ds = Dataset.open(dataset)
+    if split is not None and split not in ds.splits:
+        raise ValueError(f"dataset {dataset} has no split {split!r}; splits: {sorted(ds.splits) or 'none'}")
+    scenarios = ds.load(split=split, limit=limit)
+    if not scenarios:
+        raise ValueError(f"dataset {dataset}: split {split!r} is empty")
+    return scenarios
+
+
+def build_model(env: GooseEnv, config: dict[str, Any], spec: GooseSpec) -> Any:
+    """An SB3 SAC / TD3 model with the GOOSE policy and a HER replay buffer, from a resolved config."""
+    from stable_baselines3 import SAC, TD3, HerReplayBuffer
+    from stable_baselines3.common.noise import NormalActionNoise
+
+    common = dict(
+        learning_rate=config["learning_rate"], buffer_size=int(config["buffer_size"]),
+        learning_starts=int(config["learning_starts"]), batch_size=int(config["batch_size"]),
+        tau=config["tau"], gamma=config["gamma"], train_freq=int(config["train_freq"]),
+        gradient_steps=int(config["gradient_steps"]), replay_buffer_class=HerReplayBuffer,
+        replay_buffer_kwargs={"n_sampled_goal": int(config["her_n_sampled_goal"]),
+                              "goal_selection_strategy": config["her_strategy"]},
+        policy_kwargs=policy_kwargs(spec, config["net_arch"], config["gru_hidden"]),
+        seed=int(config["seed"]), device="cpu", verbose=0,
+    )
+    if config["algo"] == "sac":
+        return SAC("MultiInputPolicy", env, **common)
+    noise = NormalActionNoise(np.zeros(12), float(config["td3_action_noise"]) * np.ones(12))
+    return TD3("MultiInputPolicy", env, action_noise=noise, **common)
+
+
+def default_run_dir(out: str | Path) -> Path:
+    out = Path(out)
+    return out.with_name(out.stem + "_run")
+
+
+def fit_goose(
+    dataset: str | Path, out: str | Path, config: dict[str, Any], run_dir: str | Path | None = None,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Train, save the agent to ``out``, evaluate; returns the summary (also written to the run folder)."""
+    import torch
+    from stable_baselines3.common.logger import configure
+
+    spec = GooseSpec.from_dict(config["spec"] or {}, where="config key 'spec'")
+    train = _scenarios(dataset, config["split"], config["limit"])
+    held_scenarios = None
+    if config["eval_split"] is not None:
+        held_scenarios = _scenarios(dataset, config["eval_split"], config["eval_limit"])
+    out = Path(out)
+    run = Path(run_dir) if run_dir is not None else default_run_dir(out)
+    run.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(run / "config.yaml", yaml.safe_dump(
+        {**config, "dataset": str(dataset), "out": str(out)}, sort_keys=True).encode())
+    torch.set_num_threads(1)  # small networks: threads only add overhead on a shared 2-core machine
+
+    env = GooseEnv(train, spec)
+    model = build_model(env, config, spec)
+    formats = ["csv"] + (["tensorboard"] if importlib.util.find_spec("tensorboard") is not None else [])
+    model.set_logger(configure(str(run), formats))
+
+    held_out = None if held_scenarios is None else GooseEnv(held_scenarios, spec, skip_solved=False)
+    ids = [s.scenario_id for s in held_out.scenarios] if held_out is not None else []
+
+    evaluation: dict[str, Any] = {}
+    if held_out is not None:
+        print(f"held-out baseline on {len(ids)} {config['eval_split']} scenarios (zero, random, untrained)")
+        untrained = GooseAgent(model.policy, spec, config["algo"])
+        evaluation.update(evaluate(held_out, ids, {
+            "zero": zero_actor, "random": random_actor(int(config["seed"])), "untrained": untrained.act,
+        }, progress))
+
+    tracker = _Progress(int(config["total_steps"]), int(config["log_every"]), run / "success.csv", progress)
+    start = time.perf_counter()
+    model.learn(total_timesteps=int(config["total_steps"]), callback=tracker.callback)
+    train_s = time.perf_counter() - start
+    drawn, solved = env.start_counts
+    summary_train = {
+        "train_scenarios": len(train), "train_solved_at_start": solved, "train_scenarios_drawn": drawn,
+        "train_seconds": round(train_s, 1),
+        "env_steps": int(model.num_timesteps), "steps_per_s": round(model.num_timesteps / train_s, 2),
+        "success_curve": tracker.rows,
+    }
+    save_goose_agent(out, model.policy, config["algo"], spec, config["net_arch"], config["gru_hidden"],
+                     summary={k: v for k, v in summary_train.items() if k != "success_curve"})
+
+    if held_out is not None:
+        print(f"held-out evaluation of the trained agent (as saved in {out}) on {len(ids)} scenarios")
+        evaluation.update(evaluate(held_out, ids, {"trained": load_goose_agent(out).act}, progress))
+        atomic_write_json(run / "eval.json", evaluation)
+    summary = {
+        **summary_train, "out": str(out), "run_dir": str(run),
+        "held_out": {name: {k: v for k, v in r.items() if k != "rows"} for name, r in evaluation.items()},
+    }
+    atomic_write_json(run / "summary.json", summary)
+    return summary
+
+
+def format_summary(summary: dict[str, Any]) -> str:
+    """Plain-text report: training speed, the success curve and the held-out comparison."""
+    lines = [
+        f"agent: {summary['out']}   run folder: {summary['run_dir']}",
+        f"trained {summary['env_steps']} roll-outs in {summary['train_seconds']} s ({summary['steps_per_s']}/s) on "
+        f"{summary['train_scenarios']} scenarios ({summary['train_solved_at_start']} of "
+        f"{summary['train_scenarios_drawn']} drawn were solved by the log already and skipped)",
+        "goal success per window (steps: success rate over episodes ended in the window):",
+    ]
+    lines += [
+        f"  {r['steps']:>7}: {r['success_rate']!s:>6}  ({r['episodes']} episodes)" for r in summary["success_curve"]
+    ]
+    if summary["held_out"]:
+        lines.append("held-out goal success (all | not solved by the log | updates used | median final goal):")
+        for name, r in summary["held_out"].items():
+            lines.append(
+                f"  {name:>9}: {r['success_rate']:.3f} | {r['success_rate_unsolved']:.3f} | "
+                f"{r['mean_updates_unsolved']:.2f} | {r['median_final_goal_unsolved']}"
+            )
+    return "\n".join(lines)

@@ -1,0 +1,360 @@
+"""``seal fit objective`` / ``seal eval objective``: SEAL's learned objective pi_score (thesis 6.3.1).
+
+1. Labels (`seal.experiments.fitting.objective_labels`): for every scenario of the training split and of the held-out
+split,
+   the 32 prior candidates and the logged adversary are rolled out against the heuristic ego (resumable chunks
+   under ``OUT/labels/<split>/``, in parallel).
+2. Training (`seal.models.objective.train`): MSE on [f_coll, f_diff] over groups of (previous roll-out, all candidates)
+   pairs, plus a penalty keeping the logits near closeness (and optionally a listwise ranking loss); early stopping
+   and model selection on the validation Spearman of a held-out share of the training scenarios
+   (``train_log.csv`` has it per epoch).
+3. Report on the held-out split (scenarios never trained on), ``report.json`` + ``report.md``:
+
+   * MSE per head over all pairs and over the pairs whose previous roll-out is the logged-adversary episode;
+   * ranking with the logged-adversary episode as the previous roll-out: Spearman correlation between the score
+     and the simulated ``f_coll + f_diff`` over the 32 candidates of a scenario (mean over scenarios), how often
+     the score's top-1 is in the simulated top-3, and the simulated value of the chosen candidate;
+   * the same for K = 5 previous roll-outs (the logged one and 4 drawn from the candidates' episodes; the
+     simulated value is ``f_coll + mean_i f_diff_i``), which is how SEAL uses the score;
+   * baselines scored the same way: closeness (``exp(-min_t distance / 8)`` between candidate and previous
+     roll-out: f_coll assuming the ego does not react), CAT's heuristic score (ties broken by closeness) and the
+     prior probability;
+   * ``rank()`` latency for 32 candidates x K = 5 on one thread.
+
+Outputs in ``--out``: ``objective.pt`` (+ ``objective.json``), ``labels/``, ``config.yaml`` (resolved),
+``train_log.csv``, ``report.json``, ``report.md``.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from seal.core.atomic import atomic_write_bytes, atomic_write_json
+from seal.experiments import presets
+from seal.models.objective.labels import LOGGED_ROW, LabelSet
+
+PRESETS = ("quick", "standard")
+MODEL_FILE = "objective.pt"
+K_PREV = 5
+"""Previous roll-outs per scenario in the K-roll-out ranking metric (SEAL's K)."""
+LATENCY_CALLS = 200
+
+DEFAULTS: dict[str, Any] = {
+    "split": "train",
+    "eval_split": "eval",
+    "limit": None,
+    "eval_limit": None,
+    "prior": None,
+    "candidates": None,
+    "n_candidates": 32,
+    "seed": 0,
+    "threads": 1,
+    "workers": 2,
+    "chunk_size": 10,
+    "model": {},
+    "train": {},
+}
+"""Config keys: ``split`` (training scenarios) and ``eval_split`` (held-out report), ``limit`` / ``eval_limit``
+(first N scenarios of each), the candidate source (``prior``: a trajectory prior file, or ``candidates``: a
+built-in source name), ``n_candidates`` per scenario, ``seed``, torch ``threads`` for training, label building
+(``workers`` processes, ``chunk_size`` scenarios per resumable chunk), ``model``
+(`seal.models.objective.ObjectiveConfig` overrides) and ``train`` (`seal.models.objective.TrainConfig` overrides)."""
+
+
+def load_preset(name: str) -> dict[str, Any]:
+    """The YAML preset ``experiments/configs/objective_<name>.yaml``."""
+    return presets.load_preset("objective", name, PRESETS, DEFAULTS)
+
+
+def resolve_config(preset: str | None = "standard", config_file: str | Path | None = None,
+                   **overrides: Any) -> dict[str, Any]:
+    """Defaults < preset < YAML config file < explicit overrides (None values ignored); validated."""
+    from seal.models.objective import ObjectiveConfig, TrainConfig
+
+    config = presets.layered_options("objective", PRESETS, DEFAULTS, preset, config_file, overrides)
+    ObjectiveConfig.from_dict(config["model"], "config key 'model'")
+    TrainConfig.from_dict(config["train"], "config key 'train'")
+    for key in ("workers", "chunk_size", "n_candidates", "threads"):
+        if int(config[key]) < 1:
+            raise ValueError(f"config key {key!r} must be >= 1, got {config[key]}")
+    for key in ("limit", "eval_limit"):
+        if config[key] is not None and int(config[key]) < 1:
+            raise ValueError(f"config key {key!r} must be >= 1 or null, got {config[key]}")
+    if (config["prior"] is None) == (config["candidates"] is None):
+        raise ValueError("give exactly one candidate source: --prior FILE (config key 'prior') or --candidates NAME "
+                         "(config key 'candidates', e.g. lanes or constant_velocity)")
+    return config
+
+
+def labels_for_split(
+    dataset: str | Path, split: str, limit: int | None, folder: Path, config: dict[str, Any], progress: bool,
+    log: Callable[[str], None],
+) -> tuple[LabelSet, float]:
+    """Build (or resume / reuse) the labels of ``split``'s first ``limit`` scenarios in ``folder``; returns the
+    labels and the seconds it took."""
+    from seal.core.dataset import Dataset
+    from seal.experiments.fitting.objective_labels import build_labels, source_spec
+
+    ds = Dataset.open(dataset)
+    if split not in ds.splits:
+        raise ValueError(f"dataset {dataset} has no split {split!r}; splits: {sorted(ds.splits) or 'none'} "
+                         "(make them with `seal data split`)")
+    scenarios = ds.load(split=split, limit=limit)
+    if not scenarios:
+        raise ValueError(f"dataset {dataset}: split {split!r} is empty")
+    spec = source_spec(config["prior"], config["candidates"])
+    start = time.perf_counter()
+    labels = build_labels(scenarios, folder, spec, n_candidates=int(config["n_candidates"]),
+                          workers=int(config["workers"]), chunk_size=int(config["chunk_size"]), progress=progress,
+                          desc=f"labels {split}", log=log)
+    return labels, round(time.perf_counter() - start, 1)
+
+
+def label_stats(labels: LabelSet) -> dict[str, Any]:
+    """How the simulated labels look (share of crashes, of candidates that change the ego's behaviour)."""
+    logged = labels.f_diff[:, LOGGED_ROW]
+    return {
+        "scenarios": labels.n_scenarios,
+        "candidates": labels.n_candidates,
+        "pairs": int(labels.f_diff.size),
+        "crash_share": round(float(labels.crashed.mean()), 4),
+        "scenarios_with_a_crash": round(float(labels.crashed.any(axis=1).mean()), 4),
+        "f_coll_mean": round(float(labels.f_coll.mean()), 4),
+        "f_diff_mean_all_prev": round(float(labels.f_diff.mean()), 4),
+        "f_diff_mean_logged_prev": round(float(logged.mean()), 4),
+        "share_f_diff_gt_0.5_logged_prev": round(float((logged > 0.5).mean()), 4),
+    }
+
+
+def closeness(labels: LabelSet, prev: np.ndarray) -> np.ndarray:
+    """``[S, len(prev), N]`` f_coll of each candidate against previous roll-out rows ``prev [S, P]``, as if the
+    ego did not react (the no-simulation heuristic)."""
+    from seal.scoring.criticality import f_coll
+
+    s = np.arange(labels.n_scenarios)[:, None]
+    ego = labels.ego_xy[s, prev][:, :, None]  # [S, P, 1, T, 2]
+    valid = labels.ego_valid[s, prev][:, :, None]
+    return f_coll(ego, labels.cand_xy[:, None], valid=valid)
+
+
+def _prev_rows(labels: LabelSet, seed: int) -> np.ndarray:
+    """``[S, K_PREV]`` previous roll-outs per scenario: the logged one and K - 1 candidates' episodes."""
+    rng = np.random.default_rng(seed)
+    m = labels.ego_xy.shape[1]
+    k = min(K_PREV, m)
+    rows = [np.r_[LOGGED_ROW, 1 + rng.choice(m - 1, k - 1, replace=False)] for _ in range(labels.n_scenarios)]
+    return np.asarray(rows, dtype=np.int64)
+
+
+def evaluate(model: Any, labels: LabelSet, seed: int = 0) -> dict[str, Any]:
+    """Held-out metrics of the module docstring for ``model`` (an `ObjectiveModel`) on ``labels``."""
+    from seal.models.objective.metrics import ranking_report
+    from seal.models.objective.train import PairTensors, predict_pairs
+
+    tensors = PairTensors(labels)
+    all_pairs = tensors.pairs(np.arange(labels.n_scenarios), "all")
+    pred = predict_pairs(model, tensors, all_pairs)
+    s, i, j = all_pairs.T
+    target = np.stack([labels.f_coll[s, j], labels.f_diff[s, i, j]], axis=-1)
+    logged = i == LOGGED_ROW
+
+    def mse(rows: np.ndarray) -> dict[str, float]:
+        err = (pred[rows] - target[rows]) ** 2
+        return {"f_coll": round(float(err[:, 0].mean()), 5), "f_diff": round(float(err[:, 1].mean()), 5),
+                "pairs": int(rows.sum())}
+
+    n_s, m, n = labels.n_scenarios, labels.ego_xy.shape[1], labels.n_candidates
+    pred_grid = pred.reshape(n_s, m, n, 2)
+
+    # The logged-adversary episode as the previous roll-out.
+    sim_logged = labels.f_coll + labels.f_diff[:, LOGGED_ROW]
+    close_logged = closeness(labels, np.full((n_s, 1), LOGGED_ROW))[:, 0]
+    scores_logged = {
+        "pi_score": pred_grid[:, LOGGED_ROW].sum(axis=-1),
+        "closeness": close_logged,
+        "cat": labels.cat_score + 1e-6 * close_logged,
+        "prior_probability": labels.probs.astype(np.float64),
+    }
+    # K = 5 previous roll-outs: SEAL's selection score against f_coll + mean_i f_diff_i.
+    prev = _prev_rows(labels, seed)
+    rows = np.arange(n_s)[:, None]
+    sim_k = labels.f_coll + labels.f_diff[rows, prev].mean(axis=1)
+    scores_k = {
+        "pi_score": pred_grid[rows, prev].sum(axis=-1).mean(axis=1),
+        "closeness": closeness(labels, prev).mean(axis=1),
+        "prior_probability": labels.probs.astype(np.float64),
+    }
+    return {
+        "mse": {"all_prev": mse(np.ones(len(all_pairs), dtype=bool)), "logged_prev": mse(logged)},
+        "ranking_logged_prev": {k: ranking_report(v, sim_logged) for k, v in scores_logged.items()},
+        "ranking_k5_prev": {k: ranking_report(v, sim_k) for k, v in scores_k.items()},
+        "labels": label_stats(labels),
+    }
+
+
+def rank_latency_ms(model: Any, n_calls: int = LATENCY_CALLS, seed: int = 0) -> dict[str, float]:
+    """Median / p95 wall time (ms) of ``model.rank`` for 32 candidates x K = 5 roll-outs on one torch thread."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        rng = np.random.default_rng(seed)
+        t = model.config.n_steps
+        cand_xy = np.cumsum(np.broadcast_to(rng.normal(size=(32, 1, 2)), (32, t, 2)), axis=1)
+        cand_h = np.arctan2(cand_xy[..., 1], cand_xy[..., 0])
+        ego_xy = np.cumsum(np.ones((K_PREV, t, 2)), axis=1)
+        ego_h, ego_v = np.zeros((K_PREV, t)), np.ones((K_PREV, t), dtype=bool)
+        for _ in range(10):
+            model.rank(cand_xy, cand_h, ego_xy, ego_h, ego_v)
+        times = []
+        for _ in range(n_calls):
+            start = time.perf_counter()
+            model.rank(cand_xy, cand_h, ego_xy, ego_h, ego_v)
+            times.append(time.perf_counter() - start)
+    finally:
+        torch.set_num_threads(threads)
+    ms = np.asarray(times) * 1e3
+    return {"median_ms": round(float(np.median(ms)), 2), "p95_ms": round(float(np.percentile(ms, 95)), 2),
+            "calls": n_calls, "candidates": 32, "rollouts": K_PREV}
+
+
+def _write_log(path: Path, history: list[dict[str, float]]) -> None:
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=["epoch", "train_loss", "val_loss", "val_spearman", "seconds"])
+    writer.writeheader()
+    writer.writerows(history)
+    atomic_write_bytes(path, buf.getvalue().encode())
+
+
+def fit_objective(dataset: str | Path, out: str | Path, config: dict[str, Any], progress: bool = True,
+                  log: Callable[[str], None] = print) -> dict[str, Any]:
+    """Run the pipeline of the module docstring; returns the report (also in ``out/report.json`` / ``.md``)."""
+    import torch
+    from tqdm import tqdm
+
+    from seal.models.objective import ObjectiveConfig, TrainConfig, train_objective
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(out / "config.yaml", yaml.safe_dump({**config, "dataset": str(dataset), "out": str(out)},
+                                                           sort_keys=True).encode())
+    timings: dict[str, float] = {}
+    train_labels, timings["labels_train_s"] = labels_for_split(
+        dataset, config["split"], config["limit"], out / "labels" / config["split"], config, progress, log)
+    eval_labels, timings["labels_eval_s"] = labels_for_split(
+        dataset, config["eval_split"], config["eval_limit"], out / "labels" / config["eval_split"], config, progress,
+        log)
+    overlap = set(train_labels.scenario_ids.tolist()) & set(eval_labels.scenario_ids.tolist())
+    if overlap:
+        raise ValueError(f"splits {config['split']!r} and {config['eval_split']!r} share {len(overlap)} scenarios; "
+                         "the report must be on held-out scenarios")
+
+    torch.set_num_threads(int(config["threads"]))
+    train_cfg = TrainConfig.from_dict({"seed": int(config["seed"]), **config["train"]})
+    bar = tqdm(total=train_cfg.max_epochs, desc="training", unit="epoch", disable=not progress)
+
+    def on_step(epoch: int, step: int, steps: int) -> None:
+        if step == steps - 1:
+            bar.update(1)
+
+    model, fit = train_objective(train_labels, ObjectiveConfig.from_dict(config["model"]), train_cfg,
+                                 on_step=on_step, log=(lambda m: bar.write(m)) if progress else log)
+    bar.close()
+    timings["training_s"] = fit.seconds
+    _write_log(out / "train_log.csv", fit.history)
+    report = {
+        "dataset": str(dataset), "train_split": config["split"], "eval_split": config["eval_split"],
+        "out": str(out), "model": model.config.to_dict(), "fit": model.info.get("fit", {}),
+        "train_labels": label_stats(train_labels),
+    }
+    report.update(evaluate(model, eval_labels, int(config["seed"])))
+    report["rank_latency"] = rank_latency_ms(model)
+    report["timings"] = timings
+    model.info.update({"dataset": str(dataset), "train_split": config["split"],
+                       "train_scenarios": train_labels.n_scenarios, "candidate_source": config["prior"]
+                       or config["candidates"], "held_out": {k: report[k] for k in ("mse", "ranking_logged_prev")}})
+    model.save(out / MODEL_FILE)
+    write_report(out, report)
+    return report
+
+
+def eval_objective(model_path: str | Path, dataset: str | Path, config: dict[str, Any], labels_dir: str | Path,
+                   out: str | Path, progress: bool = True, log: Callable[[str], None] = print) -> dict[str, Any]:
+    """Recompute the held-out report of a saved model on ``config['eval_split']`` (labels built or reused in
+    ``labels_dir``); writes ``report.json`` / ``report.md`` to ``out``."""
+    from seal.models.objective import ObjectiveModel
+
+    model = ObjectiveModel.load(model_path)
+    labels, seconds = labels_for_split(dataset, config["eval_split"], config["eval_limit"], Path(labels_dir), config,
+                                       progress, log)
+    report: dict[str, Any] = {"model_file": str(model_path), "dataset": str(dataset),
+                              "eval_split": config["eval_split"], "out": str(out), "model": model.config.to_dict()}
+    report.update(evaluate(model, labels, int(config["seed"])))
+    report["rank_latency"] = rank_latency_ms(model)
+    report["timings"] = {"labels_eval_s": seconds}
+    write_report(Path(out), report)
+    return report
+
+
+def write_report(out: Path, report: dict[str, Any]) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(out / "report.json", report)
+    atomic_write_bytes(out / "report.md", format_report(report).encode())
+
+
+def format_report(r: dict[str, Any]) -> str:
+    """Markdown report of `evaluate`'s metrics."""
+    lab = r["labels"]
+    lines = [
+        f"# pi_score on held-out split `{r['eval_split']}` of `{r['dataset']}`",
+        "",
+        f"{lab['scenarios']} held-out scenarios x {lab['candidates']} candidates; ego crashes into the adversary in "
+        f"{lab['crash_share']:.1%} of candidate episodes; mean f_coll {lab['f_coll_mean']:.3f}, mean f_diff "
+        f"{lab['f_diff_mean_logged_prev']:.3f} (logged previous roll-out) / {lab['f_diff_mean_all_prev']:.3f} (any).",
+        "",
+        "## MSE per head",
+        "",
+        "| previous roll-out | f_coll | f_diff | pairs |",
+        "|---|---|---|---|",
+    ]
+    for k, v in r["mse"].items():
+        lines.append(f"| {k.replace('_', ' ')} | {v['f_coll']:.5f} | {v['f_diff']:.5f} | {v['pairs']} |")
+    for key, title in (("ranking_logged_prev", "previous roll-out = logged-adversary episode"),
+                       ("ranking_k5_prev", f"K = {K_PREV} previous roll-outs (mean score)")):
+        lines += ["", f"## Ranking the candidates, {title}", "",
+                  "| score | Spearman mean | median | share >= 0.6 | top-1 in sim. top-3 | sim. value of top-1 "
+                  "| best possible |", "|---|---|---|---|---|---|---|"]
+        for name, m in r[key].items():
+            lines.append(f"| {name} | {m['spearman_mean']:.3f} | {m['spearman_median']:.3f} | "
+                         f"{m['share_spearman_ge_0.6']:.2f} | {m['top1_in_top3']:.2f} | {m['chosen_target_mean']:.3f} "
+                         f"| {m['best_target_mean']:.3f} |")
+    lat = r["rank_latency"]
+    lines += ["", f"rank() latency, {lat['candidates']} candidates x K = {lat['rollouts']}, one thread: median "
+              f"{lat['median_ms']} ms, p95 {lat['p95_ms']} ms.", "", f"Timings (s): {r['timings']}"]
+    if "fit" in r:
+        lines.append(f"Training: {r['fit']}")
+    return "\n".join(lines) + "\n"
+
+
+def format_summary(r: dict[str, Any]) -> str:
+    """Short plain-text summary for the terminal."""
+    m = r["ranking_logged_prev"]
+    p, c = m["pi_score"], m["closeness"]
+    return (f"pi_score written to {r['out']}\n"
+            f"held-out MSE (logged prev): f_coll {r['mse']['logged_prev']['f_coll']:.5f}, f_diff "
+            f"{r['mse']['logged_prev']['f_diff']:.5f}; all prev: f_coll {r['mse']['all_prev']['f_coll']:.5f}, f_diff "
+            f"{r['mse']['all_prev']['f_diff']:.5f}\n"
+            f"Spearman mean {p['spearman_mean']:.3f} (closeness baseline {c['spearman_mean']:.3f}), top-1 in top-3 "
+            f"{p['top1_in_top3']:.2f} (baseline {c['top1_in_top3']:.2f}); K={K_PREV}: Spearman "
+            f"{r['ranking_k5_prev']['pi_score']['spearman_mean']:.3f}\n"
+            f"rank() {r['rank_latency']['median_ms']} ms median; timings {r['timings']}\n"
+            f"full report: {Path(r['out']) / 'report.md'}")

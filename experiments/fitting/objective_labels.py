@@ -1,0 +1,206 @@
+"""Simulated labels for pi_score (thesis 6.3.1): every candidate adversary future rolled out against the reactive
+heuristic ego.
+
+Per scenario: the candidate source (the trajectory prior pi_gen) gives N = 32 candidates for the adversary. The
+heuristic ego (`seal.experiments.training.egos.HeuristicEgo`) plays one episode against the logged adversary and one
+against
+each candidate, which the adversary replays kinematically (`ReplayBehavior(candidate_track(...))`, as CAT does).
+The heuristic ego is deterministic given the adversary, so each of these M = N + 1 ego roll-outs is a valid
+"previous roll-out" for every candidate j: the scenario yields M x N pairs (see `seal.models.objective.labels`).
+
+Labels (`seal.scoring.criticality`, b = 8 m), over the candidates' steps ``CURRENT_STEP + 1 .. CURRENT_STEP + 80``:
+
+* ``f_coll[j]``: ego vs adversary positions of episode j over the steps where both exist; 1 when the ego hit
+  the adversary (a crash with a third vehicle does not count: f_coll measures ego-adversary closeness).
+* ``f_diff[i, j]``: ego of episode j vs ego of episode i. An episode that ended early (crash, leaving the road,
+  arrival) keeps the ego at its last position for the rest of the horizon: a crash at step 30 is a large change
+  of behaviour from an episode that drove on, not a shorter comparison.
+
+Also stored: CAT's heuristic score of each candidate against the logged-adversary roll-out (`cat_select`, the
+report's baseline) and the prior's probabilities.
+
+Building is resumable and parallel: scenarios are cut into chunks of ``chunk_size``; each finished chunk is an
+``.npz`` (atomic write) in the output folder and is skipped by a re-run with the same settings (a
+``state.json`` fingerprint of scenarios and settings guards against mixing runs).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from seal.core.chunked import fingerprint, run_chunked
+from seal.core.scenario import CURRENT_STEP, HEADING, LENGTH, N_FUTURE, VALID, WIDTH, Scenario, X, Y
+from seal.models.objective.labels import LabelSet
+
+N_CANDIDATES = 32
+"""Candidates per scenario (pi_gen's mode count)."""
+LABEL_FORMAT = 1
+"""Bumped when the label definition changes (invalidates finished chunks)."""
+
+_SOURCE_CACHE: dict[str, Any] = {}
+
+
+def _candidate_source(spec: str) -> Any:
+    """The candidate source for ``spec`` ("prior:<path>" or a built-in name), built once per process."""
+    if spec not in _SOURCE_CACHE:
+        from seal.adversaries.candidate_sources import named_source, prior_source
+
+        _SOURCE_CACHE[spec] = prior_source(spec[len("prior:"):]) if spec.startswith("prior:") else named_source(spec)
+    return _SOURCE_CACHE[spec]
+
+
+def source_spec(prior: str | Path | None = None, candidates: str | None = None) -> str:
+    """The candidate source as a string that worker processes can rebuild: exactly one of a prior file or a
+    built-in name (`seal.adversaries.candidate_sources.NAMED_SOURCES`)."""
+    from seal.adversaries.candidate_sources import NAMED_SOURCES
+
+    if (prior is None) == (candidates is None):
+        raise ValueError("objective labels need exactly one candidate source: a trajectory prior file (--prior FILE, "
+                         f"'prior:' in configs) or a built-in source ({', '.join(NAMED_SOURCES)}: --candidates NAME)")
+    if prior is not None:
+        path = Path(prior)
+        if not path.is_file():
+            raise FileNotFoundError(f"trajectory prior file {path} does not exist (fit one with `seal fit prior`)")
+        return f"prior:{path.resolve()}"
+    if candidates not in NAMED_SOURCES:
+        raise ValueError(f"unknown candidate source {candidates!r}; choose from {', '.join(NAMED_SOURCES)}")
+    return str(candidates)
+
+
+def _future(track: np.ndarray, n_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """xy ``[n, 2]``, heading ``[n]``, valid ``[n]`` of a ``[T, 8]`` track at steps CURRENT_STEP + 1 .. + n."""
+    out = np.zeros((n_steps, 8))
+    part = track[CURRENT_STEP + 1 : CURRENT_STEP + 1 + n_steps]
+    out[: len(part)] = part
+    return out[:, [X, Y]], out[:, HEADING], out[:, VALID] > 0.5
+
+
+def hold_last(xy: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """``[..., T, 2]`` positions with every step after the last valid one (and any gap) held at the last valid
+    position; steps before the first valid one take the first valid position."""
+    n = valid.shape[-1]
+    idx = np.broadcast_to(np.arange(n), valid.shape)
+    last = np.maximum.accumulate(np.where(valid, idx, -1), axis=-1)
+    first = np.argmax(valid, axis=-1)[..., None]
+    src = np.where(last < 0, first, last)
+    return np.take_along_axis(xy, src[..., None].repeat(2, axis=-1), axis=-2)
+
+
+def label_scenario(scenario: Scenario, source: Callable[[Scenario], Any], n_candidates: int = N_CANDIDATES,
+                   n_steps: int = N_FUTURE) -> LabelSet:
+    """Roll out the logged adversary and every candidate against the heuristic ego; a `LabelSet` of one row."""
+    from seal.adversaries.candidate_path import candidate_track
+    from seal.adversaries.cat.select import cat_select
+    from seal.envs.behaviors import ReplayBehavior
+    from seal.envs.scenario_env import ScenarioEnv
+    from seal.experiments.evaluation.episodes import run_episode
+    from seal.experiments.training.egos import HeuristicEgo
+    from seal.scoring.criticality import f_coll, f_diff
+
+    adv = scenario.adv_index
+    cands = source(scenario)
+    if cands.agent_index != adv:
+        raise ValueError(f"objective labels: candidates of scenario {scenario.scenario_id!r} are for agent index "
+                         f"{cands.agent_index}, its adversary is index {adv}")
+    if cands.n_candidates < n_candidates or cands.n_steps < n_steps:
+        raise ValueError(f"objective labels: scenario {scenario.scenario_id!r} has {cands.n_candidates} candidates x "
+                         f"{cands.n_steps} steps; need {n_candidates} x {n_steps} (set n_candidates lower)")
+    cand_xy = cands.xy[:n_candidates, :n_steps]
+    env = ScenarioEnv(scenario)
+    ego = HeuristicEgo()
+    behaviors = [ReplayBehavior()] + [ReplayBehavior(candidate_track(scenario, adv, xy)) for xy in cand_xy]
+    rollouts = [run_episode(env, scenario, ego, b) for b in behaviors]
+    env.close()
+
+    m = n_candidates + 1
+    ego_xy, ego_h, ego_v = np.zeros((m, n_steps, 2)), np.zeros((m, n_steps)), np.zeros((m, n_steps), dtype=bool)
+    adv_xy, adv_v = np.zeros((m, n_steps, 2)), np.zeros((m, n_steps), dtype=bool)
+    crashed = np.zeros(m, dtype=bool)
+    for r, ro in enumerate(rollouts):
+        ego_xy[r], ego_h[r], ego_v[r] = _future(ro.ego_track.astype(np.float64), n_steps)
+        adv_xy[r], _, adv_v[r] = _future(ro.adv_track.astype(np.float64), n_steps)
+        crashed[r] = any(other == ro.adv_id for _, other in ro.ego_crashes)
+    coll = f_coll(ego_xy[1:], adv_xy[1:], crashed=crashed[1:], valid=ego_v[1:] & adv_v[1:])
+    held = hold_last(ego_xy, ego_v)
+    diff = f_diff(held[:, None], held[None, 1:])  # [M, N]: previous roll-out i, candidate j
+
+    # CAT's score of each candidate against the logged-adversary roll-out (scenario-step indexed ego arrays).
+    logged = rollouts[0].ego_track.astype(np.float64)
+    now = scenario.tracks[:, CURRENT_STEP]
+    sel = cat_select(
+        cand_xy, cands.heading[:n_candidates, :n_steps], cands.probs[:n_candidates],
+        adv_size_m=(float(now[adv, LENGTH]), float(now[adv, WIDTH])),
+        ego_xy=logged[None, :, [X, Y]], ego_heading=logged[None, :, HEADING], ego_valid=logged[None, :, VALID] > 0.5,
+        ego_size_m=(float(now[scenario.ego_index, LENGTH]), float(now[scenario.ego_index, WIDTH])),
+    )
+    return LabelSet(
+        scenario_ids=np.array([scenario.scenario_id]),
+        cand_xy=cand_xy[None].astype(np.float32),
+        cand_heading=cands.heading[None, :n_candidates, :n_steps].astype(np.float32),
+        probs=cands.probs[None, :n_candidates].astype(np.float32),
+        ego_xy=ego_xy[None].astype(np.float32), ego_heading=ego_h[None].astype(np.float32), ego_valid=ego_v[None],
+        f_coll=coll[None].astype(np.float32), f_diff=diff[None].astype(np.float32), crashed=crashed[None, 1:],
+        cat_score=np.asarray(sel.scores, dtype=np.float32)[None],
+    )
+
+
+def _run_chunk(args: tuple[int, list[Scenario], str, int]) -> tuple[int, LabelSet]:
+    index, scenarios, spec, n_candidates = args
+    import torch
+
+    torch.set_num_threads(1)
+    source = _candidate_source(spec)
+    return index, LabelSet.concat([label_scenario(s, source, n_candidates) for s in scenarios])
+
+
+def _fingerprint(spec: str, ids: Sequence[str], chunk_size: int, n_candidates: int) -> str:
+    source = spec
+    if spec.startswith("prior:"):  # the prior's content, not just its path
+        source = hashlib.sha256(Path(spec[len("prior:"):]).read_bytes()).hexdigest()
+    return fingerprint({"source": source, "ids": list(ids), "chunk": chunk_size, "n": n_candidates,
+                        "format": LABEL_FORMAT})
+
+
+def build_labels(
+    scenarios: Sequence[Scenario],
+    out: str | Path,
+    spec: str,
+    n_candidates: int = N_CANDIDATES,
+    workers: int = 2,
+    chunk_size: int = 10,
+    progress: bool = True,
+    desc: str = "objective labels",
+    log: Callable[[str], None] = print,
+) -> LabelSet:
+    """Label ``scenarios`` in ``workers`` processes into chunk files ``out/part_NNNNN.npz`` (resumable, see the
+    module docstring) and return all of them as one `LabelSet`, in scenario order.
+
+    Args:
+        scenarios: the scenarios to label.
+        out: folder of the chunk files (created).
+        spec: candidate source, from `source_spec`.
+        n_candidates: candidates kept per scenario (the first, most probable).
+        workers: processes (spawned; each uses one torch thread).
+        chunk_size: scenarios per chunk file.
+        progress: show a tqdm bar.
+        desc: the bar's label.
+        log: where to report resuming / restarting.
+    """
+    if not scenarios:
+        raise ValueError("build_labels: no scenarios")
+    out = Path(out)
+    ids = [s.scenario_id for s in scenarios]
+    path = run_chunked(
+        scenarios, out, _fingerprint(spec, ids, chunk_size, n_candidates),
+        {"n_candidates": n_candidates, "source": spec}, _run_chunk, (spec, n_candidates),
+        lambda labels, file: labels.save(file), workers, chunk_size, progress, desc, log,
+    )
+    merged = LabelSet.concat([LabelSet.load(p) for p in path])
+    if list(merged.scenario_ids) != ids:
+        raise ValueError(f"{desc}: chunk files in {out} do not match the scenarios; delete the folder and re-run")
+    return merged

@@ -1,0 +1,97 @@
+"""The report folder of `seal compare --out` and `seal run`: tables (`seal.experiments.report.compare`), figures
+and videos (`seal.experiments.report.compare_plots`) and ``report.md`` tying them together."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from seal.core.atomic import atomic_write_bytes
+from seal.experiments.evaluation.evaluate import REAL_PREFIX
+from seal.experiments.evaluation.results_store import ResultsStore
+from seal.experiments.report.compare import (
+    ego_markdown,
+    ego_table,
+    generator_markdown,
+    generator_table,
+    ordered_pipelines,
+    per_run_rates,
+    setting_label,
+    to_csv,
+)
+from seal.experiments.report.compare_plots import plot_setting_bars, plot_training_curves, render_generator_videos
+
+
+def write_report(
+    store_path: str | Path, out: str | Path, pipelines: Sequence[str] | None = None,
+    settings: Sequence[str] | None = None, plots: bool = True, videos: int = 0, video_format: str = "mp4",
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Write ``report.md``, ``table_6_1.csv``, ``table_6_2.csv``, ``episodes_per_run.csv`` and (``plots``)
+    the figures, (``videos`` > 0) that many videos per generator, into ``out``; returns the tables."""
+    out = Path(out)
+    with ResultsStore(store_path) as store:
+        setting_filter = _expand_settings(settings, store) if settings else None
+        rows = store.episodes(pipeline=pipelines or None, setting=setting_filter, decode_hists=True)
+        runs = store.runs(pipeline=pipelines or None)
+        settings_info = store.settings()
+    if not rows:
+        raise ValueError(
+            f"{store_path}: no evaluation episodes match (pipelines {pipelines or 'all'}, settings "
+            f"{settings or 'all'}); run `seal eval runs ...` first"
+        )
+    t61, t62 = ego_table(rows), generator_table(rows, settings_info)
+    per_run = [
+        {"pipeline": p, "setting": setting_label(s), "run": run, **rates}
+        for (p, s), by_run in per_run_rates(rows).items() for run, rates in by_run.items()
+    ]
+    atomic_write_bytes(out / "table_6_1.csv", to_csv(t61))
+    atomic_write_bytes(out / "table_6_2.csv", to_csv(t62))
+    atomic_write_bytes(out / "rates_per_run.csv", to_csv(per_run))
+    figures: list[str] = []
+    video_files: list[str] = []
+    if plots:
+        figures += [str(p.name) for p in plot_setting_bars(t61, out)]
+        curves = plot_training_curves(runs, out / "training_curves.png")
+        if curves is not None:
+            figures.append(curves.name)
+    if videos > 0:
+        video_files = [str(p.relative_to(out)) for p in render_generator_videos(
+            rows, runs, settings_info, out / "videos", per_generator=videos, fmt=video_format, progress=progress
+        )]
+    n_runs = len({r["run"] for r in rows})
+    md = [
+        "# Evaluation report\n",
+        f"Store `{Path(store_path).resolve()}`: {len(rows)} scored episodes of {n_runs} egos "
+        f"(pipelines: {', '.join(ordered_pipelines({r['pipeline'] for r in rows}))}).\n",
+        "## Egos per training pipeline (thesis Table 6.1)\n",
+        "Rates in %: median over seeds, [25th-75th percentile]; each seed's rate is over the setting's "
+        "scenarios. Generator settings: the last of K perturbation passes against the same ego.\n",
+        ego_markdown(t61),
+        "## Generators (thesis Table 6.2)\n",
+        "Ego success / crash averaged over egos; realism = Wasserstein distances of the pooled adversary yaw rate, "
+        "acceleration and out-of-road rate to the logged adversaries (lower = more realistic); collision speed "
+        "along the contact normal over colliding episodes; head-on rates of all episodes. `normal` = logged "
+        "adversary (reference).\n",
+        generator_markdown(t62) if t62 else "(no generator settings evaluated)\n",
+    ]
+    if figures:
+        md.append("## Figures\n")
+        md += [f"![{f}]({f})\n" for f in figures]
+    if video_files:
+        md.append("## Videos\n")
+        md += [f"- [{v}]({v})" for v in video_files]
+        md.append("")
+    atomic_write_bytes(out / "report.md", "\n".join(md).encode())
+    return {"table_6_1": t61, "table_6_2": t62, "figures": figures, "videos": video_files, "episodes": len(rows)}
+
+
+def _expand_settings(settings: Sequence[str], store: Any) -> list[str]:
+    """Setting filters as given, with ``real:NAME`` also matching ``real:/any/path/NAME``."""
+    known = {s["setting"] for s in store.settings()}
+    out = []
+    for s in settings:
+        out.append(s)
+        out += [k for k in known if k.startswith(REAL_PREFIX) and setting_label(k) == s]
+    return out

@@ -1,0 +1,239 @@
+"""Run folder of ``seal train`` and its checkpoints (what a killed run resumes from).
+
+Layout of a run folder ``RUN/``::
+
+    config.yaml           resolved config (seal.experiments.training.config)
+    progress.csv          SB3 CSV log (rows after the resumed checkpoint are dropped on resume)
+    tb/                   TensorBoard event files (a resumed session adds a file; the killed session's points
+                          after its last checkpoint stay in the older one)
+    eval/                 evaluations.csv (one row per evaluation) and step_<N>.json (per-scenario outcomes)
+    checkpoints/latest.json   {"step": N, "dir": "step_<N>"}: the last complete checkpoint
+    checkpoints/step_<N>/ model.zip (SB3: parameters + optimiser states), replay_buffer.npz (off-policy),
+                          state.json (counters, wall time, rng states as JSON), rng.npz (numpy / torch rng arrays),
+                          worker_<i>.npz (each env worker's roll-out queues and env rng: `ClosedLoopEnv.get_state`)
+    final_model.zip       the trained model, once finished
+    done.json             {"steps": N, "wall_s": ...}, written last (atomically): the run is finished
+
+A checkpoint is written into a temporary folder, renamed to ``step_<N>`` and only then named in ``latest.json``
+(atomic write), so a kill at any moment leaves the previous complete checkpoint in force. Nothing here is
+unpickled: arrays are loaded with ``allow_pickle=False`` and the model's parameters with SB3's
+``torch.load(weights_only=True)``; the model's pickled settings are never read (the model is rebuilt from
+``config.yaml``).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import random
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from seal.core.atomic import atomic_write, atomic_write_bytes, atomic_write_json
+
+CONFIG = "config.yaml"
+DONE = "done.json"
+FINAL_MODEL = "final_model.zip"
+PROGRESS = "progress.csv"
+CHECKPOINTS = "checkpoints"
+LATEST = "latest.json"
+KEEP_CHECKPOINTS = 2
+
+SAVE_EXCLUDE = [
+    "action_noise", "_last_obs", "_last_original_obs", "_last_episode_starts", "ep_info_buffer",
+    "ep_success_buffer", "_episode_storage", "replay_buffer_kwargs", "lr_schedule",
+]
+"""Model attributes left out of saved zips: pickled-only runtime state (the model is rebuilt from the config)."""
+
+_BUFFER_FIELDS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
+
+
+class RunFolderError(ValueError):
+    """A run folder cannot be used as asked (finished, unfinished without --resume, not a run)."""
+
+
+def run_status(out: Path) -> str:
+    """``"new"`` (absent or empty), ``"done"`` (has done.json), ``"unfinished"`` (has config.yaml) or
+    ``"foreign"`` (a non-empty folder that is not a run)."""
+    out = Path(out)
+    if not out.exists() or (out.is_dir() and not any(out.iterdir())):
+        return "new"
+    if (out / DONE).is_file():
+        return "done"
+    if (out / CONFIG).is_file():
+        return "unfinished"
+    return "foreign"
+
+
+def check_out_folder(out: Path, resume: bool) -> str:
+    """The folder's `run_status`, or a `RunFolderError` telling the user what to do."""
+    status = run_status(out)
+    if status == "done":
+        raise RunFolderError(f"{out} holds a finished run ({DONE}); it is never overwritten: choose another --out")
+    if status == "foreign":
+        raise RunFolderError(f"{out} is not empty and is not a `seal train` run folder ({CONFIG} missing)")
+    if resume and status == "new":
+        raise RunFolderError(f"--resume {out}: no run there to resume (no {CONFIG}); start one with --out")
+    if not resume and status == "unfinished":
+        raise RunFolderError(
+            f"{out} holds an unfinished run; continue it with `seal train --resume {out}` or choose another --out"
+        )
+    return status
+
+
+# --------------------------------------------------------------------------------------------------- writes
+def save_replay_buffer(buffer: Any, path: Path) -> None:
+    """The filled part of an SB3 ``ReplayBuffer`` as an ``.npz`` (arrays only; ``pos``, ``full`` and the buffer
+    size recorded for the checks of `load_replay_buffer`)."""
+    n = buffer.buffer_size if buffer.full else buffer.pos
+    arrays = {name: np.asarray(getattr(buffer, name))[:n] for name in _BUFFER_FIELDS
+              if getattr(buffer, name, None) is not None}
+    arrays["meta"] = np.array([buffer.pos, int(buffer.full), buffer.buffer_size, buffer.n_envs], dtype=np.int64)
+    atomic_write(path, lambda f: np.savez(f, **arrays))
+
+
+def load_replay_buffer(buffer: Any, path: Path) -> None:
+    """Fill ``buffer`` (built with the run's settings) from `save_replay_buffer`'s file."""
+    with np.load(path, allow_pickle=False) as z:
+        pos, full, size, n_envs = (int(v) for v in z["meta"])
+        if (size, n_envs) != (buffer.buffer_size, buffer.n_envs):
+            raise ValueError(f"{path}: replay buffer of size {size} x {n_envs} envs, the run's is "
+                             f"{buffer.buffer_size} x {buffer.n_envs}")
+        for name in _BUFFER_FIELDS:
+            target = getattr(buffer, name, None)
+            if target is None:
+                continue
+            if name not in z.files:
+                raise ValueError(f"{path}: no {name!r} array")
+            data = z[name]
+            target[: len(data)] = data
+        buffer.pos, buffer.full = pos, bool(full)
+
+
+def rng_state(model: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Global (numpy legacy, python, torch) and action-space rng states: JSON part and array part."""
+    import torch
+
+    name, keys, pos, has_gauss, cached = np.random.get_state()
+    version, internal, gauss = random.getstate()
+    json_part = {
+        "numpy": {"name": name, "pos": int(pos), "has_gauss": int(has_gauss), "cached_gaussian": float(cached)},
+        "python": {"version": version, "internal": list(internal), "gauss": gauss},
+        "action_space": model.action_space.np_random.bit_generator.state,
+    }
+    arrays = {"numpy_keys": np.asarray(keys, dtype=np.uint32), "torch": torch.get_rng_state().numpy()}
+    return json_part, arrays
+
+
+def set_rng_state(model: Any, json_part: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+    import torch
+
+    n = json_part["numpy"]
+    np.random.set_state((n["name"], arrays["numpy_keys"], n["pos"], n["has_gauss"], n["cached_gaussian"]))
+    p = json_part["python"]
+    random.setstate((p["version"], tuple(p["internal"]), p["gauss"]))
+    torch.set_rng_state(torch.from_numpy(np.asarray(arrays["torch"], dtype=np.uint8)))
+    model.action_space.np_random.bit_generator.state = json_part["action_space"]
+
+
+def write_checkpoint(out: Path, model: Any, worker_states: list[dict[str, np.ndarray]], extra: dict[str, Any]) -> Path:
+    """Write checkpoint ``step_<num_timesteps>`` (module docstring), point ``latest.json`` at it and drop all but
+    the last `KEEP_CHECKPOINTS` (replay buffers only in the newest). Returns its folder."""
+    step = int(model.num_timesteps)
+    root = Path(out) / CHECKPOINTS
+    root.mkdir(parents=True, exist_ok=True)
+    final = root / f"step_{step}"
+    tmp = root / f".tmp_step_{step}"
+    for stale in root.glob(".tmp_step_*"):  # left by a kill during an earlier checkpoint
+        shutil.rmtree(stale, ignore_errors=True)
+    tmp.mkdir()
+    model.save(tmp / "model.zip", exclude=SAVE_EXCLUDE)
+    if getattr(model, "replay_buffer", None) is not None:
+        save_replay_buffer(model.replay_buffer, tmp / "replay_buffer.npz")
+    for i, state in enumerate(worker_states):
+        atomic_write(tmp / f"worker_{i}.npz", lambda f, s=state: np.savez_compressed(f, **s))
+    rng_json, rng_arrays = rng_state(model)
+    atomic_write(tmp / "rng.npz", lambda f: np.savez(f, **rng_arrays))
+    state = {
+        "step": step, "n_updates": int(getattr(model, "_n_updates", 0)),
+        "episode_num": int(getattr(model, "_episode_num", 0)), "n_workers": len(worker_states),
+        "rng": rng_json, **extra,
+    }
+    atomic_write_json(tmp / "state.json", state)
+    shutil.rmtree(final, ignore_errors=True)
+    tmp.rename(final)
+    atomic_write_json(root / LATEST, {"step": step, "dir": final.name})
+    kept = sorted((p for p in root.glob("step_*") if p.is_dir()), key=lambda p: int(p.name.split("_")[1]))
+    for old in kept[:-KEEP_CHECKPOINTS]:
+        shutil.rmtree(old, ignore_errors=True)
+    for old in kept[-KEEP_CHECKPOINTS:-1]:
+        (old / "replay_buffer.npz").unlink(missing_ok=True)
+    return final
+
+
+# ---------------------------------------------------------------------------------------------------- reads
+def latest_checkpoint(out: Path) -> Path | None:
+    """The folder ``latest.json`` names, or None when the run has no checkpoint yet."""
+    pointer = Path(out) / CHECKPOINTS / LATEST
+    if not pointer.is_file():
+        return None
+    latest = json.loads(pointer.read_text())
+    folder = pointer.parent / str(latest["dir"])
+    if not (folder / "state.json").is_file():
+        raise ValueError(f"{pointer} names {folder}, which has no state.json; delete {pointer} to restart the run")
+    return folder
+
+
+def read_checkpoint_state(folder: Path) -> tuple[dict[str, Any], dict[str, np.ndarray], list[dict[str, np.ndarray]]]:
+    """``state.json``, the rng arrays and every worker's state of a checkpoint folder."""
+    state = json.loads((folder / "state.json").read_text())
+    with np.load(folder / "rng.npz", allow_pickle=False) as z:
+        rng_arrays = {k: z[k] for k in z.files}
+    workers = []
+    for i in range(int(state["n_workers"])):
+        path = folder / f"worker_{i}.npz"
+        if not path.is_file():
+            raise ValueError(f"checkpoint {folder}: {path.name} is missing")
+        with np.load(path, allow_pickle=False) as z:
+            workers.append({k: z[k] for k in z.files})
+    return state, rng_arrays, workers
+
+
+def load_model_state(model: Any, path: Path) -> None:
+    """Parameters, optimiser states and saved torch variables (SAC's entropy coefficient) of ``path`` into
+    ``model`` (SB3 reads them with ``torch.load(weights_only=True)``; the pickled settings are not read)."""
+    from stable_baselines3.common.save_util import load_from_zip_file, recursive_setattr
+
+    model.set_parameters(str(path), exact_match=True, device=model.device)
+    _, _, variables = load_from_zip_file(path, device=model.device, load_data=False)
+    for name, value in (variables or {}).items():
+        recursive_setattr(model, f"{name}.data", value.data)
+
+
+def truncate_progress(path: Path, step: int) -> None:
+    """Keep only the rows of an SB3 ``progress.csv`` logged at or before env step ``step`` (a resumed run
+    continues from there; rows of work after the checkpoint were lost with it)."""
+    if not path.is_file():
+        return
+    text = path.read_text()
+    rows = list(csv.reader(io.StringIO(text)))
+    if not rows:
+        return
+    header = rows[0]
+    col = header.index("time/total_timesteps") if "time/total_timesteps" in header else None
+    lines = text.splitlines(keepends=True)
+    if col is None or len(lines) != len(rows):
+        return  # not a plain one-line-per-row log: keep it whole rather than guess
+    # A row cut short by the kill (fewer fields than the header) goes too.
+    kept = [lines[0]] + [line for line, row in zip(lines[1:], rows[1:], strict=True)
+                         if len(row) == len(header) and line.endswith("\n")
+                         and (row[col] == "" or float(row[col]) <= step)]
+    atomic_write_bytes(path, "".join(kept).encode())
+
+
+def read_done(out: Path) -> dict[str, Any]:
+    return json.loads((Path(out) / DONE).read_text())

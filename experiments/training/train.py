@@ -1,0 +1,284 @@
+"""``seal train``: an SB3 ego (TD3 with CAT's settings by default; SAC / PPO) trained in the closed loop of
+DESIGN section 4 under CAT's curriculum.
+
+Each env worker (``SubprocVecEnv``, one per core) plays its share of the train scenarios (`ClosedLoopEnv`; a
+scenario's roll-out queue lives in the worker that plays it): a random scenario per episode, perturbed by the
+pipeline's generator with probability p(t) = min(1.8 t / T, 0.9) (`seal.experiments.training.curriculum`), else
+replayed from
+the log. The run folder (`seal.experiments.training.state`) holds the resolved config, CSV + TensorBoard logs (SB3's
+``rollout/`` and ``train/`` keys plus ``episode/*`` outcome rates, ``curriculum/p``, ``generator/time_ms``),
+periodic evaluations on the Normal eval split, checkpoints and, at the end, ``final_model.zip`` and ``done.json``.
+
+Resume: a run killed at any point continues from its last checkpoint (``train_run(config, out, resume=True)``,
+``seal train --resume RUN``) with the model, optimiser states, replay buffer, step and update counters, rng
+states and every worker's roll-out queues of that checkpoint, and ends after exactly ``total_timesteps`` env
+steps. Episodes in flight at the checkpoint are dropped (the envs are reset). Trust: checkpoints are files this
+run wrote into its own folder; they are still read without unpickling (arrays with ``allow_pickle=False``,
+parameters with ``torch.load(weights_only=True)``), and the model is rebuilt from ``config.yaml``. What is not
+restored: generator-internal memory (GOOSE's per-scenario curve edits restart from the fitted curve).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from seal.experiments.training import state as ts
+from seal.experiments.training.config import check_resolved, load_train_config
+
+__all__ = ["build_model", "build_vec_env", "load_train_config", "train_run"]
+
+
+def resolve_n_envs(config: Mapping[str, Any]) -> int:
+    return int(config["n_envs"]) if config.get("n_envs") else max(1, os.cpu_count() or 1)
+
+
+def check_steps(config: Mapping[str, Any], n_envs: int) -> None:
+    """``total_timesteps`` must be reachable exactly: a multiple of ``n_envs`` (PPO: of ``n_envs * n_steps``)."""
+    total = int(config["total_timesteps"])
+    unit = n_envs * (int(config["hyperparams"]["n_steps"]) if config["algo"] == "ppo" else 1)
+    if total % unit:
+        lo, hi = total // unit * unit, (total // unit + 1) * unit
+        raise ValueError(
+            f"train.total_timesteps = {total} is not a multiple of {unit} (env steps per "
+            f"{'PPO roll-out' if config['algo'] == 'ppo' else 'vec-env step'} with {n_envs} envs); use {lo or hi} "
+            f"or {hi}"
+        )
+
+
+def _generator_kwargs(config: Mapping[str, Any]) -> dict[str, Any]:
+    kwargs = dict(config["generator"]["kwargs"])
+    missing = [k for k, v in kwargs.items() if v is None]
+    if missing:
+        name = config["pipeline"]
+        raise ValueError(
+            f"pipeline {name!r}: generator option(s) {missing} not set; set train.pipelines.{name}.kwargs in the "
+            f"config or give them on the command line (--prior / --goose-model / --objective / --skills / --set)"
+        )
+    for key, value in kwargs.items():
+        # Only values that look like paths: e.g. SEAL's ``objective`` may also name a built-in ranking ("cat").
+        looks_like_path = isinstance(value, str) and ("/" in value or Path(value).suffix != "")
+        if key in ("prior", "model", "objective", "skills") and looks_like_path and not Path(value).exists():
+            raise FileNotFoundError(
+                f"pipeline {config['pipeline']!r}: {key} = {value!r} does not exist (fit it first, or set "
+                f"train.pipelines.{config['pipeline']}.kwargs.{key})"
+            )
+    return kwargs
+
+
+def load_split(dataset: str | Path, split: str | None, limit: int | None, what: str) -> list[Any]:
+    from seal.core.dataset import Dataset
+
+    if dataset is None:
+        raise ValueError("train.dataset is not set: give --dataset DIR or set it in the config's train: section")
+    ds = Dataset.open(dataset)
+    if split is not None and split not in ds.splits:
+        raise ValueError(f"dataset {dataset} has no split {split!r} for the {what} scenarios; splits: "
+                         f"{sorted(ds.splits) or 'none'} (make them with `seal data split`)")
+    scenarios = ds.load(split=split, limit=limit)
+    if not scenarios:
+        raise ValueError(f"dataset {dataset}: no {what} scenarios in split {split!r}")
+    return scenarios
+
+
+def _worker(fn: Callable[[], Any], threads: int) -> Callable[[], Any]:
+    def build() -> Any:
+        import torch
+
+        torch.set_num_threads(threads)
+        return fn()
+
+    return build
+
+
+def build_vec_env(config: Mapping[str, Any], scenarios: list[Any], n_envs: int) -> Any:
+    """``VecMonitor`` over one `ClosedLoopEnv` per worker (``SubprocVecEnv`` when ``n_envs > 1``), perturb
+    probability 0 until the curriculum sets it."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor
+
+    from seal.adversaries.closed_loop import closed_loop_env_fns
+
+    gen = config["generator"]
+    kwargs = _generator_kwargs(config) if gen["name"] else {}
+    fns = closed_loop_env_fns(scenarios, n_envs, gen["name"], kwargs, env_config=config["env"], k=int(config["k"]),
+                              perturb_prob=0.0)
+    fns = [_worker(fn, 1) for fn in fns]
+    venv = SubprocVecEnv(fns) if n_envs > 1 else DummyVecEnv(fns)
+    return VecMonitor(venv)
+
+
+def build_model(config: Mapping[str, Any], env: Any) -> Any:
+    """The SB3 model of ``config["algo"]`` with ``config["hyperparams"]`` (see `seal.experiments.training.config`)."""
+    import stable_baselines3 as sb3
+
+    h = dict(config["hyperparams"])
+    policy_kwargs = {"net_arch": list(h.pop("net_arch"))}
+    common = {"policy": "MlpPolicy", "env": env, "seed": int(config["seed"]), "device": config["device"],
+              "policy_kwargs": policy_kwargs, "verbose": 0}
+    algo = config["algo"]
+    if algo == "td3":
+        from stable_baselines3.common.noise import NormalActionNoise
+
+        std = float(h.pop("action_noise_std"))
+        n_act = env.action_space.shape[0]
+        noise = NormalActionNoise(np.zeros(n_act), std * np.ones(n_act)) if std > 0 else None
+        return sb3.TD3(action_noise=noise, **h, **common)
+    if algo == "sac":
+        return sb3.SAC(**h, **common)
+    return sb3.PPO(**h, **common)
+
+
+def _absolute_paths(config: dict[str, Any]) -> dict[str, Any]:
+    """The dataset and the generator's existing files as absolute paths, so the recorded config still works from
+    another working directory (``--resume``, evaluation)."""
+    if config.get("dataset") is not None and Path(config["dataset"]).exists():
+        config["dataset"] = str(Path(config["dataset"]).resolve())
+    kwargs = dict(config["generator"]["kwargs"])
+    for key, value in kwargs.items():
+        if isinstance(value, str) and ("/" in value or Path(value).suffix) and Path(value).exists():
+            kwargs[key] = str(Path(value).resolve())
+    config["generator"] = {**config["generator"], "kwargs": kwargs}
+    return config
+
+
+def _log_interval(config: Mapping[str, Any]) -> int:
+    """Off-policy: episodes between log rows (~500 rows per run at ~70 steps an episode); PPO: roll-outs."""
+    if config["algo"] == "ppo":
+        return 1
+    return max(4, int(config["total_timesteps"]) // 70 // 500)
+
+
+def _write_config(out: Path, config: Mapping[str, Any]) -> None:
+    from seal.core.atomic import atomic_write_bytes
+
+    atomic_write_bytes(out / ts.CONFIG, yaml.safe_dump(dict(config), sort_keys=True).encode())
+
+
+def train_run(config: dict[str, Any], out: Path, resume: bool = False, progress: bool = True,
+              log: Callable[[str], None] = print) -> Path:
+    """Train (or, with ``resume``, continue) the run of ``config`` in folder ``out``; returns ``out``.
+
+    ``config`` is a resolved config (`load_train_config`). A new run needs an absent or empty ``out``; ``resume``
+    needs an unfinished run there and continues with its recorded ``config.yaml`` (``config`` is not used). A
+    finished run (``done.json``) is never overwritten: `seal.experiments.training.state.RunFolderError` on misuse.
+    ``done.json``: ``steps``, ``wall_s`` (seconds of training behind the final model: each session's time up to
+    the checkpoint the next one resumed from, plus the last session), ``resumed_from`` (the step the last session
+    started at), ``episodes`` and ``session_totals`` (the last session's episode outcomes and generation time).
+    """
+    import torch
+    from stable_baselines3.common.callbacks import CallbackList
+    from stable_baselines3.common.logger import Logger, TensorBoardOutputFormat
+
+    from seal.envs.scenario_env import ScenarioEnv
+    from seal.experiments.training.callbacks import (
+        CheckpointCallback,
+        EpisodeStatsCallback,
+        EvalCallback,
+        ProgressCallback,
+        RestoreCallback,
+        ResumableCSVOutputFormat,
+        truncate_eval,
+    )
+    from seal.experiments.training.curriculum import CurriculumCallback
+
+    out = Path(out)
+    ts.check_out_folder(out, resume)
+    if resume:
+        config = check_resolved(yaml.safe_load((out / ts.CONFIG).read_text()), str(out / ts.CONFIG))
+    else:
+        config = _absolute_paths(dict(config))
+        config["n_envs"] = resolve_n_envs(config)
+    n_envs = int(config["n_envs"])
+    check_steps(config, n_envs)
+    total = int(config["total_timesteps"])
+    torch.set_num_threads(int(config["torch_threads"]))
+
+    train_scenarios = load_split(config["dataset"], config["train_split"], config["train_limit"], "train")
+    eval_scenarios = (load_split(config["dataset"], config["eval_split"], int(config["eval_episodes"]), "eval")
+                      if int(config["eval_every"]) else [])
+    if len(train_scenarios) < n_envs:
+        raise ValueError(f"{len(train_scenarios)} train scenarios cannot feed {n_envs} env workers; lower train.n_envs")
+    if config["generator"]["name"]:
+        _generator_kwargs(config)  # fail before starting workers
+    if not resume:
+        out.mkdir(parents=True, exist_ok=True)
+        _write_config(out, config)
+
+    checkpoint = ts.latest_checkpoint(out) if resume else None
+    start_step = 0
+    restored: dict[str, Any] = {}
+    if checkpoint is not None:
+        restored["state"], restored["rng"], restored["workers"] = ts.read_checkpoint_state(checkpoint)
+        start_step = int(restored["state"]["step"])
+        if int(restored["state"]["n_workers"]) != n_envs:
+            raise ValueError(f"{checkpoint}: written by {restored['state']['n_workers']} env workers, the run "
+                             f"config has n_envs = {n_envs}")
+    if resume:
+        log(f"resuming {out} from step {start_step}" + (f" ({checkpoint.name})" if checkpoint else " (no checkpoint)"))
+        ts.truncate_progress(out / ts.PROGRESS, start_step)
+        truncate_eval(out / "eval", start_step)
+
+    from seal.envs.road_geometry import reserve_road_cache
+
+    # The eval env (and, with one worker, the training env) lives in this process: cache every road it cycles.
+    reserve_road_cache(len({id(s.road) for s in eval_scenarios + (train_scenarios if n_envs == 1 else [])}))
+    venv = build_vec_env(config, train_scenarios, n_envs)
+    try:
+        model = build_model(config, venv)
+        wall_before = 0.0
+        if checkpoint is not None:
+            ts.load_model_state(model, checkpoint / "model.zip")
+            if getattr(model, "replay_buffer", None) is not None:
+                ts.load_replay_buffer(model.replay_buffer, checkpoint / "replay_buffer.npz")
+            model.num_timesteps = start_step
+            model._n_updates = int(restored["state"]["n_updates"])
+            model._episode_num = int(restored["state"]["episode_num"])
+            wall_before = float(restored["state"].get("wall_s", 0.0))
+        (out / "eval").mkdir(exist_ok=True)
+        model.set_logger(Logger(folder=str(out), output_formats=[
+            ResumableCSVOutputFormat(str(out / ts.PROGRESS)), TensorBoardOutputFormat(str(out / "tb"))]))
+
+        session_start = time.perf_counter()
+
+        def save(m: Any) -> None:
+            states = m.get_env().env_method("get_state")
+            ts.write_checkpoint(out, m, states, {"wall_s": wall_before + time.perf_counter() - session_start})
+
+        curriculum = CurriculumCallback(total, **config["curriculum"])
+        stats = EpisodeStatsCallback()
+        eval_env_config = dict(config["eval_env"])
+        callbacks = [
+            curriculum,  # first: a resumed run's restore resets the envs, whose first episodes then use p(t)
+            RestoreCallback(restored["workers"], restored["state"]["rng"], restored["rng"])
+            if checkpoint is not None else None,
+            stats,
+            CheckpointCallback(int(config["checkpoint_every"]), total, save),
+            EvalCallback(int(config["eval_every"]), out / "eval", lambda: ScenarioEnv(eval_scenarios, eval_env_config),
+                         eval_scenarios) if eval_scenarios else None,
+            ProgressCallback(total, stats, curriculum, enabled=progress),
+        ]
+        model.learn(total_timesteps=total - start_step, callback=CallbackList([c for c in callbacks if c]),
+                    log_interval=_log_interval(config), reset_num_timesteps=False)
+        if model.num_timesteps != total:
+            raise RuntimeError(f"training stopped at {model.num_timesteps} env steps, expected {total}")
+        tmp_model = out / f".tmp_{ts.FINAL_MODEL}"
+        model.save(tmp_model, exclude=ts.SAVE_EXCLUDE)
+        os.replace(tmp_model, out / ts.FINAL_MODEL)
+        wall = wall_before + time.perf_counter() - session_start
+        done = {"steps": int(model.num_timesteps), "wall_s": round(wall, 1), "resumed_from": start_step,
+                "episodes": int(model._episode_num), "session_totals": stats.totals}
+        from seal.core.atomic import atomic_write_json
+
+        atomic_write_json(out / ts.DONE, done)
+        log(f"finished {out}: {done['steps']} steps in {done['wall_s']} s")
+    finally:
+        with contextlib.suppress(OSError, EOFError):  # workers already gone (killed with the process group)
+            venv.close()
+    return out

@@ -1,0 +1,94 @@
+"""Resumable per-scenario work in chunk files: simulate or label a list of scenarios in worker processes, one
+``part_NNNNN.npz`` file per chunk, so a killed build resumes from its finished chunks.
+
+A ``state.json`` in the chunk folder carries a fingerprint of the settings and scenarios; chunks written under
+another fingerprint are discarded (the folder starts over), so a re-run never mixes results of different settings.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import multiprocessing as mp
+import shutil
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, TypeVar
+
+from seal.core.atomic import atomic_write_json
+
+T = TypeVar("T")
+
+
+def fingerprint(settings: dict[str, Any]) -> str:
+    """Short hex digest of JSON-serialisable ``settings`` (key order does not matter)."""
+    return hashlib.sha256(json.dumps(settings, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def run_chunked(
+    items: Sequence[Any],
+    folder: Path,
+    settings_fingerprint: str,
+    state: dict[str, Any],
+    work: Callable[[tuple[Any, ...]], tuple[int, T]],
+    work_args: tuple[Any, ...],
+    save: Callable[[T, Path], None],
+    workers: int,
+    chunk_size: int,
+    progress: bool,
+    desc: str,
+    log: Callable[[str], None],
+) -> list[Path]:
+    """Run ``work((i, chunk_i, *work_args)) -> (i, result)`` for every chunk of ``chunk_size`` items that has no
+    file in ``folder`` yet, ``save(result, path)`` each (atomically, by the caller's writer); return every chunk's
+    path, in item order.
+
+    Args:
+        items: what to split into chunks (e.g. scenarios).
+        folder: chunk folder (created; emptied first when it holds chunks of another fingerprint).
+        settings_fingerprint: `fingerprint` of everything the results depend on, the items included.
+        state: extra fields for ``state.json`` (for people reading the folder).
+        work: module-level function (spawned workers pickle it by name).
+        work_args: arguments after the chunk index and items.
+        save: writes one result.
+        workers: processes (spawned, not forked: the parent may hold torch / OpenMP state that does not survive
+            a fork); 1 runs in this process.
+        chunk_size: items per chunk file.
+        progress: show a tqdm bar labelled ``desc``.
+        log: where resuming / restarting is reported.
+    """
+    from tqdm import tqdm
+
+    state_path = folder / "state.json"
+    if folder.exists() and any(folder.glob("part_*.npz")):
+        try:
+            same = json.loads(state_path.read_text()).get("fingerprint") == settings_fingerprint
+        except (OSError, json.JSONDecodeError):
+            same = False
+        if not same:
+            log(f"{desc}: {folder} holds chunks of other scenarios or settings; starting over")
+            shutil.rmtree(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(state_path, {"fingerprint": settings_fingerprint, "n_items": len(items),
+                                   "chunk_size": chunk_size, **state})
+    chunks = [list(items[i : i + chunk_size]) for i in range(0, len(items), chunk_size)]
+    paths = [folder / f"part_{i:05d}.npz" for i in range(len(chunks))]
+    todo = [i for i in range(len(chunks)) if not paths[i].exists()]
+    if len(todo) < len(chunks):
+        log(f"{desc}: resuming, {len(chunks) - len(todo)} of {len(chunks)} chunks already done")
+    pending = set(todo)
+    bar = tqdm(total=len(items), desc=desc, unit="scenario", disable=not progress,
+               initial=sum(len(c) for i, c in enumerate(chunks) if i not in pending))
+    jobs = [(i, chunks[i], *work_args) for i in todo]
+    if workers > 1 and len(jobs) > 1:
+        with mp.get_context("spawn").Pool(min(workers, len(jobs))) as pool:
+            for i, result in pool.imap_unordered(work, jobs):
+                save(result, paths[i])
+                bar.update(len(chunks[i]))
+    else:
+        for job in jobs:
+            i, result = work(job)
+            save(result, paths[i])
+            bar.update(len(chunks[i]))
+    bar.close()
+    return paths

@@ -1,0 +1,344 @@
+"""Dataset store: one directory = ``manifest.json`` + ``shards/shard-NNNNN.npz``.
+
+* Shards are columnar ``.npz`` files (numpy only, loaded with ``allow_pickle=False``): all agents' tracks of
+  all scenarios of the shard concatenated, plus offsets, ids, roads (deduplicated JSON) and metadata (JSON).
+* Every file is written atomically. ``manifest.json`` is written last, so a directory without it is not a
+  dataset (an interrupted build: ``build.json`` records the build parameters and the shards already done,
+  and `DatasetBuilder` resumes from it).
+* The manifest records the schema version, provenance, counts, splits and each shard's size and sha256;
+  loading checks them and names the file that is missing, truncated or corrupt.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import shutil
+import zipfile
+from collections import Counter
+from collections.abc import Iterable, Sequence
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from seal.core.atomic import atomic_write, atomic_write_json
+from seal.core.road import RoadDescription, RoadError
+from seal.core.scenario import Scenario, ScenarioError
+
+SCHEMA_VERSION = 1
+MANIFEST = "manifest.json"
+BUILD_STATE = "build.json"
+SHARD_DIR = "shards"
+FORMAT = "seal-dataset"
+
+
+class DatasetError(RuntimeError):
+    """A dataset directory or file cannot be used; the message names the file and what to do."""
+
+
+# --------------------------------------------------------------------------------------------- shards
+def encode_shard(scenarios: Sequence[Scenario]) -> dict[str, np.ndarray]:
+    """Columnar arrays for a list of scenarios (see the module docstring)."""
+    if not scenarios:
+        raise ValueError("a shard needs at least one scenario")
+    road_json: dict[str, int] = {}
+    road_index = []
+    for s in scenarios:
+        key = s.road.to_json()
+        road_index.append(road_json.setdefault(key, len(road_json)))
+    counts = np.array([s.n_agents for s in scenarios], dtype=np.int64)
+    return {
+        "schema_version": np.array(SCHEMA_VERSION, dtype=np.int64),
+        "scenario_ids": np.array([s.scenario_id for s in scenarios]),
+        "agent_offsets": np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+        "tracks": np.concatenate([s.tracks for s in scenarios]).astype(np.float32),
+        "agent_ids": np.concatenate([s.agent_ids for s in scenarios]).astype(np.int64),
+        "agent_types": np.array([t for s in scenarios for t in s.agent_types]),
+        "ego_ids": np.array([s.ego_id for s in scenarios], dtype=np.int64),
+        "adv_ids": np.array([s.adv_id for s in scenarios], dtype=np.int64),
+        "road_index": np.array(road_index, dtype=np.int64),
+        "roads_json": np.array(list(road_json)),
+        "sources": np.array([s.source for s in scenarios]),
+        "metadata_json": np.array([json.dumps(dict(s.metadata), sort_keys=True) for s in scenarios]),
+    }
+
+
+_SHARD_KEYS = (
+    "schema_version", "scenario_ids", "agent_offsets", "tracks", "agent_ids", "agent_types", "ego_ids",
+    "adv_ids", "road_index", "roads_json", "sources", "metadata_json",
+)
+
+
+def write_shard(path: Path, scenarios: Sequence[Scenario]) -> dict[str, Any]:
+    """Atomically write a shard; return its manifest entry (file, n_scenarios, bytes, sha256)."""
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **encode_shard(scenarios))
+    data = buf.getvalue()
+    atomic_write(path, lambda f: f.write(data))
+    return {"n_scenarios": len(scenarios), "bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()}
+
+
+def read_shard(path: Path, expected: dict[str, Any] | None = None) -> list[Scenario]:
+    """Load the scenarios of one shard, checking size and checksum against ``expected`` when given."""
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise DatasetError(f"shard file {path} is missing; the dataset is incomplete, rebuild it") from None
+    if expected is not None:
+        if len(data) != expected["bytes"]:
+            raise DatasetError(
+                f"shard file {path} is truncated or corrupt: {len(data)} bytes, manifest says {expected['bytes']}"
+            )
+        if hashlib.sha256(data).hexdigest() != expected["sha256"]:
+            raise DatasetError(f"shard file {path} is corrupt: its sha256 does not match the manifest")
+    try:
+        with np.load(io.BytesIO(data), allow_pickle=False) as z:
+            arrays = {k: z[k] for k in _SHARD_KEYS}
+    except KeyError as exc:
+        raise DatasetError(f"shard file {path} lacks array {exc.args[0]!r}; not a seal shard") from None
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
+        raise DatasetError(f"shard file {path} is truncated or corrupt ({type(exc).__name__}: {exc})") from None
+    version = int(arrays["schema_version"])
+    if version != SCHEMA_VERSION:
+        raise DatasetError(f"shard file {path} has schema version {version}; this seal reads {SCHEMA_VERSION}")
+    try:
+        roads = [RoadDescription.from_json(str(j)) for j in arrays["roads_json"]]
+        out = []
+        offsets = arrays["agent_offsets"]
+        for i, sid in enumerate(arrays["scenario_ids"]):
+            a, b = int(offsets[i]), int(offsets[i + 1])
+            out.append(
+                Scenario(
+                    scenario_id=str(sid),
+                    tracks=arrays["tracks"][a:b],
+                    agent_ids=arrays["agent_ids"][a:b],
+                    agent_types=tuple(arrays["agent_types"][a:b].tolist()),
+                    ego_id=int(arrays["ego_ids"][i]),
+                    adv_id=int(arrays["adv_ids"][i]),
+                    road=roads[int(arrays["road_index"][i])],
+                    source=str(arrays["sources"][i]),
+                    metadata=json.loads(str(arrays["metadata_json"][i])),
+                )
+            )
+    except (ScenarioError, RoadError) as exc:
+        raise DatasetError(f"shard file {path}: {exc}") from None
+    return out
+
+
+# --------------------------------------------------------------------------------------------- dataset
+class Dataset:
+    """A finished dataset directory. Open with `Dataset.open`; scenarios load lazily per shard."""
+
+    def __init__(self, root: Path, manifest: dict[str, Any]) -> None:
+        self.root = root
+        self.manifest = manifest
+
+    @classmethod
+    def open(cls, root: str | Path) -> Dataset:
+        root = Path(root)
+        path = root / MANIFEST
+        if not path.exists():
+            if (root / BUILD_STATE).exists():
+                raise DatasetError(
+                    f"{root} is an unfinished build (no {MANIFEST}, but {BUILD_STATE} exists); "
+                    "re-run the same `seal data generate` command to resume it"
+                )
+            raise DatasetError(f"{root} is not a seal dataset: {path} not found")
+        try:
+            manifest = json.loads(path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise DatasetError(f"{path} is not valid JSON ({exc})") from None
+        for key in ("schema_version", "format", "shards", "counts", "splits", "provenance"):
+            if key not in manifest:
+                raise DatasetError(f"{path}: missing field {key!r}")
+        if manifest["format"] != FORMAT:
+            raise DatasetError(f"{path}: field 'format' is {manifest['format']!r}, expected {FORMAT!r}")
+        if manifest["schema_version"] != SCHEMA_VERSION:
+            raise DatasetError(
+                f"{path}: field 'schema_version' is {manifest['schema_version']}; this seal reads {SCHEMA_VERSION}"
+            )
+        return cls(root, manifest)
+
+    def __len__(self) -> int:
+        return int(self.manifest["counts"]["scenarios"])
+
+    @property
+    def splits(self) -> dict[str, list[str]]:
+        return self.manifest["splits"]
+
+    def load(
+        self, split: str | None = None, ids: Iterable[str] | None = None, limit: int | None = None
+    ) -> list[Scenario]:
+        """Load scenarios in dataset order, optionally only those of ``split`` or with the given ``ids``, and at
+        most ``limit`` of them (shards past the limit are not read)."""
+        wanted: set[str] | None = None
+        if split is not None:
+            if split not in self.splits:
+                raise DatasetError(
+                    f"{self.root}: no split {split!r}; available: {sorted(self.splits) or 'none (run seal data split)'}"
+                )
+            wanted = set(self.splits[split])
+        if ids is not None:
+            ids = set(ids)
+            wanted = ids if wanted is None else wanted & ids
+        out: list[Scenario] = []
+        for entry in self.manifest["shards"]:
+            if limit is not None and len(out) >= limit:
+                return out[:limit]
+            scenarios = read_shard(self.root / entry["file"], entry)
+            out.extend(s for s in scenarios if wanted is None or s.scenario_id in wanted)
+        if limit is not None:
+            out = out[:limit]
+        if ids is not None:
+            missing = set(ids) - {s.scenario_id for s in out}
+            if missing:
+                raise DatasetError(f"{self.root}: unknown scenario ids {sorted(missing)[:5]}")
+        return out
+
+    def get(self, scenario_id: str) -> Scenario:
+        return self.load(ids=[scenario_id])[0]
+
+    def update_manifest(self, **fields: Any) -> None:
+        """Atomically replace top-level manifest fields (e.g. ``splits``)."""
+        self.manifest.update(fields)
+        atomic_write_json(self.root / MANIFEST, self.manifest)
+
+
+def load_scenarios(root: str | Path, split: str | None = None) -> list[Scenario]:
+    """Shortcut for ``Dataset.open(root).load(split)``."""
+    return Dataset.open(root).load(split)
+
+
+def summarize(scenarios: Sequence[Scenario]) -> dict[str, Any]:
+    """Counts per layout and split, agents per scenario and valid track lengths (steps)."""
+    agents = np.array([s.n_agents for s in scenarios])
+    lengths = np.concatenate([s.valid.sum(axis=1) for s in scenarios]) if scenarios else np.zeros(0)
+
+    def stats(v: np.ndarray) -> dict[str, float]:
+        if v.size == 0:
+            return {}
+        return {
+            "mean": float(v.mean()),
+            "min": float(v.min()),
+            "p50": float(np.median(v)),
+            "max": float(v.max()),
+        }
+
+    return {
+        "scenarios": len(scenarios),
+        "per_layout": dict(sorted(Counter(s.layout for s in scenarios).items())),
+        "agents_per_scenario": stats(agents),
+        "track_length_steps": stats(lengths),
+    }
+
+
+# --------------------------------------------------------------------------------------------- builder
+class DatasetBuilder:
+    """Builds a dataset shard by shard; an interrupted build resumes where it stopped.
+
+    ``params`` identify the build (e.g. the ``seal data generate`` arguments): resuming with other
+    parameters is refused instead of mixing two builds. Shards are numbered; `done` tells which exist.
+    """
+
+    def __init__(self, root: str | Path, params: dict[str, Any], overwrite: bool = False) -> None:
+        self.root = Path(root)
+        self.params = json.loads(json.dumps(params))
+        if (self.root / MANIFEST).exists():
+            if not overwrite:
+                raise DatasetError(
+                    f"{self.root} already holds a finished dataset; choose another --out or pass --overwrite"
+                )
+            shutil.rmtree(self.root)
+        state_path = self.root / BUILD_STATE
+        if state_path.exists() and not overwrite:
+            try:
+                state = json.loads(state_path.read_text())
+            except json.JSONDecodeError as exc:
+                raise DatasetError(f"{state_path} is corrupt ({exc}); pass --overwrite to start over") from None
+            if state.get("params") != self.params:
+                raise DatasetError(
+                    f"{self.root} holds an unfinished build with other parameters ({state.get('params')}); "
+                    "re-run with those parameters to resume, or pass --overwrite to start over"
+                )
+            self.shards: dict[int, dict[str, Any]] = {int(k): v for k, v in state["shards"].items()}
+        else:
+            if state_path.exists():
+                shutil.rmtree(self.root)
+            self.shards = {}
+            self.root.mkdir(parents=True, exist_ok=True)
+            self._save_state()
+
+    def _save_state(self) -> None:
+        atomic_write_json(
+            self.root / BUILD_STATE, {"params": self.params, "shards": {str(k): v for k, v in self.shards.items()}}
+        )
+
+    def shard_path(self, index: int) -> Path:
+        return self.root / SHARD_DIR / f"shard-{index:05d}.npz"
+
+    def is_done(self, index: int) -> bool:
+        return index in self.shards
+
+    @property
+    def n_done_scenarios(self) -> int:
+        return sum(v["n_scenarios"] for v in self.shards.values())
+
+    def write_shard(self, index: int, scenarios: Sequence[Scenario], info: dict[str, Any] | None = None) -> None:
+        """Write shard ``index`` (may be empty: then only the build state records it)."""
+        entry: dict[str, Any] = {"n_scenarios": 0, "info": info or {}}
+        if scenarios:
+            entry.update(write_shard(self.shard_path(index), scenarios))
+            entry["file"] = str(self.shard_path(index).relative_to(self.root))
+        self.shards[index] = entry
+        self._save_state()
+
+    def finalize(
+        self, n_scenarios: int | None = None, provenance: dict[str, Any] | None = None
+    ) -> Dataset:
+        """Write the manifest (keeping the first ``n_scenarios`` in shard order) and return the dataset."""
+        entries = []
+        layouts: Counter[str] = Counter()
+        total = 0
+        for index in sorted(self.shards):
+            entry = self.shards[index]
+            if entry["n_scenarios"] == 0:
+                continue
+            if n_scenarios is not None and total >= n_scenarios:
+                self.shard_path(index).unlink(missing_ok=True)
+                continue
+            path = self.shard_path(index)
+            scenarios = read_shard(path, entry)
+            if n_scenarios is not None and total + len(scenarios) > n_scenarios:
+                scenarios = scenarios[: n_scenarios - total]
+                entry = {**entry, **write_shard(path, scenarios)}
+            layouts.update(s.layout for s in scenarios)
+            total += len(scenarios)
+            entries.append({k: entry[k] for k in ("file", "n_scenarios", "bytes", "sha256")})
+        if n_scenarios is not None and total < n_scenarios:
+            raise DatasetError(f"{self.root}: only {total} scenarios were built, {n_scenarios} requested")
+        manifest = {
+            "format": FORMAT,
+            "schema_version": SCHEMA_VERSION,
+            "created": datetime.now(UTC).isoformat(timespec="seconds"),
+            "provenance": {**(provenance or {}), "build_params": self.params},
+            "counts": {"scenarios": total, "per_layout": dict(sorted(layouts.items()))},
+            "splits": {},
+            "shards": entries,
+        }
+        atomic_write_json(self.root / MANIFEST, manifest)
+        (self.root / BUILD_STATE).unlink(missing_ok=True)
+        return Dataset(self.root, manifest)
+
+
+def write_dataset(
+    root: str | Path, scenarios: Sequence[Scenario], provenance: dict[str, Any] | None = None,
+    shard_size: int = 500, overwrite: bool = False,
+) -> Dataset:
+    """Write a list of scenarios as a finished dataset (used by importers and tests)."""
+    builder = DatasetBuilder(root, {"writer": "write_dataset", "n": len(scenarios)}, overwrite=overwrite)
+    for k, start in enumerate(range(0, len(scenarios), shard_size)):
+        builder.write_shard(k, scenarios[start : start + shard_size])
+    return builder.finalize(provenance=provenance)

@@ -1,0 +1,121 @@
+"""Per-timestep input features of pi_score: a previous ego roll-out seen from a candidate adversary.
+
+For a pair (ego roll-out, candidate) and every timestep ``t`` (the same scenario step in both), the ego is
+expressed in the candidate adversary's frame at ``t`` (origin at the candidate's position, x along its heading):
+relative position, distance, relative heading and relative velocity; plus the candidate seen from the ego (is it
+ahead or beside?), both speeds, a validity flag and the time. Invalid ego steps have every feature zeroed except
+the time, and the valid flag says so.
+
+Everything is torch and broadcasts over leading batch axes, so training (gathered pairs ``[B, T]``) and
+inference (all pairs ``[K, N, T]`` at once) share one implementation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from seal.core.scenario import CURRENT_STEP, DT_S, N_FUTURE
+
+POS_SCALE_M = 20.0
+"""Positions and distances are divided by this (m)."""
+SPEED_SCALE_MPS = 10.0
+"""Speeds and velocities are divided by this (m/s)."""
+CLOSE_SCALE_M = 8.0
+"""Distance scale of the closeness feature ``exp(-d / 8)`` (the b of f_coll)."""
+POS_CLIP = 5.0
+"""Scaled positions are clipped to +-this (100 m): farther away nothing interacts."""
+
+FEATURE_NAMES = (
+    "ego_x_in_adv", "ego_y_in_adv", "distance", "closeness", "cos_rel_heading", "sin_rel_heading",
+    "adv_x_in_ego", "adv_y_in_ego", "rel_vx_in_adv", "rel_vy_in_adv", "adv_speed", "ego_speed", "valid", "time",
+)
+N_FEATURES = len(FEATURE_NAMES)
+
+
+def to_frame(dx: torch.Tensor, dy: torch.Tensor, heading: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """World-frame vectors ``(dx, dy)`` expressed in a frame rotated by ``heading`` (rad): ``(along, left)``."""
+    c, s = torch.cos(heading), torch.sin(heading)
+    return c * dx + s * dy, -s * dx + c * dy
+
+
+def _velocity(xy: torch.Tensor) -> torch.Tensor:
+    """``[..., T, 2]`` finite-difference velocity (m/s); step 0 takes the first forward difference."""
+    vel = torch.diff(xy, dim=-2) / DT_S
+    return torch.cat([vel[..., :1, :], vel], dim=-2)
+
+
+def pair_features(
+    cand_xy: torch.Tensor, cand_heading: torch.Tensor, ego_xy: torch.Tensor, ego_heading: torch.Tensor,
+    ego_valid: torch.Tensor,
+) -> torch.Tensor:
+    """Features ``[..., T, N_FEATURES]`` (order: `FEATURE_NAMES`) of ego roll-outs against candidates.
+
+    Args:
+        cand_xy: ``[..., T, 2]`` candidate positions (m, world frame).
+        cand_heading: ``[..., T]`` candidate headings (rad).
+        ego_xy: ``[..., T, 2]`` ego positions (m); row ``t`` is the same scenario step as the candidate's.
+        ego_heading: ``[..., T]`` ego headings (rad).
+        ego_valid: ``[..., T]`` bool, False where the roll-out had ended (its xy / heading are ignored there).
+
+    All leading axes broadcast against each other (e.g. ego ``[K, 1, T, 2]`` with candidates ``[1, N, T, 2]``).
+    """
+    valid = ego_valid.to(cand_xy.dtype)
+    # A finished roll-out holds its last position (zeros would invent a jump in the velocity features).
+    ego_xy = _hold_last(ego_xy, ego_valid)
+    dx = ego_xy[..., 0] - cand_xy[..., 0]
+    dy = ego_xy[..., 1] - cand_xy[..., 1]
+    ex, ey = to_frame(dx, dy, cand_heading)
+    ax, ay = to_frame(-dx, -dy, ego_heading)
+    dist = torch.sqrt(dx * dx + dy * dy + 1e-12)
+    rel = ego_heading - cand_heading
+    cand_v = _velocity(cand_xy)
+    ego_v = _velocity(ego_xy) * torch.cat([valid[..., :1], valid[..., 1:] * valid[..., :-1]], dim=-1)[..., None]
+    rvx, rvy = to_frame(ego_v[..., 0] - cand_v[..., 0], ego_v[..., 1] - cand_v[..., 1], cand_heading)
+    n_steps = cand_xy.shape[-2]
+    time = torch.arange(n_steps, dtype=cand_xy.dtype, device=cand_xy.device) / max(n_steps - 1, 1)
+    feats = [
+        (ex / POS_SCALE_M).clamp(-POS_CLIP, POS_CLIP), (ey / POS_SCALE_M).clamp(-POS_CLIP, POS_CLIP),
+        (dist / POS_SCALE_M).clamp(max=POS_CLIP), torch.exp(-dist / CLOSE_SCALE_M), torch.cos(rel), torch.sin(rel),
+        (ax / POS_SCALE_M).clamp(-POS_CLIP, POS_CLIP), (ay / POS_SCALE_M).clamp(-POS_CLIP, POS_CLIP),
+        rvx / SPEED_SCALE_MPS, rvy / SPEED_SCALE_MPS,
+        torch.linalg.vector_norm(cand_v, dim=-1) / SPEED_SCALE_MPS,
+        torch.linalg.vector_norm(ego_v, dim=-1) / SPEED_SCALE_MPS,
+    ]
+    shape = torch.broadcast_shapes(*(f.shape for f in feats), valid.shape)
+    out = torch.stack([f.expand(shape) * valid.expand(shape) for f in feats]
+                      + [valid.expand(shape), time.expand(shape)], dim=-1)
+    return out
+
+
+def _hold_last(xy: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    """``xy`` with every invalid step replaced by the last valid position before it (steps before the first
+    valid one take the first valid position; all-invalid rows take row 0, masked anyway)."""
+    idx = torch.arange(xy.shape[-2], device=xy.device).expand(valid.shape)
+    last = torch.cummax(torch.where(valid, idx, torch.full_like(idx, -1)), dim=-1).values
+    first = valid.int().argmax(dim=-1, keepdim=True)
+    src = torch.where(last < 0, first.expand_as(last), last)
+    return torch.gather(xy, -2, src[..., None].expand(*src.shape, 2))
+
+
+def align_ego_rollouts(
+    ego_xy: np.ndarray, ego_heading: np.ndarray, ego_valid: np.ndarray, n_steps: int = N_FUTURE
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cut ego arrays indexed by scenario step (e.g. ``seal.adversaries.cat.generator.stack_ego_rollouts``: ``[K, T_s,
+    ...]``)
+    to the candidates' steps ``CURRENT_STEP + 1 .. CURRENT_STEP + n_steps``, padding missing steps as invalid.
+
+    Returns ``xy [K, n_steps, 2]``, ``heading [K, n_steps]``, ``valid [K, n_steps]``.
+    """
+    ego_xy, ego_heading = np.asarray(ego_xy, np.float64), np.asarray(ego_heading, np.float64)
+    ego_valid = np.asarray(ego_valid, bool)
+    k, t_s = ego_valid.shape
+    lo = CURRENT_STEP + 1
+    hi = min(t_s, lo + n_steps)
+    xy = np.zeros((k, n_steps, 2))
+    heading = np.zeros((k, n_steps))
+    valid = np.zeros((k, n_steps), dtype=bool)
+    if hi > lo:
+        xy[:, : hi - lo], heading[:, : hi - lo], valid[:, : hi - lo] = ego_xy[:, lo:hi], ego_heading[:, lo:hi], \
+            ego_valid[:, lo:hi]
+    return xy, heading, valid

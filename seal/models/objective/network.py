@@ -1,0 +1,166 @@
+"""The pi_score network: per-step features of an (ego roll-out, candidate) pair -> [f_coll, f_diff] in [0, 1].
+
+A small polyline encoder in the spirit of VectorNet's sub-graph: a per-step MLP, a residual 1-D convolution over
+time (local motion context: braking, closing in), a second per-step layer that sees the max-pooled polyline
+feature next to its own, then masked max + mean pooling over the valid steps and an MLP head with a sigmoid. The
+head also sees explicit per-pair scalars: the maxima of the raw features over the valid steps and the raw
+features at the step of closest approach (its time, relative position and velocity there).
+Both outputs are corrections in logit space of closeness ``exp(-min_t d / 8)`` (see `ObjectiveNet.forward`).
+No normalisation layer couples the pairs of a batch, so a pair's output does not depend on its batch-mates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+from typing import Any
+
+import torch
+from torch import nn
+
+from seal.core.config_keys import check_keys
+from seal.core.scenario import N_FUTURE
+from seal.models.objective.features import FEATURE_NAMES, N_FEATURES, pair_features
+
+N_OUTPUTS = 2
+"""Heads: f_coll, f_diff."""
+VALID_FEATURE = FEATURE_NAMES.index("valid")
+DISTANCE_FEATURE = FEATURE_NAMES.index("distance")
+CLOSENESS_FEATURE = FEATURE_NAMES.index("closeness")
+
+
+@dataclass(frozen=True)
+class ObjectiveConfig:
+    """Architecture of the pi_score network.
+
+    Attributes:
+        n_steps: timesteps per input track (candidate rows; 80 = the 8 s future).
+        stride: every ``stride``-th step is fed to the encoder (2 = 0.2 s).
+        hidden: width of the per-step and pooled features.
+        kernel: temporal convolution width (steps after striding, odd).
+        dropout: dropout probability before the head's layers (training only).
+        diff_on_closeness: f_diff starts as a logit correction of closeness too (its learned weight starts at 1,
+            else at 0).
+    """
+
+    n_steps: int = N_FUTURE
+    stride: int = 2
+    hidden: int = 32
+    kernel: int = 5
+    dropout: float = 0.1
+    diff_on_closeness: bool = True
+
+    def __post_init__(self) -> None:
+        for name in ("n_steps", "stride", "hidden", "kernel"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"objective config: {name} must be >= 1, got {getattr(self, name)}")
+        if self.kernel % 2 != 1:
+            raise ValueError(f"objective config: kernel must be odd, got {self.kernel}")
+        if not 0.0 <= self.dropout < 1.0:
+            raise ValueError(f"objective config: dropout must be in [0, 1), got {self.dropout}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], where: str = "objective config") -> ObjectiveConfig:
+        check_keys(cls, d, where)
+        types = {f.name: f.type for f in fields(cls)}
+        cast = {"float": float, "bool": bool}
+        return cls(**{k: cast.get(types[k], int)(v) for k, v in d.items()})
+
+
+def stride_pool(feats: torch.Tensor, stride: int) -> torch.Tensor:
+    """Keep every ``stride``-th step of ``feats [B, T, F]``, except that distance and closeness summarise their
+    whole window of ``stride`` steps (smallest valid distance, largest closeness): a close pass between two kept
+    steps must not vanish, since f_coll is about the closest approach."""
+    if stride == 1:
+        return feats
+    b, t, f = feats.shape
+    n = -(-t // stride)
+    pad = n * stride - t
+    if pad:
+        feats = torch.cat([feats, torch.zeros(b, pad, f, dtype=feats.dtype, device=feats.device)], dim=1)
+    win = feats.reshape(b, n, stride, f)
+    out = win[:, :, 0].clone()
+    valid = win[..., VALID_FEATURE] > 0.5
+    dist = torch.where(valid, win[..., DISTANCE_FEATURE], torch.full_like(valid, 1e9, dtype=feats.dtype)).min(dim=2)
+    any_valid = valid.any(dim=2)
+    out[..., DISTANCE_FEATURE] = torch.where(any_valid, dist.values, torch.zeros_like(dist.values))
+    out[..., CLOSENESS_FEATURE] = win[..., CLOSENESS_FEATURE].max(dim=2).values
+    out[..., VALID_FEATURE] = any_valid.to(feats.dtype)
+    return out
+
+
+def closest_step(feats: torch.Tensor) -> torch.Tensor:
+    """The features ``[B, F]`` of ``feats [B, T, F]`` at each pair's step of smallest valid distance (the closest
+    approach; zeros for a pair with no valid step, as the features of invalid steps are)."""
+    valid = feats[..., VALID_FEATURE] > 0.5
+    dist = torch.where(valid, feats[..., DISTANCE_FEATURE], torch.full_like(feats[..., 0], 1e9))
+    at = dist.argmin(dim=1)
+    return torch.gather(feats, 1, at[:, None, None].expand(-1, 1, feats.shape[-1]))[:, 0]
+
+
+def _masked_pool(h: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Max and mean of ``h [B, T, H]`` over steps where ``mask [B, T]``; zeros for rows with no valid step."""
+    m = mask[..., None]
+    any_valid = mask.any(dim=1, keepdim=True)
+    mx = torch.where(m, h, torch.full_like(h, -1e4)).max(dim=1).values
+    mx = torch.where(any_valid, mx, torch.zeros_like(mx))
+    mean = (h * m).sum(dim=1) / m.sum(dim=1).clamp(min=1)
+    return mx, mean
+
+
+class ObjectiveNet(nn.Module):
+    """Pairs' per-step features ``[B, T, N_FEATURES]`` + validity ``[B, T]`` + features at the closest approach
+    ``[B, N_FEATURES]`` -> logits ``[B, 2]`` (both relative to the logit of the largest closeness feature)."""
+
+    def __init__(self, config: ObjectiveConfig) -> None:
+        super().__init__()
+        self.config = config
+        h = config.hidden
+        self.step = nn.Sequential(nn.Linear(N_FEATURES, h), nn.ReLU(), nn.Linear(h, h), nn.ReLU())
+        self.conv = nn.Conv1d(h, h, config.kernel, padding=config.kernel // 2)
+        self.mix = nn.Sequential(nn.Linear(2 * h, h), nn.ReLU())
+        # The head also sees the per-pair maxima of the raw features (e.g. the largest closeness = the closest
+        # approach): a direct path for what f_coll is made of, which the deep path then corrects.
+        self.head = nn.Sequential(nn.Dropout(config.dropout), nn.Linear(2 * h + 2 * N_FEATURES, h), nn.ReLU(),
+                                  nn.Dropout(config.dropout), nn.Linear(h, N_OUTPUTS))
+        # Learned weight of the closeness logit in each output (starts at 1 = "no reaction" for f_coll).
+        self.close_gain = nn.Parameter(torch.tensor([1.0, 1.0 if config.diff_on_closeness else 0.0]))
+
+    def forward(self, feats: torch.Tensor, valid: torch.Tensor, closest: torch.Tensor) -> torch.Tensor:
+        correction, prior = self.parts(feats, valid, closest)
+        return correction + prior
+
+    def parts(self, feats: torch.Tensor, valid: torch.Tensor, closest: torch.Tensor
+              ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The logits ``[B, 2]`` split into the learned correction and the weighted closeness logit."""
+        h = self.step(feats)
+        h = h + torch.relu(self.conv(h.transpose(1, 2)).transpose(1, 2))
+        g, _ = _masked_pool(h, valid)
+        h = self.mix(torch.cat([h, g[:, None].expand_as(h)], dim=-1))
+        mx, mean = _masked_pool(h, valid)
+        raw, _ = _masked_pool(feats, valid)
+        out = self.head(torch.cat([mx, mean, raw, closest], dim=-1))
+        # Both heads are corrections (in logit space) of the closest approach to the previous roll-out,
+        # exp(-min_t d / 8): exactly f_coll when the ego does not react, which most candidates do not provoke; and
+        # a candidate that passes close is the one that makes the ego change its behaviour (f_diff).
+        close = raw[:, CLOSENESS_FEATURE : CLOSENESS_FEATURE + 1].clamp(1e-4, 1 - 1e-4)
+        return out, self.close_gain * torch.log(close / (1 - close))
+
+    def score_pairs(
+        self, cand_xy: torch.Tensor, cand_heading: torch.Tensor, ego_xy: torch.Tensor, ego_heading: torch.Tensor,
+        ego_valid: torch.Tensor, with_correction: bool = False,
+    ) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
+        """Predicted ``[f_coll, f_diff]`` ``[..., 2]`` for pairs given as tracks (shapes as in
+        `seal.models.objective.features.pair_features`; leading axes broadcast); with ``with_correction`` also the
+        learned logit corrections ``[..., 2]`` (for training's penalty on them)."""
+        feats = pair_features(cand_xy, cand_heading, ego_xy, ego_heading, ego_valid)
+        lead = feats.shape[:-2]
+        feats = feats.reshape(-1, *feats.shape[-2:])
+        closest = closest_step(feats)
+        feats = stride_pool(feats, self.config.stride)
+        valid = feats[..., VALID_FEATURE] > 0.5
+        correction, prior = self.parts(feats, valid, closest)
+        pred = torch.sigmoid(correction + prior).reshape(*lead, N_OUTPUTS)
+        return (pred, correction.reshape(*lead, N_OUTPUTS)) if with_correction else pred

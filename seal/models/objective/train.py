@@ -1,0 +1,318 @@
+"""Training pi_score on a `LabelSet`: MSE on [f_coll, f_diff] over (previous roll-out, candidate) pairs, plus an
+optional listwise ranking loss.
+
+Batches are made of groups: a group is one (scenario s, previous roll-out i) with all its N candidates j, drawn at
+random each epoch (``pairs_per_epoch`` / N groups). The loss is the MSE of both heads plus ``rank_weight`` times
+a ListNet cross-entropy between the softmax (temperature ``rank_temperature``) of the simulated ``f_coll + f_diff``
+over the group's candidates and that of the predicted sum: pi_score is used to rank candidates, and MSE alone
+spends its capacity on the near-binary f_diff level rather than on the order. With ``mirror``, half of the groups
+are reflected across the x axis (y and headings negated; the labels do not change). Features are computed on the
+fly from the stored tracks (`seal.models.objective.features`), so memory stays at the size of the tracks.
+
+A share of the training scenarios (``val_fraction``) is held out by scenario for early stopping and model
+selection: with ``select="spearman"`` the kept state is the one with the best mean Spearman correlation of the
+predicted sum with the simulated sum over the candidates of the validation groups (the logged-adversary roll-out
+and 4 other roll-outs per validation scenario), with ``"mse"`` the one with the lowest validation MSE.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+
+from seal.core.config_keys import check_keys
+from seal.models.objective.labels import LOGGED_ROW, LabelSet
+from seal.models.objective.metrics import spearman
+from seal.models.objective.model import ObjectiveModel
+from seal.models.objective.network import ObjectiveConfig, ObjectiveNet
+
+PREV_MODES = ("all", "logged")
+"""Which previous roll-outs make training pairs: all M of a scenario, or only the logged-adversary episode."""
+SELECT_MODES = ("spearman", "mse")
+"""Validation metric of early stopping / model selection."""
+VAL_PREVS = 5
+"""Previous roll-outs per validation scenario (the logged one and 4 drawn from the candidates' episodes)."""
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Optimisation settings (see the module docstring).
+
+    Attributes:
+        batch_size: pairs per step (rounded down to whole groups of N candidates, at least one group).
+        lr: Adam learning rate; cosine-decayed to 5% over ``max_epochs``.
+        weight_decay: AdamW weight decay.
+        max_epochs: epochs at most.
+        pairs_per_epoch: pairs drawn per epoch (all pairs when larger).
+        patience: epochs without validation improvement before stopping.
+        max_minutes: wall-clock budget of the training loop.
+        val_fraction: share of the scenarios held out for early stopping.
+        prev: ``"all"`` or ``"logged"`` (`PREV_MODES`).
+        rank_weight: weight of the listwise ranking loss next to the MSE (0: MSE only).
+        rank_temperature: softmax temperature of the ranking loss (units of f_coll + f_diff).
+        mirror: reflect a random half of the groups across the x axis (augmentation).
+        correction_l2: weight of a penalty on the squared logit corrections of closeness (keeps the outputs
+            near closeness unless the labels say otherwise).
+        select: validation metric of early stopping (`SELECT_MODES`).
+        seed: random seed.
+    """
+
+    batch_size: int = 512
+    lr: float = 2e-3
+    weight_decay: float = 1e-4
+    max_epochs: int = 20
+    pairs_per_epoch: int = 200_000
+    patience: int = 4
+    max_minutes: float = 5.0
+    val_fraction: float = 0.1
+    prev: str = "all"
+    rank_weight: float = 0.0
+    rank_temperature: float = 0.1
+    mirror: bool = False
+    correction_l2: float = 0.0
+    select: str = "spearman"
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("batch_size", "max_epochs", "pairs_per_epoch", "patience"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"objective training: {name} must be >= 1, got {getattr(self, name)}")
+        if not (self.lr > 0 and self.max_minutes > 0 and self.weight_decay >= 0):
+            raise ValueError("objective training: lr and max_minutes must be > 0, weight_decay >= 0")
+        if not 0.0 < self.val_fraction < 1.0:
+            raise ValueError(f"objective training: val_fraction must be in (0, 1), got {self.val_fraction}")
+        if self.prev not in PREV_MODES:
+            raise ValueError(f"objective training: prev must be one of {PREV_MODES}, got {self.prev!r}")
+        if self.select not in SELECT_MODES:
+            raise ValueError(f"objective training: select must be one of {SELECT_MODES}, got {self.select!r}")
+        if not (self.rank_weight >= 0 and self.rank_temperature > 0):
+            raise ValueError("objective training: rank_weight must be >= 0 and rank_temperature > 0")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], where: str = "objective training config") -> TrainConfig:
+        check_keys(cls, d, where)
+        return cls(**d)
+
+
+@dataclass
+class FitResult:
+    """What `train_objective` did: per-epoch ``history`` rows (epoch, train_loss, val_loss = validation MSE,
+    val_spearman, seconds), the best epoch and its validation MSE and Spearman, why it stopped and the wall time."""
+
+    history: list[dict[str, float]] = field(default_factory=list)
+    best_epoch: int = -1
+    best_val: float = float("inf")
+    best_val_spearman: float = float("nan")
+    stop_reason: str = ""
+    seconds: float = 0.0
+
+
+class PairTensors:
+    """A `LabelSet` as torch tensors, with the pairs of chosen scenarios and previous roll-outs."""
+
+    def __init__(self, labels: LabelSet) -> None:
+        self.cand_xy = torch.as_tensor(labels.cand_xy, dtype=torch.float32)
+        self.cand_heading = torch.as_tensor(labels.cand_heading, dtype=torch.float32)
+        self.ego_xy = torch.as_tensor(labels.ego_xy, dtype=torch.float32)
+        self.ego_heading = torch.as_tensor(labels.ego_heading, dtype=torch.float32)
+        self.ego_valid = torch.as_tensor(labels.ego_valid, dtype=torch.bool)
+        self.f_coll = torch.as_tensor(labels.f_coll, dtype=torch.float32)
+        self.f_diff = torch.as_tensor(labels.f_diff, dtype=torch.float32)
+        self.n_prev = labels.ego_xy.shape[1]
+        self.n_cand = labels.n_candidates
+        self.last_correction = torch.zeros(0, 2)
+        """The logit corrections ``[B, 2]`` of the last `batch` (for the penalty)."""
+
+    def pairs(self, scenarios: np.ndarray, prev: str) -> np.ndarray:
+        """``[P, 3]`` int64 (scenario, previous roll-out, candidate) of every pair of ``scenarios``; the N
+        candidates of one (scenario, previous roll-out) group are consecutive rows."""
+        prevs = np.arange(self.n_prev) if prev == "all" else np.array([LOGGED_ROW])
+        return self.group_pairs(self.groups(scenarios, prevs))
+
+    @staticmethod
+    def groups(scenarios: np.ndarray, prevs: np.ndarray) -> np.ndarray:
+        """``[G, 2]`` int64 (scenario, previous roll-out) for every scenario and every row of ``prevs``."""
+        s, i = np.meshgrid(scenarios, prevs, indexing="ij")
+        return np.stack([s.ravel(), i.ravel()], axis=1).astype(np.int64)
+
+    def group_pairs(self, groups: np.ndarray) -> np.ndarray:
+        """``[G * N, 3]`` pairs of the groups ``[G, 2]``, group by group."""
+        j = np.tile(np.arange(self.n_cand), len(groups))
+        return np.concatenate([np.repeat(groups, self.n_cand, axis=0), j[:, None]], axis=1).astype(np.int64)
+
+    def batch(self, net: ObjectiveNet, idx: np.ndarray, flip: np.ndarray | None = None
+              ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Predictions and targets ``[B, 2]`` of the pairs ``idx [B, 3]``; pairs where ``flip [B]`` (bool) are
+        mirrored across the x axis first."""
+        s, i, j = (torch.as_tensor(idx[:, c]) for c in range(3))
+        cand_xy, cand_h = self.cand_xy[s, j], self.cand_heading[s, j]
+        ego_xy, ego_h = self.ego_xy[s, i], self.ego_heading[s, i]
+        if flip is not None:
+            sign = torch.where(torch.as_tensor(flip), -1.0, 1.0)
+            mirror = torch.stack([torch.ones_like(sign), sign], dim=-1)[:, None]
+            cand_xy, ego_xy = cand_xy * mirror, ego_xy * mirror
+            cand_h, ego_h = cand_h * sign[:, None], ego_h * sign[:, None]
+        pred, correction = net.score_pairs(cand_xy, cand_h, ego_xy, ego_h, self.ego_valid[s, i], with_correction=True)
+        target = torch.stack([self.f_coll[s, j], self.f_diff[s, i, j]], dim=-1)
+        self.last_correction = correction
+        return pred, target
+
+
+def predict_pairs(model: ObjectiveModel, tensors: PairTensors, idx: np.ndarray, batch_size: int = 4096
+                  ) -> np.ndarray:
+    """``[P, 2]`` predictions for the pairs ``idx [P, 3]`` (no gradient)."""
+    out = []
+    with torch.inference_mode():
+        for start in range(0, len(idx), batch_size):
+            pred, _ = tensors.batch(model.net, idx[start : start + batch_size])
+            out.append(pred.numpy())
+    return np.concatenate(out) if out else np.zeros((0, 2))
+
+
+def listnet_loss(pred: torch.Tensor, target: torch.Tensor, n_cand: int, temperature: float) -> torch.Tensor:
+    """ListNet cross-entropy between the candidate distributions ``softmax(sum / temperature)`` of the simulated
+    and the predicted ``f_coll + f_diff``, per group of ``n_cand`` consecutive pairs (``pred, target [G * n, 2]``),
+    averaged over groups; minus the target's entropy, so a perfect ranking scores about 0."""
+    p = pred.sum(dim=-1).reshape(-1, n_cand) / temperature
+    t = torch.softmax(target.sum(dim=-1).reshape(-1, n_cand) / temperature, dim=-1)
+    return (t * (torch.log(t.clamp(min=1e-12)) - torch.log_softmax(p, dim=-1))).sum(dim=-1).mean()
+
+
+def _validate(net: ObjectiveNet, tensors: PairTensors, idx: np.ndarray, batch_size: int = 4096
+              ) -> tuple[float, float]:
+    """Validation MSE and mean Spearman over the groups of ``idx`` (whole groups, group by group)."""
+    if len(idx) == 0:
+        return float("nan"), float("nan")
+    preds, targets = [], []
+    with torch.inference_mode():
+        for start in range(0, len(idx), batch_size):
+            pred, target = tensors.batch(net, idx[start : start + batch_size])
+            preds.append(pred.numpy())
+            targets.append(target.numpy())
+    pred, target = np.concatenate(preds), np.concatenate(targets)
+    mse = float(((pred - target) ** 2).mean())
+    n = tensors.n_cand
+    rho = spearman(pred.sum(-1).reshape(-1, n), target.sum(-1).reshape(-1, n))
+    return mse, float(rho.mean())
+
+
+def validation_groups(tensors: PairTensors, scenarios: np.ndarray, prev: str, rng: np.random.Generator
+                      ) -> np.ndarray:
+    """``[G, 2]`` validation groups: per scenario the logged-adversary roll-out and (with ``prev="all"``) 4
+    others drawn from the candidates' episodes."""
+    if prev == "logged" or tensors.n_prev < 2:
+        return tensors.groups(scenarios, np.array([LOGGED_ROW]))
+    k = min(VAL_PREVS, tensors.n_prev) - 1
+    rows = [np.r_[LOGGED_ROW, 1 + rng.choice(tensors.n_prev - 1, k, replace=False)] for _ in scenarios]
+    return np.stack([np.repeat(scenarios, k + 1), np.concatenate(rows)], axis=1).astype(np.int64)
+
+
+def train_objective(
+    labels: LabelSet,
+    model_config: ObjectiveConfig | None = None,
+    config: TrainConfig | None = None,
+    on_step: Callable[[int, int, float], None] | None = None,
+    log: Callable[[str], None] = print,
+) -> tuple[ObjectiveModel, FitResult]:
+    """Train a fresh pi_score on ``labels`` (see the module docstring).
+
+    Args:
+        labels: training scenarios (at least 2: one is held out for validation).
+        model_config: architecture; ``n_steps`` is taken from the labels.
+        config: optimisation settings.
+        on_step: called after every optimiser step with (epoch, step in epoch, steps per epoch) for progress.
+        log: one line per epoch.
+    """
+    cfg = config or TrainConfig()
+    if labels.n_scenarios < 2:
+        raise ValueError(f"objective training needs at least 2 labelled scenarios, got {labels.n_scenarios}")
+    mcfg = ObjectiveConfig(**{**(model_config or ObjectiveConfig()).to_dict(), "n_steps": labels.n_steps})
+    rng = np.random.default_rng(cfg.seed)
+    torch.manual_seed(cfg.seed)
+    order = rng.permutation(labels.n_scenarios)
+    n_val = min(max(1, round(cfg.val_fraction * labels.n_scenarios)), labels.n_scenarios - 1)
+    val_s, train_s = np.sort(order[:n_val]), np.sort(order[n_val:])
+    tensors = PairTensors(labels)
+    n_cand = tensors.n_cand
+    prevs = np.arange(tensors.n_prev) if cfg.prev == "all" else np.array([LOGGED_ROW])
+    train_groups = tensors.groups(train_s, prevs)
+    val_pairs = tensors.group_pairs(validation_groups(tensors, val_s, cfg.prev, rng))
+
+    net = ObjectiveNet(mcfg)
+    opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    groups_per_batch = max(1, cfg.batch_size // n_cand)
+    n_per_epoch = min(max(1, cfg.pairs_per_epoch // n_cand), len(train_groups))
+    steps_per_epoch = max(1, -(-n_per_epoch // groups_per_batch))
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=cfg.max_epochs * steps_per_epoch,
+                                                       eta_min=0.05 * cfg.lr)
+    result = FitResult()
+    best_state = {k: v.detach().clone() for k, v in net.state_dict().items()}
+    best_key = -float("inf")
+    start = time.perf_counter()
+    bad = 0
+    for epoch in range(cfg.max_epochs):
+        net.train()
+        pick = rng.permutation(len(train_groups))[:n_per_epoch]
+        total, seen = 0.0, 0
+        out_of_time = False
+        for step in range(steps_per_epoch):
+            groups = train_groups[pick[step * groups_per_batch : (step + 1) * groups_per_batch]]
+            if len(groups) == 0:
+                break
+            idx = tensors.group_pairs(groups)
+            flip = np.repeat(rng.random(len(groups)) < 0.5, n_cand) if cfg.mirror else None
+            pred, target = tensors.batch(net, idx, flip)
+            loss = ((pred - target) ** 2).mean()
+            if cfg.correction_l2 > 0:
+                loss = loss + cfg.correction_l2 * (tensors.last_correction ** 2).mean()
+            if cfg.rank_weight > 0:
+                loss = loss + cfg.rank_weight * listnet_loss(pred, target, n_cand, cfg.rank_temperature)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            sched.step()
+            total += float(loss.detach()) * len(idx)
+            seen += len(idx)
+            if on_step is not None:
+                on_step(epoch, step, steps_per_epoch)
+            if time.perf_counter() - start > 60.0 * cfg.max_minutes:
+                out_of_time = True
+                break
+        net.eval()
+        val, val_rho = _validate(net, tensors, val_pairs)
+        row = {"epoch": epoch, "train_loss": total / max(seen, 1), "val_loss": val, "val_spearman": val_rho,
+               "seconds": round(time.perf_counter() - start, 1)}
+        result.history.append(row)
+        log(f"objective epoch {epoch}: train loss {row['train_loss']:.5f}, val MSE {val:.5f}, val Spearman "
+            f"{val_rho:.4f} ({row['seconds']} s)")
+        key = val_rho if cfg.select == "spearman" else -val
+        if key > best_key:
+            best_key, result.best_val, result.best_val_spearman, result.best_epoch, bad = key, val, val_rho, epoch, 0
+            best_state = {k: v.detach().clone() for k, v in net.state_dict().items()}
+        else:
+            bad += 1
+        if out_of_time:
+            result.stop_reason = f"time budget {cfg.max_minutes} min"
+            break
+        if bad >= cfg.patience:
+            result.stop_reason = f"no validation improvement for {cfg.patience} epochs"
+            break
+    else:
+        result.stop_reason = f"max_epochs {cfg.max_epochs}"
+    net.load_state_dict(best_state)
+    net.eval()
+    result.seconds = round(time.perf_counter() - start, 1)
+    info = {"train": cfg.to_dict(), "fit": {"best_epoch": result.best_epoch, "best_val_mse": result.best_val,
+                                            "best_val_spearman": result.best_val_spearman,
+                                            "stop_reason": result.stop_reason, "seconds": result.seconds,
+                                            "epochs": len(result.history)},
+            "train_scenarios": int(train_s.size), "val_scenarios": int(val_s.size)}
+    return ObjectiveModel(mcfg, net, info), result

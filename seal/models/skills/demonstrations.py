@@ -1,0 +1,269 @@
+"""Skill demonstrations: every vehicle of a scenario driven by a noisy `HeuristicDriver` (thesis 6.3.3: all
+agents follow the heuristic and produce demonstrations), recorded as (own observation, applied action) per step.
+
+Noise model (`DemoConfig`), per agent:
+
+* every driver gets its own IDM time headway and minimum gap (drawn uniformly from the configured ranges);
+* additive Ornstein-Uhlenbeck noise on steering and acceleration (stationary std ``steer_noise`` /
+  ``accel_noise``, time constant ``noise_tau_s``): smooth human-like drift rather than per-step jitter, so a
+  10-step window carries a consistent deviation a skill latent can encode;
+* a share ``impaired_share`` of agents is impaired: ``impaired_noise_scale`` times the noise, a longitudinal
+  reaction delay (acceleration decided on the observation of ``d`` steps ago, ``d`` uniform in
+  ``reaction_delay_steps``; steering stays on the current observation) and distractions (starting at rate
+  ``distraction_rate_hz``, lasting ``distraction_s``) during which the agent does not see other vehicles. These
+  produce the rear-end and merge collisions the adversarial skills are learned from.
+
+`build_demonstrations` runs a list of scenarios in parallel processes in resumable chunks and writes one
+`seal.models.skills.demos.Demonstrations` file.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+import zlib
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from seal.core.chunked import fingerprint, run_chunked
+from seal.core.scenario import DT_S, N_STEPS, Scenario
+from seal.envs import observation as ob
+from seal.envs.heuristic import HeuristicDriver
+from seal.envs.multi_agent import MultiAgentSim, SimConfig
+from seal.models.skills.demos import Demonstrations
+
+
+@dataclass(frozen=True)
+class DemoConfig:
+    """Settings of the demonstration roll-outs (see the module docstring).
+
+    Attributes:
+        start_step, end_step: simulated scenario steps (`seal.envs.multi_agent.SimConfig`).
+        steer_noise, accel_noise: stationary std of the OU noise on the normalised steering / acceleration.
+        noise_tau_s: OU time constant (s).
+        headway_range_s, min_gap_range_m: per-driver IDM time headway (s) and minimum gap (m) ranges.
+        impaired_share: share of impaired agents.
+        impaired_noise_scale: noise multiplier for impaired agents.
+        reaction_delay_steps: inclusive range of the impaired longitudinal reaction delay (steps).
+        distraction_rate_hz: rate at which an impaired agent starts a distraction (1/s).
+        distraction_s: range of a distraction's duration (s).
+        max_lateral_m, offroad_tolerance_m: road checks (`SimConfig`).
+        seed: base seed; each scenario's stream is derived from it and the scenario id.
+    """
+
+    start_step: int = 0
+    end_step: int = N_STEPS - 1
+    steer_noise: float = 0.02
+    accel_noise: float = 0.08
+    noise_tau_s: float = 1.0
+    headway_range_s: tuple[float, float] = (0.6, 1.4)
+    min_gap_range_m: tuple[float, float] = (1.5, 3.0)
+    impaired_share: float = 0.5
+    impaired_noise_scale: float = 3.0
+    reaction_delay_steps: tuple[int, int] = (5, 15)
+    distraction_rate_hz: float = 0.3
+    distraction_s: tuple[float, float] = (1.0, 2.5)
+    max_lateral_m: float = 10.0
+    offroad_tolerance_m: float = 0.5
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("steer_noise", "accel_noise", "impaired_noise_scale", "distraction_rate_hz"):
+            if float(getattr(self, name)) < 0:
+                raise ValueError(f"DemoConfig: {name} must be >= 0, got {getattr(self, name)}")
+        if not 0.0 <= self.impaired_share <= 1.0:
+            raise ValueError(f"DemoConfig: impaired_share must be in [0, 1], got {self.impaired_share}")
+        if self.noise_tau_s <= 0:
+            raise ValueError(f"DemoConfig: noise_tau_s must be > 0, got {self.noise_tau_s}")
+        for name in ("headway_range_s", "min_gap_range_m", "reaction_delay_steps", "distraction_s"):
+            lo, hi = getattr(self, name)
+            if not 0 <= lo <= hi:
+                raise ValueError(f"DemoConfig: {name} must be a range 0 <= low <= high, got {(lo, hi)}")
+        self.sim_config()  # validates the time span
+
+    def sim_config(self) -> SimConfig:
+        return SimConfig(start_step=self.start_step, end_step=self.end_step, max_lateral_m=self.max_lateral_m,
+                         offroad_tolerance_m=self.offroad_tolerance_m)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], where: str = "demo config") -> DemoConfig:
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ValueError(f"{where}: unknown key(s) {unknown}; known: {sorted(known)}")
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+
+
+def scenario_seed(base_seed: int, scenario_id: str) -> np.random.SeedSequence:
+    """Seed stream of one scenario: independent of which process or chunk simulates it."""
+    return np.random.SeedSequence([int(base_seed) & 0xFFFFFFFF, zlib.crc32(scenario_id.encode())])
+
+
+class NoisyHeuristicDrivers:
+    """Per-agent noisy heuristic drivers for one roll-out (see the module docstring); agents are created on
+    first use, so agents entering late get a driver when they first act."""
+
+    def __init__(self, config: DemoConfig, rng: np.random.Generator) -> None:
+        self.cfg = config
+        self.rng = rng
+        self._drivers: dict[int, HeuristicDriver] = {}
+        self._noise: dict[int, np.ndarray] = {}
+        self._scale: dict[int, float] = {}
+        self._delay: dict[int, int] = {}
+        self._history: dict[int, list[np.ndarray]] = {}
+        self._distracted: dict[int, int] = {}
+        self._impaired: dict[int, bool] = {}
+        self._decay = math.exp(-DT_S / config.noise_tau_s)
+        self._sigma = np.array([config.steer_noise, config.accel_noise])
+
+    def impaired(self, agent: int) -> bool:
+        """Whether ``agent`` drives with the impaired model (False for agents not seen yet)."""
+        return self._impaired.get(agent, False)
+
+    def _add(self, agent: int) -> None:
+        cfg, rng = self.cfg, self.rng
+        self._drivers[agent] = HeuristicDriver(
+            time_headway_s=float(rng.uniform(*cfg.headway_range_s)),
+            min_gap_m=float(rng.uniform(*cfg.min_gap_range_m)),
+        )
+        impaired = bool(rng.random() < cfg.impaired_share)
+        self._impaired[agent] = impaired
+        self._scale[agent] = cfg.impaired_noise_scale if impaired else 1.0
+        self._delay[agent] = int(rng.integers(cfg.reaction_delay_steps[0], cfg.reaction_delay_steps[1] + 1)) \
+            if impaired else 0
+        # Start from the stationary distribution so there is no noise-free transient.
+        self._noise[agent] = rng.normal(0.0, 1.0, 2) * self._sigma * self._scale[agent]
+        self._history[agent] = []
+        self._distracted[agent] = 0
+
+    def act(self, agents: np.ndarray, obs: np.ndarray) -> np.ndarray:
+        """Actions ``[n, 2]`` (float32, clipped to [-1, 1]) of ``agents`` given their observations ``[n, D]``."""
+        out = np.empty((len(agents), 2), dtype=np.float32)
+        cfg, rng = self.cfg, self.rng
+        innov = math.sqrt(1.0 - self._decay**2)
+        for k, agent in enumerate(np.asarray(agents).tolist()):
+            if agent not in self._drivers:
+                self._add(agent)
+            o = obs[k].astype(np.float64)
+            driver = self._drivers[agent]
+            steer, accel = driver.act(o)
+            if self._impaired[agent]:
+                hist = self._history[agent]
+                hist.append(o)
+                if len(hist) > self._delay[agent] + 1:
+                    hist.pop(0)
+                seen = hist[0]  # the observation of `delay` steps ago (the oldest one early on)
+                if self._distracted[agent] > 0:
+                    self._distracted[agent] -= 1
+                    seen = _blind(seen)
+                elif rng.random() < cfg.distraction_rate_hz * DT_S:
+                    self._distracted[agent] = int(round(rng.uniform(*cfg.distraction_s) / DT_S))
+                if seen is not o:
+                    accel = driver.act(seen)[1]
+            n = self._noise[agent]
+            n *= self._decay
+            n += innov * rng.normal(0.0, 1.0, 2) * self._sigma * self._scale[agent]
+            out[k] = (steer + n[0], accel + n[1])
+        np.clip(out, -1.0, 1.0, out=out)
+        return out
+
+
+def _blind(obs: np.ndarray) -> np.ndarray:
+    """The observation without other vehicles (lidar at full range, no nearest-vehicle slots)."""
+    o = obs.copy()
+    o[ob.LIDAR] = 1.0
+    o[ob.NEAREST] = 0.0
+    return o
+
+
+def roll_out_demonstrations(scenario: Scenario, config: DemoConfig | None = None) -> Demonstrations:
+    """Simulate one scenario with every vehicle driven by `NoisyHeuristicDrivers`; its `Demonstrations`
+    (segments in the order agents ended; deterministic for the config's seed and the scenario id)."""
+    cfg = config or DemoConfig()
+    rng = np.random.default_rng(scenario_seed(cfg.seed, scenario.scenario_id))
+    sim = MultiAgentSim(scenario, cfg.sim_config())
+    drivers = NoisyHeuristicDrivers(cfg, rng)
+    rec_obs: dict[int, list[np.ndarray]] = {}
+    rec_act: dict[int, list[np.ndarray]] = {}
+    while not sim.done:
+        idx, obs = sim.observe()
+        actions = drivers.act(idx, obs)
+        for k, i in enumerate(idx.tolist()):
+            rec_obs.setdefault(i, []).append(obs[k])
+            rec_act.setdefault(i, []).append(actions[k])
+        sim.step(idx, actions)
+    obs_parts, act_parts, segs = [], [], []
+    row = 0
+    for end in sim.ends:
+        n = end.end_step - end.start_step
+        if n < 1:
+            continue
+        o, a = rec_obs.pop(end.index), rec_act.pop(end.index)
+        assert len(o) == n, (scenario.scenario_id, end, len(o))
+        obs_parts.append(np.stack(o))
+        act_parts.append(np.stack(a))
+        segs.append((row, n, end.agent_id, end.start_step, end.end_reason, drivers.impaired(end.index)))
+        row += n
+    seg = np.array(segs, dtype=np.int64).reshape(-1, 6)
+    return Demonstrations(
+        obs=np.concatenate(obs_parts).astype(np.float16) if obs_parts else np.zeros((0, ob.OBS_DIM), np.float16),
+        actions=np.concatenate(act_parts).astype(np.float32) if act_parts else np.zeros((0, 2), np.float32),
+        seg_row=seg[:, 0], seg_len=seg[:, 1].astype(np.int32), seg_scenario=np.zeros(len(seg), dtype=np.int32),
+        seg_agent=seg[:, 2], seg_start_step=seg[:, 3].astype(np.int32), seg_end_reason=seg[:, 4].astype(np.int8),
+        seg_impaired=seg[:, 5].astype(bool), scenario_ids=np.array([scenario.scenario_id]),
+        params=cfg.to_dict(),
+    )
+
+
+def _run_chunk(args: tuple[int, list[Scenario], dict[str, Any]]) -> tuple[int, Demonstrations]:
+    index, scenarios, cfg = args
+    config = DemoConfig.from_dict(cfg)
+    return index, Demonstrations.concat([roll_out_demonstrations(s, config) for s in scenarios], config.to_dict())
+
+
+def _fingerprint(config: DemoConfig, scenario_ids: Sequence[str], chunk_size: int) -> str:
+    return fingerprint({"config": config.to_dict(), "ids": list(scenario_ids), "chunk": chunk_size})
+
+
+def parts_dir(out: str | Path) -> Path:
+    """Where `build_demonstrations` keeps finished chunks until the final file is written."""
+    out = Path(out)
+    return out.with_name(out.name + ".parts")
+
+
+def build_demonstrations(
+    scenarios: Sequence[Scenario],
+    out: str | Path,
+    config: DemoConfig | None = None,
+    workers: int = 2,
+    chunk_size: int = 10,
+    progress: bool = True,
+    log: Callable[[str], None] = print,
+) -> Demonstrations:
+    """Simulate ``scenarios`` in ``workers`` processes and write one `Demonstrations` file to ``out``.
+
+    Resumable: finished chunks of ``chunk_size`` scenarios are kept in `parts_dir` (atomic writes) and reused by a
+    re-run with the same config and scenarios; the folder is removed once ``out`` is written.
+    """
+
+    cfg = config or DemoConfig()
+    if not scenarios:
+        raise ValueError("build_demonstrations: no scenarios")
+    out = Path(out)
+    parts = parts_dir(out)
+    ids = [s.scenario_id for s in scenarios]
+    paths = run_chunked(
+        scenarios, parts, _fingerprint(cfg, ids, chunk_size), {}, _run_chunk, (cfg.to_dict(),),
+        lambda demos, file: demos.save(file, compress=False), workers, chunk_size, progress, "demonstrations", log,
+    )
+    merged = Demonstrations.concat([Demonstrations.load(p) for p in paths], cfg.to_dict())
+    merged.save(out)
+    shutil.rmtree(parts)
+    return merged

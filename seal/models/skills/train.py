@@ -1,0 +1,255 @@
+"""Training loops of the skill VAE and of the state-conditioned priors.
+
+Both use AdamW on shuffled mini-batches, evaluate on held-out windows before training and after every epoch, keep
+the best epoch (lowest validation loss; epoch 0 = the starting weights, which matters when fine-tuning), stop
+early after ``patience`` epochs without improvement or when the next epoch would overrun ``max_minutes``, and
+write one CSV row per epoch (atomically rewritten, so it can be watched).
+
+The VAE trains on windows gathered from the demonstration rows (`seal.models.skills.demos.gather_windows`); the priors
+train on the VAE's posterior means of benign or adversarial windows, conditioned on each window's first
+observation (thesis 6.3.2: the priors are fitted after, and separately from, the shared VAE).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from seal.core.atomic import atomic_write_bytes
+from seal.core.config_keys import check_keys
+from seal.models.skills.demos import gather_windows
+from seal.models.skills.realnvp import ConditionalRealNVP
+from seal.models.skills.vae import SkillVAE
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Optimisation settings of one model.
+
+    Attributes:
+        batch_size: windows per step.
+        lr: AdamW learning rate.
+        weight_decay: AdamW weight decay.
+        max_epochs: epochs at most.
+        epoch_windows: training windows drawn (without replacement) per epoch; None = all of them.
+        patience: epochs without a better validation loss before stopping.
+        max_minutes: wall-clock budget (None: none); no epoch starts that would overrun it.
+        grad_clip: gradient-norm clip.
+        seed: initialisation and shuffling seed.
+    """
+
+    batch_size: int = 256
+    lr: float = 1e-3
+    weight_decay: float = 1e-5
+    max_epochs: int = 30
+    epoch_windows: int | None = None
+    patience: int = 4
+    max_minutes: float | None = None
+    grad_clip: float = 5.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("batch_size", "max_epochs", "patience"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"training config: {name} must be >= 1, got {getattr(self, name)}")
+        if self.lr <= 0:
+            raise ValueError(f"training config: lr must be > 0, got {self.lr}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], where: str = "training config") -> TrainConfig:
+        check_keys(cls, d, where)
+        return cls(**d)
+
+
+@dataclass
+class FitResult:
+    """Outcome of a training run: per-epoch rows, best epoch and its validation loss, why it stopped, seconds."""
+
+    history: list[dict[str, float]]
+    best_epoch: int
+    best_val: float
+    stop_reason: str
+    seconds: float
+
+
+def _write_csv(path: Path | None, rows: list[dict[str, float]]) -> None:
+    if path is None or not rows:
+        return
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(rows[0]))
+    writer.writeheader()
+    writer.writerows(rows)
+    atomic_write_bytes(path, buf.getvalue().encode())
+
+
+def fit_loop(
+    model: torch.nn.Module,
+    n_train: int,
+    batch_loss: Callable[[np.ndarray], tuple[torch.Tensor, dict[str, float]]],
+    validate: Callable[[], dict[str, float]],
+    cfg: TrainConfig,
+    csv_path: str | Path | None = None,
+    desc: str = "train",
+    progress: bool = True,
+    log: Callable[[str], None] = print,
+) -> FitResult:
+    """Generic loop: ``batch_loss(indices)`` over shuffled training indices ``0..n_train-1``, ``validate()``
+    returning a dict with ``"loss"`` (lower is better) after each epoch; the best weights are restored at the end."""
+    from tqdm import tqdm
+
+    if n_train < 1:
+        raise ValueError(f"{desc}: no training windows")
+    torch.manual_seed(cfg.seed)
+    rng = np.random.default_rng(cfg.seed)
+    opt = torch.optim.AdamW([p for p in model.parameters() if p.requires_grad], lr=cfg.lr,
+                            weight_decay=cfg.weight_decay)
+    per_epoch = n_train if cfg.epoch_windows is None else min(n_train, int(cfg.epoch_windows))
+    n_batches = max(1, math.ceil(per_epoch / cfg.batch_size))
+    budget = None if cfg.max_minutes is None else 60.0 * cfg.max_minutes
+    csv_file = None if csv_path is None else Path(csv_path)
+    t0 = time.perf_counter()
+    model.eval()
+    with torch.no_grad():
+        val0 = validate()
+    history: list[dict[str, float]] = [{"epoch": 0, **{f"val_{k}": round(v, 6) for k, v in val0.items()}}]
+    best_val, best_epoch, bad = val0["loss"], 0, 0
+    log(f"{desc} epoch 0: val loss {val0['loss']:.4f} (starting weights)")
+    best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+    stop = f"completed {cfg.max_epochs} epochs"
+    for epoch in range(1, cfg.max_epochs + 1):
+        t_epoch = time.perf_counter()
+        model.train()
+        order = rng.permutation(n_train)[:per_epoch]
+        sums: dict[str, float] = {}
+        bar = tqdm(range(n_batches), desc=f"{desc} {epoch}/{cfg.max_epochs}", unit="batch", disable=not progress,
+                   leave=False)
+        for b in bar:
+            idx = order[b * cfg.batch_size : (b + 1) * cfg.batch_size]
+            if idx.size == 0:
+                continue
+            loss, parts = batch_loss(idx)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+            opt.step()
+            sums["loss"] = sums.get("loss", 0.0) + loss.item()
+            for k, v in parts.items():
+                sums[k] = sums.get(k, 0.0) + v
+            if b % 20 == 0:
+                bar.set_postfix(loss=f"{sums['loss'] / (b + 1):.4f}")
+        bar.close()
+        model.eval()
+        with torch.no_grad():
+            val = validate()
+        epoch_s = time.perf_counter() - t_epoch
+        row = {"epoch": epoch, **{f"train_{k}": round(v / n_batches, 6) for k, v in sums.items()},
+               **{f"val_{k}": round(v, 6) for k, v in val.items()}, "seconds": round(epoch_s, 2)}
+        history.append(row)
+        _write_csv(csv_file, [{**dict.fromkeys(row, ""), **r} for r in history])
+        improved = val["loss"] < best_val
+        if improved:
+            best_val, best_epoch, bad = val["loss"], epoch, 0
+            best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+        else:
+            bad += 1
+        log(f"{desc} epoch {epoch}: train loss {row['train_loss']:.4f}, val loss {val['loss']:.4f} "
+            f"({epoch_s:.1f} s)" + (" *" if improved else ""))
+        elapsed = time.perf_counter() - t0
+        if bad >= cfg.patience:
+            stop = f"early stop: no better validation loss for {cfg.patience} epochs"
+            break
+        if budget is not None and epoch < cfg.max_epochs and elapsed + epoch_s > budget:
+            stop = f"time budget of {cfg.max_minutes:g} min reached"
+            break
+    model.load_state_dict(best_state)
+    model.eval()
+    return FitResult(history, best_epoch, best_val, stop, round(time.perf_counter() - t0, 2))
+
+
+def _windows(obs: np.ndarray, actions: np.ndarray, rows: np.ndarray, horizon: int) -> tuple[torch.Tensor,
+                                                                                            torch.Tensor]:
+    o, a = gather_windows(obs, actions, rows, horizon)
+    return torch.from_numpy(o), torch.from_numpy(a)
+
+
+def fit_norm_from_rows(vae: SkillVAE, obs: np.ndarray, actions: np.ndarray, rows: np.ndarray,
+                       max_windows: int = 20000, seed: int = 0) -> None:
+    """Fit the VAE's standardisation on (a sample of) the steps of the training windows."""
+    rng = np.random.default_rng(seed)
+    pick = rows if rows.size <= max_windows else rng.choice(rows, max_windows, replace=False)
+    o, a = gather_windows(obs, actions, pick, vae.config.horizon)
+    vae.fit_norm(o.reshape(-1, o.shape[-1]), a.reshape(-1, a.shape[-1]))
+
+
+def train_vae(
+    vae: SkillVAE, obs: np.ndarray, actions: np.ndarray, train_rows: np.ndarray, val_rows: np.ndarray,
+    cfg: TrainConfig, csv_path: str | Path | None = None, progress: bool = True, log: Callable[[str], None] = print,
+) -> FitResult:
+    """Train ``vae`` on windows starting at ``train_rows`` of the demonstration rows ``obs [M, D]`` /
+    ``actions [M, 2]``; validation loss = recon (posterior mean) + beta KL on ``val_rows``."""
+    h = vae.config.horizon
+    fit_norm_from_rows(vae, obs, actions, train_rows, seed=cfg.seed)
+    val_o, val_a = _windows(obs, actions, val_rows, h)
+
+    def batch_loss(idx: np.ndarray) -> tuple[torch.Tensor, dict[str, float]]:
+        o, a = _windows(obs, actions, train_rows[idx], h)
+        return vae.loss(o, a)
+
+    def validate() -> dict[str, float]:
+        rec, kl = 0.0, 0.0
+        for s in range(0, val_o.shape[0], 2048):
+            o, a = val_o[s : s + 2048], val_a[s : s + 2048]
+            recon, mu, logvar = vae(o, a, sample=False)
+            rec += float(vae.recon_error(recon, a).sum())
+            kl += float(vae.kl(mu, logvar).sum())
+        n = max(1, val_o.shape[0])
+        return {"loss": (rec + vae.config.beta * kl) / n, "recon": rec / n, "kl": kl / n}
+
+    return fit_loop(vae, train_rows.size, batch_loss, validate, cfg, csv_path, "vae", progress, log)
+
+
+@torch.no_grad()
+def encode_windows(vae: SkillVAE, obs: np.ndarray, actions: np.ndarray, rows: np.ndarray,
+                   batch_size: int = 4096) -> np.ndarray:
+    """Posterior means ``[N, latent_dim]`` float32 of the windows starting at ``rows``."""
+    vae.eval()
+    out = np.empty((rows.size, vae.config.latent_dim), dtype=np.float32)
+    for s in range(0, rows.size, batch_size):
+        o, a = _windows(obs, actions, rows[s : s + batch_size], vae.config.horizon)
+        out[s : s + batch_size] = vae.encode(o, a)[0].numpy()
+    return out
+
+
+def train_prior(
+    prior: ConditionalRealNVP, z_train: np.ndarray, cond_train: np.ndarray, z_val: np.ndarray, cond_val: np.ndarray,
+    cfg: TrainConfig, csv_path: str | Path | None = None, progress: bool = True, desc: str = "prior",
+    log: Callable[[str], None] = print, fit_norm: bool = True,
+) -> FitResult:
+    """Fit ``prior`` by maximum likelihood of latents ``z [N, L]`` given states ``cond [N, D]``; the loss is the
+    mean negative log-likelihood (nats per window). ``fit_norm`` False keeps the prior's standardisation (when
+    fine-tuning a trained prior: refitting it would change the function being fine-tuned)."""
+    if fit_norm:
+        prior.fit_norm(z_train, cond_train)
+    zt, ct = torch.as_tensor(z_train, dtype=torch.float32), torch.as_tensor(cond_train, dtype=torch.float32)
+    zv, cv = torch.as_tensor(z_val, dtype=torch.float32), torch.as_tensor(cond_val, dtype=torch.float32)
+
+    def batch_loss(idx: np.ndarray) -> tuple[torch.Tensor, dict[str, float]]:
+        i = torch.from_numpy(idx)
+        return -prior.log_prob(zt[i], ct[i]).mean(), {}
+
+    def validate() -> dict[str, float]:
+        return {"loss": float(-prior.log_prob(zv, cv).mean())} if zv.shape[0] else {"loss": math.inf}
+
+    return fit_loop(prior, zt.shape[0], batch_loss, validate, cfg, csv_path, desc, progress, log)

@@ -1,0 +1,150 @@
+"""The skill VAE (ReSkill): an LSTM encoder of a (observation, action) window to a latent skill ``z``, and a
+closed-loop decoder ``pi(a | obs, z)`` that produces each step's action from that step's observation and ``z``.
+
+Inputs are standardised inside the model with statistics fitted on the training windows (`SkillVAE.fit_norm`,
+stored as buffers, so a loaded model needs no side files). Loss (`SkillVAE.loss`): mean squared action error in
+units of each action dimension's training std (steering varies far less than acceleration; raw MSE would
+ignore it), summed over the 2 dimensions and averaged over steps, plus ``beta`` times the KL divergence of the
+posterior ``N(mu, exp(logvar))`` from ``N(0, I)`` (summed over latent dimensions).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from seal.core.config_keys import check_keys
+
+_MIN_STD = 1e-3
+
+
+@dataclass(frozen=True)
+class VAEConfig:
+    """Architecture of the skill VAE.
+
+    Attributes:
+        obs_dim: observation size (100, `seal.envs.observation.OBS_DIM`).
+        action_dim: action size (2: steering, acceleration).
+        horizon: window length (steps).
+        latent_dim: skill latent size (8).
+        encoder_hidden: LSTM hidden size.
+        decoder_hidden: hidden layer sizes of the decoder MLP.
+        beta: KL weight.
+        decoder_ignore: observation slots the decoder does not see: by default the last applied steering and
+            action (slots 32-34 of `seal.envs.observation`). With them the decoder could copy the previous action, and
+            the latent would carry no intention (a skill's plan would be only "keep doing what you did").
+    """
+
+    obs_dim: int = 100
+    action_dim: int = 2
+    horizon: int = 10
+    latent_dim: int = 8
+    encoder_hidden: int = 128
+    decoder_hidden: tuple[int, ...] = (256, 256)
+    beta: float = 0.01
+    decoder_ignore: tuple[int, ...] = (32, 33, 34)
+
+    def __post_init__(self) -> None:
+        bad = [i for i in self.decoder_ignore if not 0 <= int(i) < self.obs_dim]
+        if bad:
+            raise ValueError(f"VAE config: decoder_ignore slots {bad} are outside 0..{self.obs_dim - 1}")
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["decoder_hidden"] = list(self.decoder_hidden)
+        d["decoder_ignore"] = list(self.decoder_ignore)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], where: str = "VAE config") -> VAEConfig:
+        check_keys(cls, d, where)
+        d = dict(d)
+        for key in ("decoder_hidden", "decoder_ignore"):
+            if key in d:
+                d[key] = tuple(int(h) for h in d[key])
+        return cls(**d)
+
+
+def mlp(sizes: list[int], out_dim: int) -> nn.Sequential:
+    """ReLU MLP ``sizes[0] -> sizes[1] -> ... -> out_dim`` (no output activation)."""
+    layers: list[nn.Module] = []
+    for a, b in zip(sizes[:-1], sizes[1:], strict=True):
+        layers += [nn.Linear(a, b), nn.ReLU()]
+    layers.append(nn.Linear(sizes[-1], out_dim))
+    return nn.Sequential(*layers)
+
+
+class SkillVAE(nn.Module):
+    """Skill VAE (see the module docstring).
+
+    Shapes: observations ``[B, T, obs_dim]``, actions ``[B, T, action_dim]`` (normalised, in [-1, 1]), latents
+    ``[B, latent_dim]``.
+    """
+
+    def __init__(self, config: VAEConfig | None = None) -> None:
+        super().__init__()
+        self.config = cfg = config or VAEConfig()
+        self.register_buffer("obs_mean", torch.zeros(cfg.obs_dim))
+        self.register_buffer("obs_std", torch.ones(cfg.obs_dim))
+        self.register_buffer("act_std", torch.ones(cfg.action_dim))
+        keep = torch.ones(cfg.obs_dim)
+        keep[list(cfg.decoder_ignore)] = 0.0
+        self.register_buffer("decoder_keep", keep)
+        self.encoder = nn.LSTM(cfg.obs_dim + cfg.action_dim, cfg.encoder_hidden, batch_first=True)
+        self.to_posterior = nn.Linear(cfg.encoder_hidden, 2 * cfg.latent_dim)
+        self.decoder = mlp([cfg.obs_dim + cfg.latent_dim, *cfg.decoder_hidden], cfg.action_dim)
+
+    def fit_norm(self, obs: np.ndarray, actions: np.ndarray) -> None:
+        """Set the standardisation from training rows ``obs [N, obs_dim]`` and ``actions [N, action_dim]``."""
+        obs = np.asarray(obs, dtype=np.float64)
+        actions = np.asarray(actions, dtype=np.float64)
+        self.obs_mean.copy_(torch.as_tensor(obs.mean(0), dtype=torch.float32))
+        self.obs_std.copy_(torch.as_tensor(np.maximum(obs.std(0), _MIN_STD), dtype=torch.float32))
+        self.act_std.copy_(torch.as_tensor(np.maximum(actions.std(0), _MIN_STD), dtype=torch.float32))
+
+    def normalise_obs(self, obs: torch.Tensor) -> torch.Tensor:
+        return (obs - self.obs_mean) / self.obs_std
+
+    def encode(self, obs: torch.Tensor, actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Posterior mean and log-variance ``[B, latent_dim]`` of windows ``obs [B, T, D]``, ``actions [B, T, 2]``."""
+        x = torch.cat([self.normalise_obs(obs), actions / self.act_std], dim=-1)
+        _, (h, _) = self.encoder(x)
+        mu, logvar = self.to_posterior(h[-1]).chunk(2, dim=-1)
+        return mu, logvar.clamp(-12.0, 6.0)
+
+    def decode(self, obs: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
+        """Actions ``[..., action_dim]`` in [-1, 1] for observations ``[..., obs_dim]`` and latents ``[..., latent]``
+        (``z`` broadcast over the leading dimensions of ``obs`` it lacks, e.g. ``[B, L]`` for ``[B, T, D]``)."""
+        while z.dim() < obs.dim():
+            z = z.unsqueeze(-2)
+        z = z.expand(*obs.shape[:-1], z.shape[-1])
+        return torch.tanh(self.decoder(torch.cat([self.normalise_obs(obs) * self.decoder_keep, z], dim=-1)))
+
+    def forward(
+        self, obs: torch.Tensor, actions: torch.Tensor, sample: bool = True
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Reconstructed actions ``[B, T, 2]`` (from a posterior sample, or its mean when ``sample`` is False),
+        posterior mean and log-variance."""
+        mu, logvar = self.encode(obs, actions)
+        z = mu + torch.randn_like(mu) * torch.exp(0.5 * logvar) if sample else mu
+        return self.decode(obs, z), mu, logvar
+
+    def recon_error(self, recon: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        """Per-window standardised squared error ``[B]``: sum over action dims, mean over steps."""
+        return (((recon - actions) / self.act_std) ** 2).sum(-1).mean(-1)
+
+    @staticmethod
+    def kl(mu: torch.Tensor, logvar: torch.Tensor) -> torch.Tensor:
+        """KL(N(mu, exp(logvar)) || N(0, I)) per window ``[B]`` (nats)."""
+        return 0.5 * (mu.pow(2) + logvar.exp() - 1.0 - logvar).sum(-1)
+
+    def loss(self, obs: torch.Tensor, actions: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:
+        """Training loss (recon + beta KL, means over the batch) and its parts."""
+        recon, mu, logvar = self(obs, actions)
+        rec = self.recon_error(recon, actions).mean()
+        kl = self.kl(mu, logvar).mean()
+        return rec + self.config.beta * kl, {"recon": rec.item(), "kl": kl.item()}

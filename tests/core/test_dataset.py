@@ -1,0 +1,131 @@
+"""Dataset store: round trip, atomic/resumable builds, corrupt and truncated shards."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from seal.core.dataset import BUILD_STATE, MANIFEST, Dataset, DatasetBuilder, DatasetError, summarize, write_dataset
+from seal.core.road import LaneSpec, RoadDescription
+from seal.core.scenario import N_STEPS, VALID, Scenario, X
+
+
+def _scenario(i: int, n_agents: int = 4, layout: str = "highway") -> Scenario:
+    rng = np.random.default_rng(i)
+    tr = np.zeros((n_agents, N_STEPS, 8), np.float32)
+    tr[:, :, X] = np.arange(N_STEPS) * 2.0 + rng.uniform(0, 100, size=(n_agents, 1))
+    tr[:, :, 1] = rng.uniform(-4, 4, size=(n_agents, 1))
+    tr[:, :, 3] = 20.0
+    tr[:, :, 5:7] = (5.0, 2.0)
+    tr[:, :, VALID] = 1.0
+    tr[-1, 70:, VALID] = 0.0
+    tr[-1, 70:, :VALID] = 0.0
+    lane = LaneSpec(f"{layout}:0", np.array([[0.0, 0.0], [400.0, 0.0]]), 4.0)
+    road = RoadDescription(layout, (lane,), params={"lanes": 1})
+    return Scenario(
+        f"s{i:04d}", tr, np.arange(n_agents) + 100, ["vehicle"] * n_agents, 100, 101, road,
+        source="test", metadata={"layout": layout, "k": i},
+    )
+
+
+def test_round_trip_preserves_everything(tmp_path: Path) -> None:
+    scenarios = [_scenario(i, n_agents=3 + i % 4, layout=("highway", "merge")[i % 2]) for i in range(25)]
+    write_dataset(tmp_path / "ds", scenarios, provenance={"who": "test"}, shard_size=10)
+    ds = Dataset.open(tmp_path / "ds")
+    assert len(ds) == 25
+    assert len(ds.manifest["shards"]) == 3
+    assert ds.manifest["counts"]["per_layout"] == {"highway": 13, "merge": 12}
+    assert ds.manifest["provenance"]["who"] == "test"
+    loaded = ds.load()
+    for a, b in zip(scenarios, loaded, strict=True):
+        assert a.scenario_id == b.scenario_id
+        np.testing.assert_array_equal(a.tracks, b.tracks)
+        np.testing.assert_array_equal(a.agent_ids, b.agent_ids)
+        assert (a.ego_id, a.adv_id, a.agent_types, a.source) == (b.ego_id, b.adv_id, b.agent_types, b.source)
+        assert a.road.to_json() == b.road.to_json()
+        assert dict(a.metadata) == dict(b.metadata)
+    assert [s.scenario_id for s in ds.load(ids=["s0003", "s0017"])] == ["s0003", "s0017"]
+    assert [s.scenario_id for s in ds.load(limit=12)] == [s.scenario_id for s in scenarios[:12]]
+
+
+def test_splits_recorded_in_manifest(tmp_path: Path) -> None:
+    ds = write_dataset(tmp_path / "ds", [_scenario(i) for i in range(6)])
+    ds.update_manifest(splits={"train": ["s0000", "s0002"], "eval": ["s0005"]})
+    again = Dataset.open(tmp_path / "ds")
+    assert [s.scenario_id for s in again.load("train")] == ["s0000", "s0002"]
+    with pytest.raises(DatasetError, match="no split 'hard'"):
+        again.load("hard")
+
+
+def test_truncated_shard_names_the_file(tmp_path: Path) -> None:
+    write_dataset(tmp_path / "ds", [_scenario(i) for i in range(6)], shard_size=3)
+    shard = tmp_path / "ds" / "shards" / "shard-00001.npz"
+    shard.write_bytes(shard.read_bytes()[:500])
+    with pytest.raises(DatasetError, match=r"shard-00001\.npz is truncated or corrupt"):
+        Dataset.open(tmp_path / "ds").load()
+
+
+def test_corrupt_shard_without_manifest_check_names_the_file(tmp_path: Path) -> None:
+    from seal.core.dataset import read_shard
+
+    write_dataset(tmp_path / "ds", [_scenario(i) for i in range(3)])
+    shard = tmp_path / "ds" / "shards" / "shard-00000.npz"
+    data = bytearray(shard.read_bytes())
+    shard.write_bytes(bytes(data[: len(data) // 2]))
+    with pytest.raises(DatasetError, match="shard-00000.npz is truncated or corrupt"):
+        read_shard(shard)
+    data[len(data) // 2] ^= 0xFF
+    shard.write_bytes(bytes(data))
+    with pytest.raises(DatasetError, match="shard-00000.npz is corrupt: its sha256"):
+        Dataset.open(tmp_path / "ds").load()
+
+
+def test_missing_or_bad_manifest(tmp_path: Path) -> None:
+    with pytest.raises(DatasetError, match="not a seal dataset"):
+        Dataset.open(tmp_path)
+    (tmp_path / MANIFEST).write_text("{not json")
+    with pytest.raises(DatasetError, match="manifest.json is not valid JSON"):
+        Dataset.open(tmp_path)
+    (tmp_path / MANIFEST).write_text(json.dumps({"format": "seal-dataset"}))
+    with pytest.raises(DatasetError, match="missing field"):
+        Dataset.open(tmp_path)
+
+
+def test_interrupted_build_is_not_loadable_and_resumes(tmp_path: Path) -> None:
+    root = tmp_path / "ds"
+    scenarios = [_scenario(i) for i in range(12)]
+    params = {"n": 10, "seed": 3}
+
+    builder = DatasetBuilder(root, params)
+    builder.write_shard(0, scenarios[0:4])
+    builder.write_shard(1, scenarios[4:8])
+    # "Killed" here: a build state but no manifest.
+    assert (root / BUILD_STATE).exists() and not (root / MANIFEST).exists()
+    with pytest.raises(DatasetError, match="unfinished build"):
+        Dataset.open(root)
+
+    with pytest.raises(DatasetError, match="other parameters"):
+        DatasetBuilder(root, {"n": 11, "seed": 3})
+
+    resumed = DatasetBuilder(root, params)
+    assert resumed.is_done(0) and resumed.is_done(1) and not resumed.is_done(2)
+    assert resumed.n_done_scenarios == 8
+    resumed.write_shard(2, scenarios[8:12])
+    ds = resumed.finalize(10)
+    assert not (root / BUILD_STATE).exists()
+    assert len(ds) == 10
+    assert [s.scenario_id for s in Dataset.open(root).load()] == [s.scenario_id for s in scenarios[:10]]
+
+    with pytest.raises(DatasetError, match="already holds a finished dataset"):
+        DatasetBuilder(root, params)
+
+
+def test_summary_counts() -> None:
+    info = summarize([_scenario(i, n_agents=3 + i % 2, layout=("highway", "roundabout")[i % 2]) for i in range(4)])
+    assert info["per_layout"] == {"highway": 2, "roundabout": 2}
+    assert info["agents_per_scenario"]["mean"] == pytest.approx(3.5)
+    assert info["track_length_steps"]["max"] == N_STEPS
+    assert info["track_length_steps"]["min"] == 70

@@ -1,0 +1,218 @@
+"""`seal run` orchestration with injected commands and job functions: the step order, what each step gets,
+skip-on-rerun, changed parameters, failing jobs; and the shipped presets."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import scenario_factory as sf
+import yaml
+from results_builders import episode
+
+from seal.core.dataset import Dataset, write_dataset
+from seal.experiments.backends import InlineBackend
+from seal.experiments.evaluation.results_store import ResultsStore
+from seal.experiments.pipeline.run import cli_options, fits_needed, load_run_config, run_pipeline, substitute
+
+CONFIGS = Path(__file__).resolve().parents[2] / "experiments" / "configs"
+
+
+class FakeCommands:
+    """Records `seal` subcommands; `data generate` / `split` and `fit prior` write small real outputs."""
+
+    def __init__(self) -> None:
+        self.calls: list[list[str]] = []
+
+    def __call__(self, argv) -> None:
+        argv = list(map(str, argv))
+        self.calls.append(argv)
+        if argv[:2] == ["data", "generate"]:
+            write_dataset(argv[argv.index("--out") + 1], [sf.highway_scenario(i) for i in range(3)])
+        elif argv[:2] == ["data", "split"]:
+            ds = Dataset.open(argv[2])
+            ids = [s.scenario_id for s in ds.load()]
+            ds.update_manifest(splits={"train": ids[:1], "eval": ids[1:], "hard": ids[:1]})
+        elif argv[0] == "fit":
+            Path(argv[argv.index("--out") + 1]).write_text("model")
+
+
+def fake_train_config(config, preset_path, pipeline, seed, dataset, generators) -> dict:
+    gen = None if pipeline == "noadv" else pipeline
+    return {"algo": "td3", "pipeline": pipeline, "seed": seed, "dataset": dataset,
+            "generator": {"name": gen, "kwargs": generators.get(gen, {})} if gen else None}
+
+
+def fake_train(job) -> dict:
+    """Writes what a finished run folder holds (config.yaml, done.json); fails for seed 13."""
+    if job["config"]["seed"] == 13:
+        raise RuntimeError("diverged")
+    out = Path(job["out"])
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "config.yaml").write_text(yaml.safe_dump(job["config"]))
+    (out / "done.json").write_text("{}")
+    return {"run": str(out)}
+
+
+def fake_eval(job) -> dict:
+    """One episode row per (setting, first scenario) for the job's ego, into the job's store."""
+    cfg = yaml.safe_load((Path(job["run"]) / "config.yaml").read_text()) if job["run"] != "replay" else {}
+    pipeline, seed = cfg.get("pipeline", "replay"), cfg.get("seed", 0)
+    with ResultsStore(job["store"]) as store:
+        store.upsert_episodes([
+            episode(run=job["run"], setting=s["name"], pipeline=pipeline, seed=seed) for s in job["settings"]
+        ])
+        for s in job["settings"]:
+            store.upsert_setting(s["dataset"], s["name"], "generator" if s["generator"] else "replay", s["split"],
+                                 s["generator"], job["config"]["generators"].get(s["generator"] or "", {}), 2)
+    return {"run": job["run"]}
+
+
+def write_preset(tmp_path: Path, seeds=(0, 1), **changes) -> Path:
+    preset = {
+        "data": {"generate": {"n": 3, "seed": 0}, "split": {"n_train": 1, "n_eval": 2, "n_hard": 1}},
+        "fit": {"prior": {"epochs": 1, "no_progress": True}, "goose": {"path": "/models/goose.zip"},
+                "skills": {"preset": "quick"}},
+        "generators": {"cat": {"prior": "${fit.prior}", "follow": "replay"}, "rule": {}},
+        "pipelines": ["noadv", "cat"],
+        "seeds": list(seeds),
+        "eval": {"settings": ["normal", "hard", "cat"], "k": 2, "limit": 2},
+        "report": {"plots": False},
+        "train": {"algo": "td3", "total_timesteps": 100},
+        **changes,
+    }
+    path = tmp_path / "preset.yaml"
+    path.write_text(yaml.safe_dump(preset, sort_keys=False))
+    return path
+
+
+def run(preset: Path, out: Path, commands: FakeCommands, train=fake_train) -> dict:
+    return run_pipeline(preset, out, backend=InlineBackend(), command=commands, train_fn=train, eval_fn=fake_eval,
+                        train_config_fn=fake_train_config, progress=False, log=lambda _: None)
+
+
+def test_steps_then_skip_on_rerun(tmp_path: Path) -> None:
+    preset, out = write_preset(tmp_path), tmp_path / "out"
+    commands = FakeCommands()
+    summary = run(preset, out, commands)
+    data = str(out / "data")
+    prior = str(out / "models" / "prior.pt")
+    assert commands.calls == [
+        ["data", "generate", "--out", data, "--n", "3", "--seed", "0"],
+        ["data", "score", data],
+        ["data", "split", data, "--n-train", "1", "--n-eval", "2", "--n-hard", "1"],
+        # only the prior: goose and skills are not referenced by the generators in use (cat)
+        ["fit", "prior", data, "--out", prior, "--split", "all-but-eval", "--epochs", "1", "--no-progress"],
+    ]
+    assert summary["steps_ran"] == ["data", "score", "split", "fit-prior", "eval", "report"]
+    assert summary["train_jobs"] == 4 and len(summary["runs"]) == 4 and summary["models"] == {"prior": prior}
+    cat_cfg = yaml.safe_load((out / "runs" / "cat-s1" / "config.yaml").read_text())
+    assert cat_cfg["generator"] == {"name": "cat", "kwargs": {"prior": prior, "follow": "replay"}}
+    with ResultsStore(out / "results.sqlite") as store:
+        assert store.count() == 5 * 3  # 4 trained egos + the Replay ego, 3 settings
+        assert {r["pipeline"] for r in store.runs()} == set()  # fake_eval records episodes only
+    assert (out / "report" / "report.md").is_file() and (out / "report" / "table_6_1.csv").is_file()
+    assert json.loads((out / "summary.json").read_text())["errors"] == []
+
+    # second run: every step done, nothing runs
+    def must_not_train(job):
+        raise AssertionError(f"trained {job['out']} again")
+
+    again = run(preset, out, commands, train=must_not_train)
+    assert len(commands.calls) == 4 and again["steps_ran"] == [] and again["train_jobs"] == 0
+    assert again["steps_skipped"] == ["data", "score", "split", "fit-prior", "eval", "report"]
+
+
+def test_changed_parameters_rerun_only_what_changed(tmp_path: Path) -> None:
+    out, commands = tmp_path / "out", FakeCommands()
+    run(write_preset(tmp_path), out, commands)
+    trained = []
+
+    def train(job):
+        trained.append(Path(job["out"]).name)
+        return fake_train(job)
+
+    summary = run(write_preset(tmp_path, seeds=(0, 1, 2)), out, commands, train=train)
+    assert sorted(trained) == ["cat-s2", "noadv-s2"]
+    assert summary["steps_ran"] == ["eval", "report"]  # new egos: evaluate (incrementally) and report again
+    with ResultsStore(out / "results.sqlite") as store:
+        assert store.count() == 7 * 3
+
+
+def test_failed_job_is_reported_and_retried(tmp_path: Path) -> None:
+    out, commands = tmp_path / "out", FakeCommands()
+    with pytest.raises(RuntimeError, match=r"(?s)1 job\(s\) failed.*cat-s13: RuntimeError: diverged"):
+        run(write_preset(tmp_path, seeds=(0, 13), pipelines=["cat"]), out, commands)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["runs"] == [str(out / "runs" / "cat-s0")] and len(summary["errors"]) == 1
+    with ResultsStore(out / "results.sqlite") as store:  # what trained was still evaluated and reported
+        assert {r["run"] for r in store.episodes()} == {str(out / "runs" / "cat-s0"), "replay"}
+    tried = []
+
+    def train(job):
+        tried.append(Path(job["out"]).name)
+        return fake_train({**job, "config": {**job["config"], "seed": 99}})
+
+    run(write_preset(tmp_path, seeds=(0, 13), pipelines=["cat"]), out, commands, train=train)
+    assert tried == ["cat-s13"]  # only the failed run is tried again
+
+
+def test_existing_dataset_and_model_paths(tmp_path: Path) -> None:
+    data = tmp_path / "data"
+    FakeCommands()(["data", "generate", "--out", str(data)])
+    FakeCommands()(["data", "split", str(data)])
+    preset = write_preset(tmp_path, data={"path": str(data)}, pipelines=["goose"],
+                          generators={"goose": {"model": "${fit.goose}"}}, eval={"settings": ["normal"], "limit": 1})
+    commands = FakeCommands()
+    summary = run(preset, tmp_path / "out", commands)
+    assert commands.calls == []  # nothing generated, nothing fitted: goose's model is given as a path
+    assert summary["dataset"] == str(data.resolve()) and summary["models"] == {"goose": "/models/goose.zip"}
+
+
+def test_config_errors(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="unknown section.*'bogus'"):
+        load_run_config(write_preset(tmp_path, bogus=1))
+    with pytest.raises(ValueError, match="'seeds' must be a non-empty list"):
+        load_run_config(write_preset(tmp_path, seeds=()))
+    config = load_run_config(write_preset(tmp_path, generators={"cat": {"prior": "${fit.nothing}"}}))
+    with pytest.raises(ValueError, match="no fit.nothing entry"):
+        fits_needed(config)
+
+
+def test_fit_dependencies_come_first(tmp_path: Path) -> None:
+    fit = {"objective": {"prior": "${fit.prior}"}, "prior": {"epochs": 1}, "skills": {}}
+    config = load_run_config(write_preset(tmp_path, fit=fit, pipelines=["seal"],
+                                          generators={"seal": {"objective": "${fit.objective}/objective.pt"}}))
+    assert fits_needed(config) == ["prior", "objective"]
+    commands = FakeCommands()
+    out = tmp_path / "out"
+    commands.calls.clear()
+    run_pipeline(config_path=tmp_path / "preset.yaml", out=out, backend=InlineBackend(), command=commands,
+                 train_fn=fake_train, eval_fn=fake_eval, train_config_fn=fake_train_config, progress=False,
+                 log=lambda _: None)
+    fits = [c for c in commands.calls if c[0] == "fit"]
+    assert [c[1] for c in fits] == ["prior", "objective"]
+    assert fits[1][-2:] == ["--prior", str(out / "models" / "prior.pt")]
+    seal_cfg = yaml.safe_load((out / "runs" / "seal-s0" / "config.yaml").read_text())
+    assert seal_cfg["generator"]["kwargs"] == {"objective": str(out / "models" / "objective" / "objective.pt")}
+    fit["prior"]["prior"] = "${fit.objective}"
+    with pytest.raises(ValueError, match="circular"):
+        fits_needed(load_run_config(write_preset(tmp_path, fit=fit, pipelines=["seal"],
+                                                 generators={"seal": {"objective": "${fit.objective}"}})))
+
+
+def test_helpers() -> None:
+    assert cli_options({"n_train": 80, "no_eval": True, "skip": False, "none": None, "layouts": ["a", "b"]}) == [
+        "--n-train", "80", "--no-eval", "--layouts", "a", "b"]
+    assert substitute({"a": ["${fit.prior}", "x"], "b": "${fit.skills}/adv.pt"}, {"prior": "/p", "skills": "/s"}) \
+        == {"a": ["/p", "x"], "b": "/s/adv.pt"}
+
+
+@pytest.mark.parametrize("name", ["quick", "standard", "paper"])
+def test_shipped_presets(name: str) -> None:
+    config = load_run_config(CONFIGS / f"{name}.yaml")
+    assert set(config["pipelines"]) == {"noadv", "goose", "cat", "seal"}
+    assert set(fits_needed(config)) == {"prior", "goose", "skills", "objective"}
+    assert {"normal", "hard", "cat", "goose", "seal"} <= set(config["eval"]["settings"])
+    assert "train" in config and config["data"]["split"]["n_eval"] >= 16

@@ -1,0 +1,132 @@
+"""pi_score labels: the builder on two tiny scenarios (shapes, label identities, agreement with a direct
+roll-out), its resume (finished chunks are skipped, a missing one is rebuilt, other settings start over) and
+the held-out evaluation on those labels."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scenario_factory as sf
+
+from seal.experiments.fitting import objective_labels as ol
+from seal.models.objective.labels import LOGGED_ROW, LabelSet
+
+N_CAND = 3
+
+
+@pytest.fixture(scope="module")
+def scenarios():
+    return [sf.lane_change_scenario(), sf.highway_scenario(1)]
+
+
+@pytest.fixture(scope="module")
+def built(scenarios, tmp_path_factory) -> tuple[LabelSet, object]:
+    out = tmp_path_factory.mktemp("labels")
+    spec = ol.source_spec(candidates="constant_velocity")
+    labels = ol.build_labels(scenarios, out, spec, n_candidates=N_CAND, workers=1, chunk_size=1, progress=False,
+                             log=lambda _: None)
+    return labels, out
+
+
+def test_labels_have_the_documented_shapes_and_identities(built, scenarios) -> None:
+    labels, out = built
+    assert labels.scenario_ids.tolist() == [s.scenario_id for s in scenarios]
+    s, n, t = 2, N_CAND, 80
+    assert labels.cand_xy.shape == (s, n, t, 2) and labels.ego_xy.shape == (s, n + 1, t, 2)
+    assert labels.f_diff.shape == (s, n + 1, n) and labels.f_coll.shape == (s, n)
+    for f in (labels.f_coll, labels.f_diff):
+        assert np.all((f >= 0) & (f <= 1))
+    # Against its own episode a candidate changes nothing; f_diff between two episodes is symmetric.
+    for j in range(n):
+        np.testing.assert_allclose(labels.f_diff[:, 1 + j, j], 0.0, atol=1e-6)
+    np.testing.assert_allclose(labels.f_diff[:, 1 + 0, 1], labels.f_diff[:, 1 + 1, 0], rtol=1e-5)
+    np.testing.assert_array_equal(labels.f_coll[labels.crashed], 1.0)
+    # Every episode starts with the ego valid at the first candidate step.
+    assert labels.ego_valid[:, :, 0].all()
+    assert sorted(p.name for p in out.glob("part_*.npz")) == ["part_00000.npz", "part_00001.npz"]
+
+
+def test_labels_match_a_direct_rollout(built, scenarios) -> None:
+    from seal.adversaries.candidate_path import candidate_track
+    from seal.envs.behaviors import ReplayBehavior
+    from seal.envs.scenario_env import ScenarioEnv
+    from seal.experiments.evaluation.episodes import run_episode
+    from seal.experiments.training.egos import HeuristicEgo
+    from seal.scoring.criticality import f_coll
+
+    labels, _ = built
+    scenario = scenarios[0]
+    j = 1
+    track = candidate_track(scenario, scenario.adv_index, labels.cand_xy[0, j].astype(np.float64))
+    ro = run_episode(ScenarioEnv(scenario), scenario, HeuristicEgo(), ReplayBehavior(track))
+    ego = ro.ego_track[11:91]
+    np.testing.assert_allclose(labels.ego_xy[0, 1 + j], ego[:, :2], atol=1e-3)
+    adv = ro.adv_track[11:91]
+    valid = (ego[:, 7] > 0.5) & (adv[:, 7] > 0.5)
+    expected = f_coll(ego[:, :2], adv[:, :2], valid=valid, crashed=any(a == ro.adv_id for _, a in ro.ego_crashes))
+    assert labels.f_coll[0, j] == pytest.approx(float(expected), abs=1e-5)
+
+
+def test_hold_last_keeps_the_last_valid_position() -> None:
+    xy = np.arange(10, dtype=float).reshape(5, 2)
+    valid = np.array([False, True, True, False, False])
+    np.testing.assert_array_equal(ol.hold_last(xy, valid), [[2, 3], [2, 3], [4, 5], [4, 5], [4, 5]])
+
+
+def test_build_resumes_skips_finished_chunks_and_restarts_on_other_settings(built, scenarios, monkeypatch) -> None:
+    labels, out = built
+    calls: list[str] = []
+    real = ol.label_scenario
+
+    def counting(scenario, *args, **kwargs):
+        calls.append(scenario.scenario_id)
+        return real(scenario, *args, **kwargs)
+
+    monkeypatch.setattr(ol, "label_scenario", counting)
+    spec = ol.source_spec(candidates="constant_velocity")
+    kw = {"workers": 1, "chunk_size": 1, "progress": False, "log": lambda _: None}
+    again = ol.build_labels(scenarios, out, spec, n_candidates=N_CAND, **kw)
+    assert calls == []  # everything reused
+    np.testing.assert_array_equal(again.f_diff, labels.f_diff)
+    (out / "part_00001.npz").unlink()
+    again = ol.build_labels(scenarios, out, spec, n_candidates=N_CAND, **kw)
+    assert calls == [scenarios[1].scenario_id]  # only the missing chunk
+    np.testing.assert_allclose(again.f_coll, labels.f_coll)
+    calls.clear()
+    other = ol.build_labels(scenarios[:1], out, spec, n_candidates=2, **kw)  # other settings: start over
+    assert calls == [scenarios[0].scenario_id] and other.n_candidates == 2
+    assert sorted(p.name for p in out.glob("part_*.npz")) == ["part_00000.npz"]
+
+
+def test_source_spec_needs_exactly_one_source(tmp_path) -> None:
+    with pytest.raises(ValueError, match="exactly one candidate source"):
+        ol.source_spec()
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        ol.source_spec(prior=tmp_path / "none.pt")
+    with pytest.raises(ValueError, match="unknown candidate source"):
+        ol.source_spec(candidates="nope")
+
+
+def test_evaluate_reports_metrics_and_baselines(built) -> None:
+    import torch
+
+    from seal.experiments.fitting.objective import K_PREV, closeness, evaluate, format_report
+    from seal.models.objective import ObjectiveConfig, ObjectiveModel
+
+    labels, _ = built
+    torch.manual_seed(0)
+    report = evaluate(ObjectiveModel(ObjectiveConfig(hidden=8)), labels)
+    assert report["mse"]["all_prev"]["pairs"] == labels.f_diff.size
+    assert report["mse"]["logged_prev"]["pairs"] == labels.n_scenarios * N_CAND
+    assert set(report["ranking_logged_prev"]) == {"pi_score", "closeness", "cat", "prior_probability"}
+    assert report["ranking_k5_prev"]["pi_score"]["scenarios"] == 2
+    # The closeness baseline with the logged roll-out as previous roll-out is f_coll of that roll-out.
+    from seal.scoring.criticality import f_coll
+
+    c = closeness(labels, np.full((2, 1), LOGGED_ROW))[:, 0]
+    expected = f_coll(labels.ego_xy[:, :1], labels.cand_xy, valid=labels.ego_valid[:, :1])
+    np.testing.assert_allclose(c, expected)
+    assert K_PREV == 5 and "Spearman" in format_report({**report, "eval_split": "x", "dataset": "d",
+                                                         "rank_latency": {"candidates": 32, "rollouts": 5,
+                                                                          "median_ms": 1.0, "p95_ms": 2.0},
+                                                         "timings": {}})

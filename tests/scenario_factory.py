@@ -1,0 +1,251 @@
+"""Hand-built scenarios for tests and benchmarks: simple roads as `LaneSpec` polylines and agents whose logs
+come from the bicycle model driven by a path-tracking controller at 100 Hz (so a 10 Hz replay of the log is
+not trivially exact).
+
+Roads: `straight_road` (multi-lane, lane 0 rightmost at y = 0, lanes to the left at +y) and `curved_road`
+(straight, left-hand arc, straight). Agents: `simulate_track`. Scenarios: `highway_scenario` (random traffic),
+`lane_change_scenario`, `curve_scenario`, `stopped_adversary_scenario`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from seal.core.road import LaneSpec, RoadDescription
+from seal.core.scenario import CURRENT_STEP, DT_S, N_STEPS, Scenario
+from seal.envs.road_geometry import offset_polyline
+
+LANE_WIDTH_M = 4.0
+
+
+def _lane_lines(i: int, n: int) -> tuple[str, str]:
+    return ("continuous" if i == n - 1 else "striped", "continuous" if i == 0 else "striped")
+
+
+def straight_road(
+    n_lanes: int = 3, length_m: float = 800.0, lane_width_m: float = LANE_WIDTH_M, speed_limit_mps: float = 30.0,
+    x0: float = -100.0,
+) -> RoadDescription:
+    """``n_lanes`` parallel lanes along +x from ``x0``; lane ``i`` centred at ``y = i * lane_width_m``."""
+    lanes = tuple(
+        LaneSpec(
+            lane_id=f"a:b:{i}",
+            centerline=np.array([[x0, i * lane_width_m], [x0 + length_m, i * lane_width_m]]),
+            width_m=lane_width_m,
+            line_types=_lane_lines(i, n_lanes),
+            speed_limit_mps=speed_limit_mps,
+        )
+        for i in range(n_lanes)
+    )
+    return RoadDescription(layout="polylines", lanes=lanes, params={"factory": "straight", "n_lanes": n_lanes})
+
+
+def curve_centerline(
+    radius_m: float = 80.0, angle_rad: float = math.pi / 2, before_m: float = 150.0, after_m: float = 150.0,
+    step_m: float = 1.0,
+) -> np.ndarray:
+    """Polyline: straight along +x ending at the origin, a left arc of ``radius_m``, then straight."""
+    straight1 = np.stack([np.linspace(-before_m, 0.0, int(before_m / 10) + 1), np.zeros(int(before_m / 10) + 1)], 1)
+    n_arc = max(2, int(radius_m * angle_rad / step_m))
+    ang = np.linspace(0.0, angle_rad, n_arc + 1)[1:]
+    arc = np.stack([radius_m * np.sin(ang), radius_m * (1 - np.cos(ang))], 1)
+    end, h = arc[-1], angle_rad
+    dist = np.linspace(0.0, after_m, int(after_m / 10) + 1)[1:]
+    straight2 = end + dist[:, None] * np.array([math.cos(h), math.sin(h)])
+    return np.vstack([straight1, arc, straight2])
+
+
+def curved_road(
+    n_lanes: int = 2, radius_m: float = 80.0, angle_rad: float = math.pi / 2, lane_width_m: float = LANE_WIDTH_M,
+    speed_limit_mps: float = 20.0,
+) -> RoadDescription:
+    """``n_lanes`` lanes around a left-hand curve; lane 0 (rightmost) follows `curve_centerline`."""
+    base = curve_centerline(radius_m, angle_rad)
+    lanes = tuple(
+        LaneSpec(
+            lane_id=f"c:d:{i}",
+            centerline=offset_polyline(base, i * lane_width_m),
+            width_m=lane_width_m,
+            line_types=_lane_lines(i, n_lanes),
+            speed_limit_mps=speed_limit_mps,
+        )
+        for i in range(n_lanes)
+    )
+    return RoadDescription(layout="polylines", lanes=lanes, params={"factory": "curve", "radius_m": radius_m})
+
+
+def _arc_lengths(path: np.ndarray) -> np.ndarray:
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))])
+
+
+def _point_at(path: np.ndarray, cum: np.ndarray, s: float, offset: float) -> tuple[np.ndarray, float]:
+    """Point at arc length ``s`` shifted ``offset`` m to the left, and the path heading there."""
+    s = float(np.clip(s, 0.0, cum[-1] - 1e-6))
+    i = int(np.searchsorted(cum, s, side="right") - 1)
+    d = path[i + 1] - path[i]
+    h = math.atan2(d[1], d[0])
+    p = path[i] + d * (s - cum[i]) / max(cum[i + 1] - cum[i], 1e-9)
+    return p + offset * np.array([-math.sin(h), math.cos(h)]), h
+
+
+def _project(path: np.ndarray, cum: np.ndarray, x: float, y: float, s_hint: float) -> float:
+    """Arc length of the closest path point to (x, y) among segments within 10 m of ``s_hint``."""
+    lo = max(0, int(np.searchsorted(cum, s_hint - 10.0)) - 1)
+    hi = min(len(path) - 1, int(np.searchsorted(cum, s_hint + 10.0)) + 1)
+    a, e = path[lo:hi], np.diff(path[lo : hi + 1], axis=0)
+    px, py = x - a[:, 0], y - a[:, 1]
+    u = np.clip((px * e[:, 0] + py * e[:, 1]) / np.maximum((e * e).sum(1), 1e-12), 0.0, 1.0)
+    d2 = (px - u * e[:, 0]) ** 2 + (py - u * e[:, 1]) ** 2
+    k = int(np.argmin(d2))
+    return float(cum[lo + k] + u[k] * (cum[lo + k + 1] - cum[lo + k]))
+
+
+def simulate_track(
+    path: np.ndarray,
+    s0: float,
+    speed_mps: float,
+    accel_fn: Callable[[float], float] | None = None,
+    offset_fn: Callable[[float], float] | None = None,
+    length_m: float = 5.0,
+    width_m: float = 2.0,
+    valid_from: int = 0,
+    valid_to: int = N_STEPS,
+    substeps: int = 10,
+) -> np.ndarray:
+    """Log ``[N_STEPS, 8]`` of a bicycle-model car tracking ``path`` (pure pursuit at ``substeps`` x 10 Hz).
+
+    Args:
+        path: ``[P, 2]`` polyline to follow (e.g. a lane centre line).
+        s0: start arc length on the path at step ``valid_from`` (m).
+        speed_mps: initial speed.
+        accel_fn: acceleration (m/s^2) as a function of time since step 0 (s); default 0.
+        offset_fn: lateral offset from the path (m, + left) as a function of time (s), e.g. a lane change.
+        valid_from, valid_to: the agent exists on steps ``[valid_from, valid_to)``.
+    """
+    accel_fn = accel_fn or (lambda _t: 0.0)
+    offset_fn = offset_fn or (lambda _t: 0.0)
+    cum = _arc_lengths(path)
+    dt = DT_S / substeps
+    t = valid_from * DT_S
+    p, h = _point_at(path, cum, s0, offset_fn(t))
+    x, y, v = float(p[0]), float(p[1]), float(speed_mps)
+    s = s0
+    track = np.zeros((N_STEPS, 8), dtype=np.float32)
+    for k in range(valid_from, valid_to):
+        track[k] = (x, y, h, v * math.cos(h), v * math.sin(h), length_m, width_m, 1.0)
+        for _ in range(substeps):
+            lookahead = max(5.0, 0.6 * v)
+            target, _ = _point_at(path, cum, s + lookahead, offset_fn(t + lookahead / max(v, 1.0)))
+            alpha = math.atan2(target[1] - y, target[0] - x) - h
+            dist = max(math.hypot(target[0] - x, target[1] - y), 1e-3)
+            sin_beta = float(np.clip(2 * math.sin(alpha) / dist * length_m / 2, -0.44, 0.44))
+            beta = math.asin(sin_beta)
+            x += v * math.cos(h + beta) * dt
+            y += v * math.sin(h + beta) * dt
+            h += v * sin_beta / (length_m / 2) * dt
+            v = max(0.0, v + accel_fn(t) * dt)
+            t += dt
+            s = _project(path, cum, x, y, s)
+    return track
+
+
+def make_scenario(
+    road: RoadDescription, tracks: list[np.ndarray], scenario_id: str, ego: int = 0, adv: int = 1,
+    metadata: dict | None = None,
+) -> Scenario:
+    """A `Scenario` from per-agent ``[N_STEPS, 8]`` tracks; agent ids are 0..A-1."""
+    return Scenario(
+        scenario_id=scenario_id,
+        tracks=np.stack(tracks),
+        agent_ids=np.arange(len(tracks)),
+        agent_types=("vehicle",) * len(tracks),
+        ego_id=ego,
+        adv_id=adv,
+        road=road,
+        source="factory",
+        metadata={"layout": road.params.get("factory", "factory"), **(metadata or {})},
+    )
+
+
+def _lane_path(road: RoadDescription, lane: int) -> np.ndarray:
+    return road.lanes[lane].centerline
+
+
+def _smoothstep(t0: float, duration: float, amplitude: float) -> Callable[[float], float]:
+    def f(t: float) -> float:
+        u = min(1.0, max(0.0, (t - t0) / duration))
+        return amplitude * u * u * (3 - 2 * u)
+
+    return f
+
+
+def lane_change_scenario(scenario_id: str = "lane_change") -> Scenario:
+    """Ego changes from lane 0 to lane 1 at 25 m/s; the adversary drives ahead in lane 1; two background cars,
+    one appearing at step 20 and one leaving at step 60."""
+    road = straight_road(3)
+    ego = simulate_track(_lane_path(road, 0), 50.0, 25.0, offset_fn=_smoothstep(2.0, 3.0, LANE_WIDTH_M))
+    adv = simulate_track(_lane_path(road, 1), 110.0, 27.0)
+    late = simulate_track(_lane_path(road, 2), 60.0, 24.0, valid_from=20)
+    early = simulate_track(_lane_path(road, 2), 0.0, 23.0, accel_fn=lambda t: 0.5, valid_to=60)
+    return make_scenario(road, [ego, adv, late, early], scenario_id)
+
+
+def curve_scenario(scenario_id: str = "curve") -> Scenario:
+    """Ego around a 80 m left curve at 15 m/s with gentle acceleration; the adversary in the inner lane."""
+    road = curved_road(2, radius_m=80.0)
+    base = road.lanes[0].centerline
+    ego = simulate_track(base, 80.0, 15.0, accel_fn=lambda t: 0.3 if t < 5 else -0.2)
+    adv = simulate_track(road.lanes[1].centerline, 100.0, 14.0)
+    return make_scenario(road, [ego, adv], scenario_id)
+
+
+def stopped_adversary_scenario(scenario_id: str = "stopped_adv", gap_m: float = 60.0) -> Scenario:
+    """Ego at 20 m/s in lane 0; in the log the adversary ahead in the same lane drives away at 30 m/s (so the
+    logged ego is safe); tests replace the adversary by a stopped car to force a collision."""
+    road = straight_road(2)
+    ego = simulate_track(_lane_path(road, 0), 50.0, 20.0)
+    adv = simulate_track(_lane_path(road, 0), 50.0 + gap_m, 30.0)
+    return make_scenario(road, [ego, adv], scenario_id)
+
+
+def highway_scenario(seed: int, n_lanes: int = 3, n_agents: int = 12, scenario_id: str | None = None) -> Scenario:
+    """Random multi-lane traffic: per lane a common speed profile (no rear-end collisions in the log), cars
+    spaced 25-55 m; the ego in the middle lane, the adversary the closest car in an adjacent lane. Some cars
+    appear late or leave early."""
+    rng = np.random.default_rng(seed)
+    road = straight_road(n_lanes, length_m=1200.0)
+    tracks: list[np.ndarray] = []
+    lanes_of: list[int] = []
+    per_lane = [n_agents // n_lanes + (1 if i < n_agents % n_lanes else 0) for i in range(n_lanes)]
+    ego_lane = n_lanes // 2
+    for lane, count in enumerate(per_lane):
+        v = float(rng.uniform(18.0, 30.0))
+        acc = float(rng.uniform(-0.8, 0.8))
+        s = float(rng.uniform(20.0, 60.0))
+        for _ in range(count):
+            valid_from = int(rng.choice([0, 0, 0, 0, 25]))
+            valid_to = int(rng.choice([N_STEPS, N_STEPS, N_STEPS, 70]))
+            if not any(lanes_of[i] == lane for i in range(len(tracks))):
+                valid_from, valid_to = 0, N_STEPS  # the first car of each lane is there all along
+            # A car appearing late starts where the lane's common motion has carried it by then.
+            t0 = valid_from * DT_S
+            tracks.append(
+                simulate_track(
+                    _lane_path(road, lane), s + v * t0 + 0.5 * acc * t0 * t0, v + acc * t0,
+                    accel_fn=lambda t, a=acc: a, valid_from=valid_from, valid_to=valid_to, substeps=2,
+                )
+            )
+            lanes_of.append(lane)
+            s += float(rng.uniform(25.0, 55.0))
+    ego = next(i for i, lane in enumerate(lanes_of) if lane == ego_lane)
+    ex = tracks[ego][CURRENT_STEP, 0]
+    cands = [
+        i for i, lane in enumerate(lanes_of)
+        if abs(lane - ego_lane) == 1 and tracks[i][CURRENT_STEP, 7] > 0.5
+    ]
+    adv = min(cands, key=lambda i: abs(tracks[i][CURRENT_STEP, 0] - ex)) if cands else (ego + 1) % len(tracks)
+    order = [ego, adv] + [i for i in range(len(tracks)) if i not in (ego, adv)]
+    return make_scenario(road, [tracks[i] for i in order], scenario_id or f"highway-{seed}")
