@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import sys
 from collections.abc import Sequence
 
@@ -46,9 +47,21 @@ def build_tree() -> tuple[argparse.ArgumentParser, CommandTree]:
     return parser, tree
 
 
+def configure_logging(level: int = logging.INFO) -> None:
+    """Library code logs through ``logging.getLogger(__name__)``; the CLI shows INFO and above on stderr as plain
+    lines (results and JSON go to stdout). Progress bars (tqdm) write to stderr on their own."""
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    root = logging.getLogger("seal")
+    root.handlers[:] = [handler]
+    root.setLevel(level)
+    root.propagate = False
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser, tree = build_tree()
     args = parser.parse_args(tree.expand_default(list(sys.argv[1:] if argv is None else argv)))
+    configure_logging()
     from seal.core.dataset import DatasetError
     from seal.core.road import RoadError
     from seal.core.scenario import ScenarioError
