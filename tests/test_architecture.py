@@ -74,3 +74,18 @@ def test_files_and_functions_stay_small() -> None:
                     too_long_functions.append(f"{rel}:{node.lineno} {node.name}: {n} lines")
     assert not too_long_files, too_long_files
     assert not too_long_functions, too_long_functions
+
+
+MYPY_PACKAGES = ("seal",)
+"""Packages mypy checks (with the settings of ``[tool.mypy]`` in pyproject.toml): all of them."""
+
+
+def test_mypy_clean() -> None:
+    """``mypy -p seal`` on the installed layout, in a fixed folder so that mypy's cache makes re-runs quick."""
+    out = ROOT / ".build" / "installed"
+    build(out)
+    args = [_tool("mypy"), "--cache-dir", str(ROOT / ".build" / "mypy_cache")]
+    for pkg in MYPY_PACKAGES:
+        args += ["-p", pkg]
+    result = subprocess.run(args, cwd=out, capture_output=True, text=True)
+    assert result.returncode == 0, result.stdout[-6000:] + result.stderr[-2000:]
