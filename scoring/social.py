@@ -90,7 +90,7 @@ class TrackContext:
         if cps.shape[0]:
             d = np.hypot(self.x[..., None] - cps[:, 0], self.y[..., None] - cps[:, 1])  # [A, T, C]
             self.cp_dist = np.where(tracks.valid[..., None], d, np.inf)
-            self.cp_near = (self.cp_dist < MAP_CP_DIST_M).any(axis=1)  # [A, C]
+            self.cp_near: np.ndarray = np.any(self.cp_dist < MAP_CP_DIST_M, axis=1)  # [A, C]
             self.cp_argmin = np.argmin(self.cp_dist, axis=1)  # [A, C] step of closest approach
         else:
             self.cp_dist = np.zeros(tracks.valid.shape + (0,))

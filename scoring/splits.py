@@ -71,9 +71,9 @@ def make_splits(
     hard = rng.choice(hard_pool, n_hard, replace=False)
     normal = rng.permutation(normal_pool)[: n_train + n_eval]
     splits = {
-        "train": sorted(ids[normal[:n_train]].tolist(), key=order.get),
-        "eval": sorted(ids[normal[n_train:]].tolist(), key=order.get),
-        "hard": sorted(ids[hard].tolist(), key=order.get),
+        "train": sorted(ids[normal[:n_train]].tolist(), key=order.__getitem__),
+        "eval": sorted(ids[normal[n_train:]].tolist(), key=order.__getitem__),
+        "hard": sorted(ids[hard].tolist(), key=order.__getitem__),
     }
     params = {
         "method": "safeshift",

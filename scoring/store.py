@@ -255,7 +255,8 @@ def score_dataset(dataset_dir: str | Path, workers: int | None = None, progress:
 def write_scores(root: Path, table: ScoreTable) -> dict[str, Any]:
     """Atomically write ``root/scores.npz``; return its manifest entry."""
     buf = io.BytesIO()
-    np.savez_compressed(buf, **table.arrays)
+    arrays: dict[str, Any] = dict(table.arrays)  # typed loosely: numpy's stub reads ** as its allow_pickle flag
+    np.savez_compressed(buf, **arrays)
     data = buf.getvalue()
     atomic_write(root / SCORES_FILE, lambda f: f.write(data))
     return {
