@@ -37,7 +37,7 @@ class Ranking:
 
 class Objective(Protocol):
     """Ranks the candidates against past ego roll-outs (arrays as from
-    `seal.adversaries.cat.generator.stack_ego_rollouts`)."""
+    `seal.adversaries.candidate_generator.stack_ego_rollouts`)."""
 
     name: str
 
