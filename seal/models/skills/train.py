@@ -87,7 +87,7 @@ class FitResult:
     seconds: float
 
 
-def _write_csv(path: Path | None, rows: list[dict[str, float]]) -> None:
+def _write_csv(path: Path | None, rows: list[dict[str, float | str]]) -> None:
     if path is None or not rows:
         return
     buf = io.StringIO()
@@ -175,7 +175,8 @@ def fit_loop(
                **{f"val_{k}": round(v, 6) for k, v in val.items()}, "seconds": round(epoch_s, 2)}
         history.append(row)
         blank: dict[str, float | str] = dict.fromkeys(row, "")  # epoch 0 has no train columns
-        _write_csv(csv_file, [{**blank, **r} for r in history])
+        rows: list[dict[str, float | str]] = [{**blank, **r} for r in history]
+        _write_csv(csv_file, rows)
         improved = val["loss"] < best_val
         if improved:
             best_val, best_epoch, bad = val["loss"], epoch, 0
