@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import time
 from abc import abstractmethod
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
@@ -104,6 +104,12 @@ class CandidateContext:
         }
 
 
+def uses_prior_file(generators: Iterable[AdversaryGenerator]) -> bool:
+    """Whether any of ``generators`` reads its candidates from a trajectory prior file: entry points then set torch
+    to `seal.adversaries.candidate_sources.PRIOR_THREADS` threads (what loading a prior used to do)."""
+    return any(isinstance(g, CandidateGenerator) and g.prior_file is not None for g in generators)
+
+
 def _size_m(scenario: Scenario, agent: int) -> tuple[float, float]:
     now = scenario.tracks[agent, CURRENT_STEP]
     return float(now[LENGTH]), float(now[WIDTH])
@@ -129,6 +135,9 @@ class CandidateGenerator(AdversaryGenerator):
     ) -> None:
         self.follow = check_follow(self.name, follow)
         self.candidate_source = make_candidate_source(candidate_source, prior, candidates)
+        self.prior_file = None if prior is None else Path(prior)
+        """The trajectory prior file the candidates come from, if any (its process runs torch with
+        `seal.adversaries.candidate_sources.PRIOR_THREADS`, set by the entry point)."""
 
     def _generate(self, scenario: Scenario, history: Sequence[Rollout], rng: np.random.Generator) -> Generation:
         if not history:

@@ -102,3 +102,16 @@ def test_stacking_pads_shorter_rollouts_as_invalid() -> None:
     assert xy.shape == (2, ego.shape[0], 2) and heading.shape == valid.shape == (2, ego.shape[0])
     assert np.array_equal(xy[1], ego[:, [X, Y]]) and np.array_equal(heading[0, :60], ego[:60, HEADING])
     assert not valid[0, 60:].any() and np.array_equal(valid[0, :60], ego[:60, VALID] > 0.5)
+
+
+def test_uses_prior_file_tells_entry_points_to_set_prior_threads(tmp_path) -> None:
+    from seal.adversaries.candidate_generator import uses_prior_file
+    from seal.adversaries.replay import ReplayGenerator
+    from seal.models.prior import TrajectoryPrior
+
+    path = tmp_path / "prior.pt"
+    TrajectoryPrior.untrained(seed=0).save(path)
+    with_prior = CATGenerator(prior=path)
+    assert with_prior.prior_file == path
+    assert uses_prior_file([ReplayGenerator(), with_prior])
+    assert not uses_prior_file([ReplayGenerator(), CATGenerator(candidates="lanes")])
