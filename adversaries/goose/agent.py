@@ -124,7 +124,11 @@ class GooseAgent:
 @contextlib.contextmanager
 def _one_thread() -> Iterator[None]:
     """Run torch single-threaded inside the block: for one small forward pass, thread hand-offs cost more than
-    they save (2.4 ms vs 15 ms per action on a busy 2-core machine); the previous setting is restored."""
+    they save (2.4 ms vs 15 ms per action on a busy 2-core machine); the previous setting is restored.
+
+    Scoped on purpose, the one thread setting outside entry points: an entry point cannot set it for GOOSE's
+    forward passes alone, and a process-wide single thread would change the thread count of the other torch work in
+    the same process (ego policies, SEAL's models) in ``seal eval generators`` / ``seal bench generators``."""
     previous = torch.get_num_threads()
     if previous == 1:
         yield
