@@ -1,4 +1,5 @@
-"""Where candidate-based generators (CAT, later SEAL) get their candidate adversary futures from.
+"""Where candidate-based generators (`seal.adversaries.candidate_generator`: CAT, SEAL) get their candidate
+adversary futures from.
 
 A candidate source is any ``Callable[[Scenario], Candidates]`` returning the adversary's candidates. Built-ins:
 
@@ -22,17 +23,18 @@ N_CV_CANDIDATES = 32
 
 
 PRIOR_THREADS = 1
-"""Torch intra-op threads for batch-of-one prior inference. One is fastest: on the shared 2-core machine the
-1-epoch prior took 22 ms mean / 27 ms p95 per scenario with 1 thread and 195 ms / 732 ms with 2 (the transformer
-layers are too small to split, and a second thread competes with every other process)."""
+"""Torch intra-op threads for batch-of-one prior inference, set by the entry points (CLI handlers, worker entries)
+of processes that build a prior-based generator. One is fastest: on the shared 2-core machine the 1-epoch prior took
+22 ms mean / 27 ms p95 per scenario with 1 thread and 195 ms / 732 ms with 2 (the transformer layers are too small
+to split, and a second thread competes with every other process)."""
 
 
-def prior_source(path: str | Path, threads: int | None = PRIOR_THREADS) -> CandidateSource:
-    """The trained trajectory prior at ``path`` as a candidate source for the adversary (batch of one).
+def prior_source(path: str | Path) -> CandidateSource:
+    """The trained trajectory prior at ``path`` as a candidate source for the adversary (batch of one). Torch's
+    thread count is the process's (entry points set `PRIOR_THREADS`).
 
     Args:
         path: a file written by `seal.models.prior.TrajectoryPrior.save`.
-        threads: torch intra-op threads to set (process-wide) for inference, or None to leave torch's setting.
     """
     path = Path(path)
     if not path.is_file():
@@ -43,10 +45,6 @@ def prior_source(path: str | Path, threads: int | None = PRIOR_THREADS) -> Candi
         raise ValueError(f"seal.models.prior.TrajectoryPrior is not available ({exc}); cannot load prior "
             f"{path}") from exc
     prior = TrajectoryPrior.load(path)
-    if threads is not None:
-        import torch
-
-        torch.set_num_threads(int(threads))
 
     def predict(scenario: Scenario) -> Candidates:
         return prior.predict([scenario], agent_indices=[scenario.adv_index])[0]
@@ -75,10 +73,8 @@ def named_source(name: str) -> CandidateSource:
 
 def make_candidate_source(
     candidate_source: CandidateSource | None = None, prior: str | Path | None = None, candidates: str | None = None,
-    prior_threads: int | None = PRIOR_THREADS,
 ) -> CandidateSource:
-    """Exactly one of: a callable, a prior file (loaded with ``prior_threads``, see `prior_source`), or a
-    built-in name."""
+    """Exactly one of: a callable, a prior file (`prior_source`), or a built-in name."""
     given = [x is not None for x in (candidate_source, prior, candidates)]
     if sum(given) != 1:
         raise ValueError(
@@ -89,7 +85,7 @@ def make_candidate_source(
     if candidate_source is not None:
         return candidate_source
     if prior is not None:
-        return prior_source(prior, prior_threads)
+        return prior_source(prior)
     return named_source(str(candidates))
 
 

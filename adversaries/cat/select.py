@@ -1,4 +1,4 @@
-"""CAT's candidate selection (DESIGN section 7), vectorised over candidates x roll-outs x sub-sampled times.
+"""CAT's candidate selection (`ARCHITECTURE.md`), vectorised over candidates x roll-outs x sub-sampled times.
 
 * P1: softmax of the mode scores with modes 7..32 (1-based, by rank) flattened to the 7th score; when only
   probabilities are known their logs are the scores.

@@ -48,8 +48,13 @@ class GooseExtractor(BaseFeaturesExtractor):
         gru_hidden: GRU state size; the output has ``gru_hidden + (obs_dim - n_time * n_features) + 6`` features.
     """
 
+    goal_scale: torch.Tensor  # buffer [6]: scale of the achieved and desired goals
+
     def __init__(self, observation_space: spaces.Dict, n_time: int, n_features: int, gru_hidden: int = 32) -> None:
-        obs_dim = int(observation_space["observation"].shape[0])
+        obs_shape = observation_space["observation"].shape
+        if obs_shape is None:
+            raise ValueError("the GOOSE observation space needs a shaped 'observation' entry")
+        obs_dim = int(obs_shape[0])
         n_seq = n_time * n_features
         if obs_dim <= n_seq:
             raise ValueError(f"observation has {obs_dim} values, fewer than the roll-out block {n_time}x{n_features}")
@@ -79,12 +84,14 @@ def policy_kwargs(spec: GooseSpec, net_arch: list[int], gru_hidden: int) -> dict
 def policy_class(algo: str) -> type[BasePolicy]:
     """SB3 ``MultiInputPolicy`` class of ``algo`` (``"sac"`` or ``"td3"``)."""
     if algo == "sac":
-        from stable_baselines3.sac.policies import MultiInputPolicy
-    elif algo == "td3":
-        from stable_baselines3.td3.policies import MultiInputPolicy
-    else:
-        raise ValueError(f"GOOSE algo must be one of {ALGOS}, got {algo!r}")
-    return MultiInputPolicy
+        from stable_baselines3.sac.policies import MultiInputPolicy as SACPolicy
+
+        return SACPolicy
+    if algo == "td3":
+        from stable_baselines3.td3.policies import MultiInputPolicy as TD3Policy
+
+        return TD3Policy
+    raise ValueError(f"GOOSE algo must be one of {ALGOS}, got {algo!r}")
 
 
 def action_space() -> spaces.Box:
@@ -117,7 +124,11 @@ class GooseAgent:
 @contextlib.contextmanager
 def _one_thread() -> Iterator[None]:
     """Run torch single-threaded inside the block: for one small forward pass, thread hand-offs cost more than
-    they save (2.4 ms vs 15 ms per action on a busy 2-core machine); the previous setting is restored."""
+    they save (2.4 ms vs 15 ms per action on a busy 2-core machine); the previous setting is restored.
+
+    Scoped on purpose, the one thread setting outside entry points: an entry point cannot set it for GOOSE's
+    forward passes alone, and a process-wide single thread would change the thread count of the other torch work in
+    the same process (ego policies, SEAL's models) in ``seal eval generators`` / ``seal bench generators``."""
     previous = torch.get_num_threads()
     if previous == 1:
         yield

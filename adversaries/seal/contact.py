@@ -87,5 +87,5 @@ def predict_contact(
         return ContactPrediction(int(steps[first[k]]), True, k, min_dist)
     if not np.isfinite(min_dist):  # no comparable step: the last roll-out step is as good a guess as any
         return ContactPrediction(int(steps[-1]), False, 0, min_dist)
-    k, j = np.unravel_index(int(np.argmin(dist)), dist.shape)
-    return ContactPrediction(int(steps[j]), False, int(k), min_dist)
+    rollout, j = np.unravel_index(int(np.argmin(dist)), dist.shape)
+    return ContactPrediction(int(steps[j]), False, int(rollout), min_dist)

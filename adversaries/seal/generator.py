@@ -1,6 +1,6 @@
-"""``seal``: SEAL's generator (thesis 6.3, DESIGN section 7).
+"""``seal``: SEAL's generator (thesis 6.3; `ARCHITECTURE.md`, generators).
 
-1. Candidates from a source (the trajectory prior pi_gen, as CAT).
+1. Candidates from a source (the trajectory prior pi_gen, as CAT; `seal.adversaries.candidate_generator`).
 2. Ranking against the scenario's last K ego roll-outs by the objective (`seal.adversaries.seal.objective`): the learned
    pi_score (a model file) or CAT's heuristic (``objective="cat"``, the ablation).
 3. The adversary follows the top candidate (placed on it, ``follow="replay"``, or tracking it with the bicycle
@@ -18,32 +18,32 @@ deterministic ego) whatever the env's seed.
 
 from __future__ import annotations
 
-import time
-from collections.abc import Sequence
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from seal.adversaries.base import AdversaryGenerator, Generation, register
+from seal.adversaries.base import Generation, register
+from seal.adversaries.candidate_generator import CandidateContext, CandidateGenerator, Follow, check_follow
 from seal.adversaries.candidate_path import candidate_track
-from seal.adversaries.candidate_sources import (
-    PRIOR_THREADS,
-    CandidateSource,
-    adversary_candidates,
-    make_candidate_source,
-)
-from seal.adversaries.cat.generator import stack_ego_rollouts
+from seal.adversaries.candidate_sources import CandidateSource
 from seal.adversaries.cat.select import DECAY, N_KEPT_MODES, STRIDE_STEPS
 from seal.adversaries.seal.contact import predict_contact
 from seal.adversaries.seal.objective import Objective, make_objective
-from seal.core.scenario import CURRENT_STEP, LENGTH, WIDTH, Scenario
-from seal.envs.behaviors import AdversaryBehavior, ReplayBehavior, TrackingBehavior
-from seal.envs.rollout import Rollout
-from seal.envs.skill_behavior import FOLLOW_MODES, SWITCH_OFFSET_STEPS, SkillSwitchBehavior, switch_step_for
+from seal.envs.behaviors import AdversaryBehavior
+from seal.envs.skill_behavior import SWITCH_OFFSET_STEPS, SkillSwitchBehavior, switch_step_for
 
-SWITCH_MODES = ("adversarial", "benign", "none")
-"""Skill prior after the switch; ``none``: no switch, the adversary follows the chosen candidate to the end."""
+
+class Switch(StrEnum):
+    """Skill prior after the switch; ``none``: no switch, the adversary follows the chosen candidate to the end."""
+
+    ADVERSARIAL = "adversarial"
+    BENIGN = "benign"
+    NONE = "none"
+
+
+SWITCH_MODES = tuple(m.value for m in Switch)
 
 
 def load_skill_policy(skills: str | Path | None, switch: str, noise_scale: float = 1.0) -> Any:
@@ -51,7 +51,7 @@ def load_skill_policy(skills: str | Path | None, switch: str, noise_scale: float
     ``switch="none"``."""
     if switch not in SWITCH_MODES:
         raise ValueError(f"seal: switch must be one of {', '.join(SWITCH_MODES)}, got {switch!r}")
-    if switch == "none":
+    if switch == Switch.NONE:
         return None
     if skills is None:
         raise ValueError(f"seal: switch={switch!r} needs option 'skills': a folder written by `seal fit skills` "
@@ -64,7 +64,7 @@ def load_skill_policy(skills: str | Path | None, switch: str, noise_scale: float
 
 
 @register("seal")
-class SEALGenerator(AdversaryGenerator):
+class SEALGenerator(CandidateGenerator):
     """SEAL (see the module docstring).
 
     Args:
@@ -79,7 +79,6 @@ class SEALGenerator(AdversaryGenerator):
         noise_scale: standard deviation of the skill noise (1 = sample the prior).
         policy: a ready skill policy (``reset(seed)`` / ``act(obs)``) instead of loading ``skills``.
         stride, decay, n_kept_modes: CAT's selection options (``objective="cat"`` only).
-        prior_threads: torch threads for the prior, see `seal.adversaries.candidate_sources.prior_source`.
     """
 
     def __init__(
@@ -89,56 +88,44 @@ class SEALGenerator(AdversaryGenerator):
         candidates: str | None = None,
         objective: str | Path | Objective | None = None,
         skills: str | Path | None = None,
-        switch: str = "adversarial",
+        switch: str = Switch.ADVERSARIAL,
         switch_offset_steps: int = SWITCH_OFFSET_STEPS,
-        follow: str = "replay",
+        follow: str = Follow.REPLAY,
         noise_scale: float = 1.0,
         policy: Any = None,
         stride: int = STRIDE_STEPS,
         decay: float = DECAY,
         n_kept_modes: int = N_KEPT_MODES,
-        prior_threads: int | None = PRIOR_THREADS,
     ) -> None:
-        if follow not in FOLLOW_MODES:
-            raise ValueError(f"seal: follow must be one of {', '.join(FOLLOW_MODES)}, got {follow!r}")
+        check_follow(self.name, follow)
         if switch not in SWITCH_MODES:
             raise ValueError(f"seal: switch must be one of {', '.join(SWITCH_MODES)}, got {switch!r}")
         if int(switch_offset_steps) < 0:
             raise ValueError(f"seal: switch_offset_steps must be >= 0, got {switch_offset_steps}")
         self.objective = make_objective(objective, stride=stride, decay=decay, n_kept=n_kept_modes)
-        self.switch = switch
+        self.switch = Switch(switch)
         self.switch_offset_steps = int(switch_offset_steps)
-        self.follow = follow
-        self.policy = policy if policy is not None or switch == "none" else load_skill_policy(
+        self.policy = policy if policy is not None or switch == Switch.NONE else load_skill_policy(
             skills, switch, noise_scale)
-        self.candidate_source = make_candidate_source(candidate_source, prior, candidates, prior_threads)
+        super().__init__(candidate_source, prior, candidates, follow)
 
-    def _generate(self, scenario: Scenario, history: Sequence[Rollout], rng: np.random.Generator) -> Generation:
-        if not history:
-            raise ValueError(f"seal: empty roll-out history for scenario {scenario.scenario_id!r}")
-        start = time.perf_counter()
-        cands = adversary_candidates(self.candidate_source, scenario, "seal")
-        candidate_s = time.perf_counter() - start
-        adv, ego = scenario.adv_index, scenario.ego_index
-        now = scenario.tracks[:, CURRENT_STEP]
-        adv_size = (float(now[adv, LENGTH]), float(now[adv, WIDTH]))
-        ego_size = (float(now[ego, LENGTH]), float(now[ego, WIDTH]))
-        ego_xy, ego_heading, ego_valid = stack_ego_rollouts(history)
-        ranking = self.objective(cands, adv_size, ego_xy, ego_heading, ego_valid, ego_size)
-        rank_s = time.perf_counter() - start - candidate_s
+    def _choose(self, context: CandidateContext, rng: np.random.Generator) -> Generation:
+        cands, scenario = context.cands, context.scenario
+        ego_rollouts = (context.ego_xy, context.ego_heading, context.ego_valid)
+        ranking = self.objective(cands, context.adv_size_m, *ego_rollouts, context.ego_size_m)
+        rank_s = context.since_candidates_s()
         chosen = ranking.index
-        contact = predict_contact(cands.xy[chosen], cands.heading[chosen], adv_size, ego_xy, ego_heading, ego_valid,
-                                  ego_size)
+        contact = predict_contact(cands.xy[chosen], cands.heading[chosen], context.adv_size_m, *ego_rollouts,
+                                  context.ego_size_m)
         switch_step = switch_step_for(contact.step, self.switch_offset_steps)
-        track = candidate_track(scenario, adv, cands.xy[chosen])
         behavior: AdversaryBehavior
         skill_seed = None
-        if self.switch == "none":
-            behavior = ReplayBehavior(track) if self.follow == "replay" else TrackingBehavior(
-                cands.xy[chosen], start_step=CURRENT_STEP + 1)
+        if self.switch == Switch.NONE:
+            behavior = self.follow_behavior(scenario, cands.xy[chosen])
         else:
             skill_seed = int(rng.integers(2**63))
             policy = self.policy.clone() if hasattr(self.policy, "clone") else self.policy
+            track = candidate_track(scenario, scenario.adv_index, cands.xy[chosen])
             behavior = SkillSwitchBehavior(policy, track=track, switch_step=switch_step, follow=self.follow,
                                            seed=skill_seed)
         return Generation(
@@ -147,19 +134,17 @@ class SEALGenerator(AdversaryGenerator):
             predicted_step=contact.step,
             extra={
                 "objective": self.objective.name,
-                "switch": self.switch,
-                "switch_step": None if self.switch == "none" else switch_step,
+                "switch": str(self.switch),
+                "switch_step": None if self.switch == Switch.NONE else switch_step,
                 "skill_seed": skill_seed,
                 "collision_predicted": contact.collided,
                 "score": float(ranking.scores[chosen]),
                 "scores": [round(float(s), 6) for s in ranking.scores],
                 "prior_prob": float(cands.probs[chosen]),
                 "min_distance_m": contact.min_distance_m,
-                "n_candidates": int(cands.xy.shape[0]),
-                "candidate_fallback": getattr(cands, "fallback", None) or "",
-                "candidate_time_s": candidate_s,
+                **context.candidate_extra(),
                 "rank_time_s": rank_s,
-                "select_time_s": time.perf_counter() - start - candidate_s,
+                "select_time_s": context.since_candidates_s(),
                 **ranking.extra,
             },
         )

@@ -37,7 +37,7 @@ class Ranking:
 
 class Objective(Protocol):
     """Ranks the candidates against past ego roll-outs (arrays as from
-    `seal.adversaries.cat.generator.stack_ego_rollouts`)."""
+    `seal.adversaries.candidate_generator.stack_ego_rollouts`)."""
 
     name: str
 
@@ -102,7 +102,7 @@ class LearnedObjective:
         return Ranking(int(np.argmax(scores)), scores, {})
 
 
-def make_objective(spec: str | Path | Objective, **heuristic_options: Any) -> Objective:
+def make_objective(spec: str | Path | Objective | None, **heuristic_options: Any) -> Objective:
     """``"cat"`` -> `HeuristicObjective` (with ``heuristic_options``); a file path -> `LearnedObjective`; an
     `Objective` object is returned as is."""
     if spec is None:

@@ -267,7 +267,7 @@ def fit_objective(dataset: str | Path, out: str | Path, config: dict[str, Any], 
             bar.update(1)
 
     model, fit = train_objective(train_labels, ObjectiveConfig.from_dict(config["model"]), train_cfg,
-                                 on_step=on_step, log=(lambda m: bar.write(m)) if progress else log)
+                                 on_step=on_step)
     bar.close()
     timings["training_s"] = fit.seconds
     _write_log(out / "train_log.csv", fit.history)

@@ -198,7 +198,7 @@ def build_labels(
     path = run_chunked(
         scenarios, out, _fingerprint(spec, ids, chunk_size, n_candidates),
         {"n_candidates": n_candidates, "source": spec}, _run_chunk, (spec, n_candidates),
-        lambda labels, file: labels.save(file), workers, chunk_size, progress, desc, log,
+        lambda labels, file: labels.save(file), workers, chunk_size, progress, desc,
     )
     merged = LabelSet.concat([LabelSet.load(p) for p in path])
     if list(merged.scenario_ids) != ids:

@@ -134,7 +134,7 @@ def get_demonstrations(
         log(f"demonstrations: {path} was built from other scenarios or settings; rebuilding")
     log(f"demonstrations: simulating {len(scenarios)} scenarios of split {split!r} with {config['workers']} processes")
     demos = build_demonstrations(scenarios, path, demo_cfg, workers=int(config["workers"]),
-                                 chunk_size=int(config["chunk_size"]), progress=progress, log=log)
+                                 chunk_size=int(config["chunk_size"]), progress=progress)
     return demos, False
 
 
@@ -215,7 +215,7 @@ def fit_skills(
         vae = SkillVAE(vae_cfg)
         train_rows = np.concatenate([rows["train", "benign"], rows["train", "adversarial"]])
         val_rows = np.concatenate([rows["val", "benign"], rows["val", "adversarial"]])
-        fit = train_vae(vae, obs, actions, train_rows, val_rows, vae_train, out / "vae_log.csv", progress, log)
+        fit = train_vae(vae, obs, actions, train_rows, val_rows, vae_train, out / "vae_log.csv", progress)
         save_model(vae, out / VAE_FILE, {"fingerprint": vae_fp, "fit": _fit_info(fit), "windows": counts})
         log(f"vae: {fit.stop_reason}; best epoch {fit.best_epoch} (val loss {fit.best_val:.4f})")
     timings["vae_s"] = round(time.perf_counter() - t, 1)
@@ -243,7 +243,7 @@ def fit_skills(
             if from_benign:
                 prior.load_state_dict(priors["benign"].state_dict())
             fit = train_prior(prior, z["train", name], cond["train", name], z["val", name], cond["val", name],
-                              prior_train, out / f"prior_{name}_log.csv", progress, f"prior {name}", log,
+                              prior_train, out / f"prior_{name}_log.csv", progress, f"prior {name}",
                               fit_norm=not from_benign)
             save_model(prior, out / prior_file(name), {"fingerprint": fp, "fit": _fit_info(fit), "windows": counts})
             log(f"prior {name}: {fit.stop_reason}; best epoch {fit.best_epoch} (val NLL {fit.best_val:.3f})")

@@ -25,11 +25,30 @@ def _generator_options(args: argparse.Namespace) -> tuple[dict, dict]:
     return config, {key: config[key] for key in ("prior", "candidates", "objective", "skills")}
 
 
+def _prior_threads_if_needed(config: dict, shared: dict) -> None:
+    """Entry point's torch threads: `PRIOR_THREADS` when a configured generator reads a trajectory prior file (what
+    loading the prior did before the library stopped setting threads); else torch's setting stays."""
+    import torch
+
+    from seal.adversaries.base import generator_class
+    from seal.adversaries.candidate_generator import CandidateGenerator
+    from seal.adversaries.candidate_sources import PRIOR_THREADS
+    from seal.experiments.evaluation.generators import generator_name
+
+    for name, kw in config["generators"].items():
+        cls = generator_class(generator_name(name, kw))
+        prior = kw["prior"] if "prior" in kw else shared.get("prior")  # as build_generator merges them
+        if isinstance(cls, type) and issubclass(cls, CandidateGenerator) and prior is not None:
+            torch.set_num_threads(PRIOR_THREADS)
+            return
+
+
 def cmd_eval_generators(args: argparse.Namespace) -> int:
     from seal.experiments.evaluation.generator_metrics import markdown_table
     from seal.experiments.evaluation.generators import run_eval_generators
 
-    config, _ = _generator_options(args)
+    config, shared = _generator_options(args)
+    _prior_threads_if_needed(config, shared)
     rows = run_eval_generators(args.dataset, args.out, config, progress=not args.no_progress)
     print(markdown_table(rows))
     print(f"wrote {args.out}/generators.md, generators.csv, generators.json, episodes.csv and config.yaml")
@@ -37,12 +56,18 @@ def cmd_eval_generators(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_generators(args: argparse.Namespace) -> int:
+    import torch
+
+    from seal.adversaries.candidate_generator import uses_prior_file
+    from seal.adversaries.candidate_sources import PRIOR_THREADS
     from seal.experiments.bench.generators import bench_generators, format_bench
     from seal.experiments.evaluation.generators import build_generator, load_eval_scenarios
 
     config, shared = _generator_options(args)
     scenarios = load_eval_scenarios(args.dataset, config["split"], config["limit"] or args.n)
     generators = {name: build_generator(name, kw, shared) for name, kw in config["generators"].items()}
+    if uses_prior_file(generators.values()):
+        torch.set_num_threads(PRIOR_THREADS)  # entry point: the library leaves torch's threads alone
     result = bench_generators(scenarios, generators, seed=config["seed"])
     if args.json:
         print_result(result, True)

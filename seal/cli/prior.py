@@ -64,6 +64,8 @@ def _load_config(path: str | None) -> tuple[dict[str, Any], dict[str, Any]]:
 def cmd_fit_prior(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
+    import torch
+
     from seal.core.atomic import atomic_write_json
     from seal.models.prior.network import PriorConfig
     from seal.models.prior.train import TrainConfig, fit_prior
@@ -83,6 +85,7 @@ def cmd_fit_prior(args: argparse.Namespace) -> int:
     scenarios, info = load_split(args.dataset, args.split, args.limit)
     info["config_file"] = args.config
     print(f"fit prior: {info['scenarios']} scenarios from {args.dataset} (split {args.split})")
+    torch.set_num_threads(train_cfg.threads)  # entry point: the library leaves torch's threads alone
     prior = fit_prior(
         scenarios, args.out, model_cfg, train_cfg, data_info=info, resume=args.resume, progress=not args.no_progress
     )
@@ -129,6 +132,8 @@ def _print_eval(res: dict[str, Any]) -> None:
 
 
 def cmd_eval_prior(args: argparse.Namespace) -> int:
+    import torch
+
     from seal.models.prior.evaluate import evaluate_prior
     from seal.models.prior.prior import TrajectoryPrior
 
@@ -137,9 +142,10 @@ def cmd_eval_prior(args: argparse.Namespace) -> int:
     if not scenarios:
         raise CliError(f"--split {args.split}: no scenarios")
     kinds = ("adversary", "moving") if args.targets == "both" else (args.targets,)
+    torch.set_num_threads(args.threads)
     res = evaluate_prior(
         prior, scenarios, kinds=kinds, miss_threshold_m=args.miss_threshold_m, check_road=not args.no_road,
-        progress=not args.no_progress and not args.json, threads=args.threads,
+        progress=not args.no_progress and not args.json,
     )
     res = {"model": str(args.model), "dataset": str(args.dataset), "split": args.split, **res}
     if args.json:
@@ -150,6 +156,8 @@ def cmd_eval_prior(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_prior(args: argparse.Namespace) -> int:
+    import torch
+
     from seal.models.prior.bench import bench_prior
     from seal.models.prior.prior import TrajectoryPrior
 
@@ -166,7 +174,8 @@ def cmd_bench_prior(args: argparse.Namespace) -> int:
         from seal.experiments.bench.env import bench_scenarios
 
         scenarios, source = bench_scenarios(None, seed=0, n_runs=8)
-    res = bench_prior(prior, scenarios, repeats=args.repeats, batch=args.batch, threads=args.threads)
+    torch.set_num_threads(args.threads)
+    res = bench_prior(prior, scenarios, repeats=args.repeats, batch=args.batch)
     print_result({"model": weights, "scenarios": source, **res}, args.json)
     return 0
 

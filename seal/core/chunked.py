@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import multiprocessing as mp
 import shutil
 from collections.abc import Callable, Sequence
@@ -18,11 +19,14 @@ from typing import Any, TypeVar
 from seal.core.atomic import atomic_write_json
 
 T = TypeVar("T")
+logger = logging.getLogger(__name__)
 
 
-def fingerprint(settings: dict[str, Any]) -> str:
-    """Short hex digest of JSON-serialisable ``settings`` (key order does not matter)."""
-    return hashlib.sha256(json.dumps(settings, sort_keys=True).encode()).hexdigest()[:16]
+def fingerprint(settings: Any) -> str:
+    """Short (16 hex digits) SHA-256 digest of ``settings`` as JSON: dict key order does not matter, tuples count as
+    lists, and values JSON cannot encode count by their ``str()`` (so a `pathlib.Path` is its path). The one
+    fingerprint of the project: chunk folders, demonstrations, labels and the skill fit's resume checks use it."""
+    return hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
 def run_chunked(
@@ -37,7 +41,6 @@ def run_chunked(
     chunk_size: int,
     progress: bool,
     desc: str,
-    log: Callable[[str], None],
 ) -> list[Path]:
     """Run ``work((i, chunk_i, *work_args)) -> (i, result)`` for every chunk of ``chunk_size`` items that has no
     file in ``folder`` yet, ``save(result, path)`` each (atomically, by the caller's writer); return every chunk's
@@ -55,7 +58,8 @@ def run_chunked(
             a fork); 1 runs in this process.
         chunk_size: items per chunk file.
         progress: show a tqdm bar labelled ``desc``.
-        log: where resuming / restarting is reported.
+
+    Resuming / restarting is reported to this module's logger (INFO).
     """
     from tqdm import tqdm
 
@@ -66,7 +70,7 @@ def run_chunked(
         except (OSError, json.JSONDecodeError):
             same = False
         if not same:
-            log(f"{desc}: {folder} holds chunks of other scenarios or settings; starting over")
+            logger.info(f"{desc}: {folder} holds chunks of other scenarios or settings; starting over")
             shutil.rmtree(folder)
     folder.mkdir(parents=True, exist_ok=True)
     atomic_write_json(state_path, {"fingerprint": settings_fingerprint, "n_items": len(items),
@@ -75,7 +79,7 @@ def run_chunked(
     paths = [folder / f"part_{i:05d}.npz" for i in range(len(chunks))]
     todo = [i for i in range(len(chunks)) if not paths[i].exists()]
     if len(todo) < len(chunks):
-        log(f"{desc}: resuming, {len(chunks) - len(todo)} of {len(chunks)} chunks already done")
+        logger.info(f"{desc}: resuming, {len(chunks) - len(todo)} of {len(chunks)} chunks already done")
     pending = set(todo)
     bar = tqdm(total=len(items), desc=desc, unit="scenario", disable=not progress,
                initial=sum(len(c) for i, c in enumerate(chunks) if i not in pending))

@@ -75,7 +75,9 @@ _SHARD_KEYS = (
 def write_shard(path: Path, scenarios: Sequence[Scenario]) -> dict[str, Any]:
     """Atomically write a shard; return its manifest entry (file, n_scenarios, bytes, sha256)."""
     buf = io.BytesIO()
-    np.savez_compressed(buf, **encode_shard(scenarios))
+    # Any: numpy's stubs let a ``**dict`` of arrays collide with the ``allow_pickle: bool`` keyword.
+    arrays: dict[str, Any] = encode_shard(scenarios)
+    np.savez_compressed(buf, **arrays)
     data = buf.getvalue()
     atomic_write(path, lambda f: f.write(data))
     return {"n_scenarios": len(scenarios), "bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()}

@@ -142,10 +142,10 @@ def validate_scenario(s: Scenario) -> None:
         raise ScenarioError(
             f"scenario {sid!r}: field 'agent_types' must have {n_agents} entries, got {len(s.agent_types)}"
         )
-    for i, t in enumerate(s.agent_types):
-        if t not in AGENT_TYPES:
+    for i, agent_type in enumerate(s.agent_types):
+        if agent_type not in AGENT_TYPES:
             raise ScenarioError(
-                f"scenario {sid!r}: field 'agent_types' of agent {int(s.agent_ids[i])} is {t!r}, "
+                f"scenario {sid!r}: field 'agent_types' of agent {int(s.agent_ids[i])} is {agent_type!r}, "
                 f"expected one of {AGENT_TYPES}"
             )
 

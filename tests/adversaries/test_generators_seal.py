@@ -199,7 +199,7 @@ def test_configs_name_several_seal_variants() -> None:
 def test_learned_objective_ranks_with_the_model(highway: list[Scenario], tmp_path) -> None:
     objective = pytest.importorskip("seal.models.objective", reason="seal.models.objective (learned "
         "objective) not available yet")
-    from seal.adversaries.cat.generator import stack_ego_rollouts
+    from seal.adversaries.candidate_generator import stack_ego_rollouts
 
     torch.manual_seed(0)
     model = objective.ObjectiveModel(objective.ObjectiveConfig(hidden=8))

@@ -215,7 +215,7 @@ def test_network_learns_a_synthetic_ranking_closer_candidates_score_higher() -> 
     # 54 training scenarios x 12 candidates = 648 pairs (logged previous roll-out only): ~11 steps per epoch.
     cfg = TrainConfig(batch_size=64, lr=3e-3, max_epochs=30, pairs_per_epoch=4000, patience=30, max_minutes=1.0,
                       prev="logged", seed=0)
-    model, fit = train_objective(train, ObjectiveConfig(hidden=32), cfg, log=lambda _: None)
+    model, fit = train_objective(train, ObjectiveConfig(hidden=32), cfg)
     rho = spearman(_ranks(model, held_out), target)
     assert rho.mean() > 0.8
     assert top1_in_topk(_ranks(model, held_out), target, k=3).mean() >= 0.75
@@ -294,7 +294,7 @@ def test_selection_on_validation_spearman_and_correction_penalty_keeps_closeness
     held_out = _synthetic_labels(rng, 10)
     cfg = TrainConfig(batch_size=48, lr=3e-3, max_epochs=3, pairs_per_epoch=480, patience=3, max_minutes=1.0,
                       prev="logged", correction_l2=100.0, rank_weight=0.5, mirror=True, seed=0)
-    model, fit = train_objective(train, ObjectiveConfig(hidden=8), cfg, log=lambda _: None)
+    model, fit = train_objective(train, ObjectiveConfig(hidden=8), cfg)
     rhos = [row["val_spearman"] for row in fit.history]
     assert len(rhos) == 3 and fit.best_epoch == int(np.argmax(rhos)) and fit.best_val_spearman == max(rhos)
     assert model.info["fit"]["best_val_spearman"] == fit.best_val_spearman

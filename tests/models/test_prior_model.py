@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -62,7 +63,7 @@ def overfit(handful: list[Scenario], tmp_path_factory: pytest.TempPathFactory) -
     out = tmp_path_factory.mktemp("prior") / "overfit.pt"
     # No on-road loss here: the point is the capacity to fit the logged futures.
     cfg = tiny_train(epochs=150, val_fraction=0.1, road_weight=0.0)
-    return fit_prior(handful, out, TINY, cfg, progress=False, log=lambda _: None)
+    return fit_prior(handful, out, TINY, cfg, progress=False)
 
 
 def test_predict_shapes_order_and_default_adversary(untrained: TrajectoryPrior, all_scenarios: list[Scenario]
@@ -124,8 +125,7 @@ def test_untrained_predictions_are_deterministic_for_a_seed(all_scenarios: list[
 
 def test_training_is_deterministic_for_a_seed(handful: list[Scenario], tmp_path: Path) -> None:
     runs = [
-        fit_prior(handful, tmp_path / f"m{i}.pt", TINY, tiny_train(epochs=3, seed=seed), progress=False,
-                  log=lambda _: None)
+        fit_prior(handful, tmp_path / f"m{i}.pt", TINY, tiny_train(epochs=3, seed=seed), progress=False)
         for i, seed in enumerate((7, 7, 8))
     ]
     sa, sb, sc = (r.net.state_dict() for r in runs)
@@ -237,24 +237,34 @@ def test_targets_skip_parked_and_short_lived_agents() -> None:
 
 
 def test_interrupted_training_resumes_to_the_same_model(handful: list[Scenario], tmp_path: Path,
-                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+                                                        monkeypatch: pytest.MonkeyPatch,
+                                                        caplog: pytest.LogCaptureFixture) -> None:
     import seal.models.prior.train as train_mod
 
     monkeypatch.setattr(train_mod, "STATE_EVERY_S", 0.0)  # save the resumable state after every epoch
     cfg = tiny_train(epochs=3, seed=5)
-    straight = fit_prior(handful, tmp_path / "straight.pt", TINY, cfg, progress=False, log=lambda _: None)
+    straight = fit_prior(handful, tmp_path / "straight.pt", TINY, cfg, progress=False)
 
-    def interrupt_in_epoch_2(line: str) -> None:
-        if line.startswith("epoch 2:"):
-            raise KeyboardInterrupt
+    class InterruptInEpoch2(logging.Handler):
+        """Stands for a Ctrl-C while epoch 2's line is logged (after its training, before its state is saved)."""
+
+        def emit(self, record: logging.LogRecord) -> None:
+            if record.getMessage().startswith("epoch 2:"):
+                raise KeyboardInterrupt
 
     out = tmp_path / "resumed.pt"
-    with pytest.raises(KeyboardInterrupt):
-        fit_prior(handful, out, TINY, cfg, progress=False, log=interrupt_in_epoch_2)
+    caplog.set_level(logging.INFO, logger=train_mod.__name__)
+    interrupt = InterruptInEpoch2()
+    train_mod.logger.addHandler(interrupt)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            fit_prior(handful, out, TINY, cfg, progress=False)
+    finally:
+        train_mod.logger.removeHandler(interrupt)
     assert train_mod.state_path(out).exists()
-    lines: list[str] = []
-    resumed = fit_prior(handful, out, TINY, cfg, resume=True, progress=False, log=lines.append)
-    assert any("resuming after epoch 1" in line for line in lines)
+    caplog.clear()
+    resumed = fit_prior(handful, out, TINY, cfg, resume=True, progress=False)
+    assert any("resuming after epoch 1" in m for m in caplog.messages)
     assert resumed.training["epochs_run"] == 3 and not train_mod.state_path(out).exists()
     a, b = straight.net.state_dict(), resumed.net.state_dict()
     assert all(torch.equal(a[k], b[k]) for k in a)
@@ -262,4 +272,4 @@ def test_interrupted_training_resumes_to_the_same_model(handful: list[Scenario],
     train_mod._save_state(train_mod.state_path(out), resumed.net, torch.optim.AdamW(resumed.net.parameters()),
                           None, {"epoch": 1}, [{"other": 1}, {}])
     with pytest.raises(ValueError, match="another model or training config"):
-        fit_prior(handful, out, TINY, cfg, resume=True, progress=False, log=lambda _: None)
+        fit_prior(handful, out, TINY, cfg, resume=True, progress=False)

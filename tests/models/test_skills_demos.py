@@ -244,11 +244,11 @@ def test_build_resumes_from_finished_chunks(tmp_path, highway, monkeypatch) -> N
 
     monkeypatch.setattr(demo_mod, "_run_chunk", failing)
     with pytest.raises(KeyboardInterrupt):
-        build_demonstrations(highway, out, cfg, workers=1, chunk_size=1, progress=False, log=lambda _: None)
+        build_demonstrations(highway, out, cfg, workers=1, chunk_size=1, progress=False)
     assert not out.exists() and len(list(parts_dir(out).glob("part_*.npz"))) == 1
     done: list[int] = []
     monkeypatch.setattr(demo_mod, "_run_chunk", lambda job: (done.append(job[0]), real(job))[1])
-    merged = build_demonstrations(highway, out, cfg, workers=1, chunk_size=1, progress=False, log=lambda _: None)
+    merged = build_demonstrations(highway, out, cfg, workers=1, chunk_size=1, progress=False)
     assert done == [1, 2]  # chunk 0 was reused
     assert not parts_dir(out).exists()
     fresh = Demonstrations.concat([roll_out_demonstrations(s, cfg) for s in highway])

@@ -155,8 +155,7 @@ def test_trained_prior_recovers_a_state_dependence() -> None:
     prior = ConditionalRealNVP(TINY_PRIOR)
     torch.manual_seed(0)
     fit = train_prior(prior, z[:2500], s[:2500], z[2500:], s[2500:],
-                      TrainConfig(batch_size=128, lr=3e-3, max_epochs=25, patience=25), progress=False,
-                      log=lambda _: None)
+                      TrainConfig(batch_size=128, lr=3e-3, max_epochs=25, patience=25), progress=False)
     true_nll = 4 * (math.log(0.1) + 0.5 * math.log(2 * math.pi) + 0.5)
     marginal_nll = float(np.sum(0.5 * np.log(2 * math.pi * math.e * z.var(0))))
     assert fit.best_val < true_nll + 1.5

@@ -203,8 +203,8 @@ def _shape(obs: ET.Element, rd: _Reader, where: str) -> tuple[float, float, tupl
     el = shape[0]
     w = f"{where} <shape>"
     offset = (0.0, 0.0)
-    if el.find("center") is not None:
-        c = el.find("center")
+    c = el.find("center")
+    if c is not None:
         offset = (rd.number(c, "x", w), rd.number(c, "y", w))
     if el.tag == "rectangle":
         length, width = rd.number(el, "length", w), rd.number(el, "width", w)

@@ -144,6 +144,59 @@ def _import_one(fmt: str, path: Path, prefix: str, opts: ImportOptions) -> tuple
     return scenarios, None
 
 
+def _import_shards(
+    builder: DatasetBuilder, fmt: str, files: Sequence[Path], prefixes: Sequence[str], opts: ImportOptions,
+    progress: bool,
+) -> None:
+    """Import ``files`` in shards of `FILES_PER_SHARD` (skipping shards an earlier run finished), each written with
+    its scenarios per file and skipped files (with reasons)."""
+    bar = tqdm(total=len(files), unit="file", desc=f"import {fmt}", disable=not progress)
+    try:
+        for chunk, first in enumerate(range(0, len(files), FILES_PER_SHARD)):
+            span = range(first, min(first + FILES_PER_SHARD, len(files)))
+            if builder.is_done(chunk):
+                bar.update(len(span))
+                continue
+            scenarios: list[Scenario] = []
+            per_file: dict[str, int] = {}
+            skipped: list[list[str]] = []
+            for k in span:
+                got, reason = _import_one(fmt, files[k], prefixes[k], opts)
+                scenarios.extend(got)
+                per_file[str(files[k])] = len(got)
+                if reason is not None:
+                    skipped.append([str(files[k]), reason])
+                bar.update(1)
+            builder.write_shard(chunk, scenarios, {"per_file": per_file, "skipped": skipped})
+    finally:
+        bar.close()
+
+
+def _report(
+    builder: DatasetBuilder, fmt: str, inputs: Sequence[str | Path], opts: ImportOptions, n_files: int,
+    seconds: float,
+) -> dict[str, Any]:
+    """The import report, gathered from every shard's info (those of a resumed run included)."""
+    per_file: dict[str, int] = {}
+    skipped: list[list[str]] = []
+    for chunk in sorted(builder.shards):
+        info = builder.shards[chunk]["info"]
+        per_file.update(info["per_file"])
+        skipped.extend(info["skipped"])
+    return {
+        "importer": fmt,
+        "inputs": [str(p) for p in inputs],
+        "options": {"max_per_file": opts.max_per_file, "min_future_steps": opts.min_future_steps},
+        "files": n_files,
+        "imported_files": sum(1 for n in per_file.values() if n > 0),
+        "skipped_files": len(skipped),
+        "skipped": [{"file": f, "reason": r} for f, r in skipped],
+        "scenarios": sum(per_file.values()),
+        "scenarios_per_file": per_file,
+        "seconds": round(seconds, 2),
+    }
+
+
 def import_files(
     inputs: Sequence[str | Path],
     out: str | Path,
@@ -188,46 +241,10 @@ def import_files(
     }
     builder = DatasetBuilder(out, params, overwrite=overwrite)
     start = time.perf_counter()
-    bar = tqdm(total=len(files), unit="file", desc=f"import {fmt}", disable=not progress)
-    try:
-        for chunk, first in enumerate(range(0, len(files), FILES_PER_SHARD)):
-            span = range(first, min(first + FILES_PER_SHARD, len(files)))
-            if builder.is_done(chunk):
-                bar.update(len(span))
-                continue
-            scenarios: list[Scenario] = []
-            per_file: dict[str, int] = {}
-            skipped: list[list[str]] = []
-            for k in span:
-                got, reason = _import_one(fmt, files[k], prefixes[k], opts)
-                scenarios.extend(got)
-                per_file[str(files[k])] = len(got)
-                if reason is not None:
-                    skipped.append([str(files[k]), reason])
-                bar.update(1)
-            builder.write_shard(chunk, scenarios, {"per_file": per_file, "skipped": skipped})
-    finally:
-        bar.close()
-    per_file, skipped = {}, []
-    for chunk in sorted(builder.shards):
-        info = builder.shards[chunk]["info"]
-        per_file.update(info["per_file"])
-        skipped.extend(info["skipped"])
-    total = sum(per_file.values())
-    report = {
-        "importer": fmt,
-        "inputs": [str(p) for p in inputs],
-        "options": {"max_per_file": opts.max_per_file, "min_future_steps": opts.min_future_steps},
-        "files": len(files),
-        "imported_files": sum(1 for n in per_file.values() if n > 0),
-        "skipped_files": len(skipped),
-        "skipped": [{"file": f, "reason": r} for f, r in skipped],
-        "scenarios": total,
-        "scenarios_per_file": per_file,
-        "seconds": round(time.perf_counter() - start, 2),
-    }
-    if total == 0:
-        reasons = "\n".join(f"  {r}" for _, r in skipped[:20])
+    _import_shards(builder, fmt, files, prefixes, opts, progress)
+    report = _report(builder, fmt, inputs, opts, len(files), time.perf_counter() - start)
+    if report["scenarios"] == 0:
+        reasons = "\n".join(f"  {s['reason']}" for s in report["skipped"][:20])
         raise ImportFailed(f"no scenario imported from {len(files)} {fmt} file(s):\n{reasons}")
     ds = builder.finalize(provenance={**report, "importer": f"seal.core.importers.{fmt}"})
     atomic_write_json(Path(out) / REPORT_FILE, report)

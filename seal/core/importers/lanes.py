@@ -11,7 +11,7 @@ continues into the first pieces of the lane's successors.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -148,7 +148,7 @@ def lane_pieces(
     return out
 
 
-def link_successors(pieces: dict[str, list[LaneSpec]], successors: dict[str, Sequence[str]]) -> list[LaneSpec]:
+def link_successors(pieces: dict[str, list[LaneSpec]], successors: Mapping[str, Sequence[str]]) -> list[LaneSpec]:
     """All pieces, with each lane's last piece continuing into the first piece of each of its successor lanes
     (successors not among ``pieces`` are dropped)."""
     out: list[LaneSpec] = []

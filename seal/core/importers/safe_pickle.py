@@ -40,7 +40,7 @@ def _plain_dict(*_args: Any) -> dict:
 _NUMPY: dict[str, Callable[..., Any]] = {
     "multiarray._reconstruct": _multiarray._reconstruct,
     "multiarray.scalar": _multiarray.scalar,
-    "numeric._frombuffer": _numeric._frombuffer,
+    "numeric._frombuffer": _numeric._frombuffer,  # type: ignore[attr-defined]  # private, absent from numpy's stubs
 }
 ALLOWED: dict[tuple[str, str], Callable[..., Any]] = {
     ("numpy", "ndarray"): np.ndarray,

@@ -232,6 +232,8 @@ def _side_types(lanes: list[LaneSpec], lines: list[tuple[np.ndarray, str]]) -> l
     hit_s, hit_g = shapely.STRtree(geoms).query(samples, predicate="dwithin", distance=LINE_MATCH_M)
     n_sides = 2 * len(lanes)
     n_samples = np.bincount(owner_side, minlength=n_sides)
+    n_matched: np.ndarray  # [2 * lanes] sampled points with a line nearby (counts; zeros as floats when none)
+    n_solid: np.ndarray
     if hit_s.size:
         dist = shapely.distance(samples[hit_s], np.asarray(geoms, dtype=object)[hit_g])
         order = np.lexsort((dist, hit_s))  # the nearest line piece of each matched sample

@@ -101,9 +101,9 @@ def _hold_last(xy: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
 def align_ego_rollouts(
     ego_xy: np.ndarray, ego_heading: np.ndarray, ego_valid: np.ndarray, n_steps: int = N_FUTURE
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Cut ego arrays indexed by scenario step (e.g. ``seal.adversaries.cat.generator.stack_ego_rollouts``: ``[K, T_s,
-    ...]``)
-    to the candidates' steps ``CURRENT_STEP + 1 .. CURRENT_STEP + n_steps``, padding missing steps as invalid.
+    """Cut ego arrays indexed by scenario step (e.g. ``seal.adversaries.candidate_generator.stack_ego_rollouts``:
+    ``[K, T_s, ...]``) to the candidates' steps ``CURRENT_STEP + 1 .. CURRENT_STEP + n_steps``, padding missing
+    steps as invalid.
 
     Returns ``xy [K, n_steps, 2]``, ``heading [K, n_steps]``, ``valid [K, n_steps]``.
     """

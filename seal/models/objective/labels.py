@@ -19,6 +19,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -102,7 +103,9 @@ class LabelSet:
     def save(self, path: str | os.PathLike[str]) -> None:
         """Atomic ``.npz`` write (compressed)."""
         buf = io.BytesIO()
-        np.savez_compressed(buf, **{f.name: np.asarray(getattr(self, f.name)) for f in fields(self)})
+        # Any: numpy's stubs let a ``**dict`` of arrays collide with the ``allow_pickle: bool`` keyword.
+        arrays: dict[str, Any] = {f.name: np.asarray(getattr(self, f.name)) for f in fields(self)}
+        np.savez_compressed(buf, **arrays)
         atomic_write_bytes(path, buf.getvalue())
 
     @classmethod

@@ -11,8 +11,9 @@ No normalisation layer couples the pairs of a batch, so a pair's output does not
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
-from typing import Any
+from typing import Any, Literal, overload
 
 import torch
 from torch import nn
@@ -64,9 +65,10 @@ class ObjectiveConfig:
     @classmethod
     def from_dict(cls, d: dict[str, Any], where: str = "objective config") -> ObjectiveConfig:
         check_keys(cls, d, where)
-        types = {f.name: f.type for f in fields(cls)}
-        cast = {"float": float, "bool": bool}
-        return cls(**{k: cast.get(types[k], int)(v) for k, v in d.items()})
+        types = {f.name: str(f.type) for f in fields(cls)}
+        converters: dict[str, Callable[[Any], Any]] = {"float": float, "bool": bool}
+        values: dict[str, Any] = {k: converters.get(types[k], int)(v) for k, v in d.items()}
+        return cls(**values)
 
 
 def stride_pool(feats: torch.Tensor, stride: int) -> torch.Tensor:
@@ -147,6 +149,18 @@ class ObjectiveNet(nn.Module):
         # a candidate that passes close is the one that makes the ego change its behaviour (f_diff).
         close = raw[:, CLOSENESS_FEATURE : CLOSENESS_FEATURE + 1].clamp(1e-4, 1 - 1e-4)
         return out, self.close_gain * torch.log(close / (1 - close))
+
+    @overload
+    def score_pairs(
+        self, cand_xy: torch.Tensor, cand_heading: torch.Tensor, ego_xy: torch.Tensor, ego_heading: torch.Tensor,
+        ego_valid: torch.Tensor, with_correction: Literal[False] = False,
+    ) -> torch.Tensor: ...
+
+    @overload
+    def score_pairs(
+        self, cand_xy: torch.Tensor, cand_heading: torch.Tensor, ego_xy: torch.Tensor, ego_heading: torch.Tensor,
+        ego_valid: torch.Tensor, with_correction: Literal[True],
+    ) -> tuple[torch.Tensor, torch.Tensor]: ...
 
     def score_pairs(
         self, cand_xy: torch.Tensor, cand_heading: torch.Tensor, ego_xy: torch.Tensor, ego_heading: torch.Tensor,

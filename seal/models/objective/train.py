@@ -17,9 +17,10 @@ and 4 other roll-outs per validation scenario), with ``"mse"`` the one with the 
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -30,6 +31,8 @@ from seal.models.objective.labels import LOGGED_ROW, LabelSet
 from seal.models.objective.metrics import spearman
 from seal.models.objective.model import ObjectiveModel
 from seal.models.objective.network import ObjectiveConfig, ObjectiveNet
+
+logger = logging.getLogger(__name__)
 
 PREV_MODES = ("all", "logged")
 """Which previous roll-outs make training pairs: all M of a scenario, or only the logged-adversary episode."""
@@ -197,10 +200,10 @@ def _validate(net: ObjectiveNet, tensors: PairTensors, idx: np.ndarray, batch_si
             pred, target = tensors.batch(net, idx[start : start + batch_size])
             preds.append(pred.numpy())
             targets.append(target.numpy())
-    pred, target = np.concatenate(preds), np.concatenate(targets)
-    mse = float(((pred - target) ** 2).mean())
+    pred_all, target_all = np.concatenate(preds), np.concatenate(targets)
+    mse = float(((pred_all - target_all) ** 2).mean())
     n = tensors.n_cand
-    rho = spearman(pred.sum(-1).reshape(-1, n), target.sum(-1).reshape(-1, n))
+    rho = spearman(pred_all.sum(-1).reshape(-1, n), target_all.sum(-1).reshape(-1, n))
     return mse, float(rho.mean())
 
 
@@ -215,43 +218,123 @@ def validation_groups(tensors: PairTensors, scenarios: np.ndarray, prev: str, rn
     return np.stack([np.repeat(scenarios, k + 1), np.concatenate(rows)], axis=1).astype(np.int64)
 
 
+@dataclass(frozen=True)
+class _FitData:
+    """The scenario split of one fit and its training groups / validation pairs."""
+
+    tensors: PairTensors
+    train_s: np.ndarray
+    val_s: np.ndarray
+    train_groups: np.ndarray
+    val_pairs: np.ndarray
+
+
+def _split(labels: LabelSet, cfg: TrainConfig, rng: np.random.Generator) -> _FitData:
+    """Hold out ``cfg.val_fraction`` of the scenarios (at least one, at most all but one) and build the groups."""
+    order = rng.permutation(labels.n_scenarios)
+    n_val = min(max(1, round(cfg.val_fraction * labels.n_scenarios)), labels.n_scenarios - 1)
+    val_s, train_s = np.sort(order[:n_val]), np.sort(order[n_val:])
+    tensors = PairTensors(labels)
+    prevs = np.arange(tensors.n_prev) if cfg.prev == "all" else np.array([LOGGED_ROW])
+    train_groups = tensors.groups(train_s, prevs)
+    val_pairs = tensors.group_pairs(validation_groups(tensors, val_s, cfg.prev, rng))
+    return _FitData(tensors, train_s, val_s, train_groups, val_pairs)
+
+
+@dataclass(frozen=True)
+class _Schedule:
+    """Groups per optimiser step, groups drawn per epoch and steps per epoch."""
+
+    groups_per_batch: int
+    n_per_epoch: int
+    steps_per_epoch: int
+
+    @classmethod
+    def of(cls, cfg: TrainConfig, n_cand: int, n_groups: int) -> _Schedule:
+        groups_per_batch = max(1, cfg.batch_size // n_cand)
+        n_per_epoch = min(max(1, cfg.pairs_per_epoch // n_cand), n_groups)
+        return cls(groups_per_batch, n_per_epoch, max(1, -(-n_per_epoch // groups_per_batch)))
+
+
+def _batch_loss(net: ObjectiveNet, tensors: PairTensors, groups: np.ndarray, cfg: TrainConfig,
+                rng: np.random.Generator) -> tuple[torch.Tensor, int]:
+    """The training loss of the pairs of ``groups`` (mirrored at random with ``cfg.mirror``) and their count."""
+    n_cand = tensors.n_cand
+    idx = tensors.group_pairs(groups)
+    flip = np.repeat(rng.random(len(groups)) < 0.5, n_cand) if cfg.mirror else None
+    pred, target = tensors.batch(net, idx, flip)
+    loss = ((pred - target) ** 2).mean()
+    if cfg.correction_l2 > 0:
+        loss = loss + cfg.correction_l2 * (tensors.last_correction ** 2).mean()
+    if cfg.rank_weight > 0:
+        loss = loss + cfg.rank_weight * listnet_loss(pred, target, n_cand, cfg.rank_temperature)
+    return loss, len(idx)
+
+
+def _train_epoch(
+    net: ObjectiveNet, opt: torch.optim.Optimizer, sched: torch.optim.lr_scheduler.LRScheduler, data: _FitData,
+    cfg: TrainConfig, schedule: _Schedule, rng: np.random.Generator, epoch: int,
+    on_step: Callable[[int, int, int], None] | None, start: float,
+) -> tuple[float, bool]:
+    """One epoch over ``schedule.n_per_epoch`` random training groups; returns the mean pair loss and whether the
+    time budget ran out (the epoch then ends early)."""
+    net.train()
+    pick = rng.permutation(len(data.train_groups))[: schedule.n_per_epoch]
+    total, seen = 0.0, 0
+    steps, per_batch = schedule.steps_per_epoch, schedule.groups_per_batch
+    for step in range(steps):
+        groups = data.train_groups[pick[step * per_batch : (step + 1) * per_batch]]
+        if len(groups) == 0:
+            break
+        loss, n_pairs = _batch_loss(net, data.tensors, groups, cfg, rng)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        sched.step()
+        total += float(loss.detach()) * n_pairs
+        seen += n_pairs
+        if on_step is not None:
+            on_step(epoch, step, steps)
+        if time.perf_counter() - start > 60.0 * cfg.max_minutes:
+            return total / max(seen, 1), True
+    return total / max(seen, 1), False
+
+
+def _fit_info(cfg: TrainConfig, result: FitResult, data: _FitData) -> dict[str, Any]:
+    """The training record stored with the model."""
+    return {"train": cfg.to_dict(), "fit": {"best_epoch": result.best_epoch, "best_val_mse": result.best_val,
+                                            "best_val_spearman": result.best_val_spearman,
+                                            "stop_reason": result.stop_reason, "seconds": result.seconds,
+                                            "epochs": len(result.history)},
+            "train_scenarios": int(data.train_s.size), "val_scenarios": int(data.val_s.size)}
+
+
 def train_objective(
     labels: LabelSet,
     model_config: ObjectiveConfig | None = None,
     config: TrainConfig | None = None,
-    on_step: Callable[[int, int, float], None] | None = None,
-    log: Callable[[str], None] = print,
+    on_step: Callable[[int, int, int], None] | None = None,
 ) -> tuple[ObjectiveModel, FitResult]:
-    """Train a fresh pi_score on ``labels`` (see the module docstring).
+    """Train a fresh pi_score on ``labels`` (see the module docstring); one INFO line per epoch to this module's
+    logger.
 
     Args:
         labels: training scenarios (at least 2: one is held out for validation).
         model_config: architecture; ``n_steps`` is taken from the labels.
         config: optimisation settings.
         on_step: called after every optimiser step with (epoch, step in epoch, steps per epoch) for progress.
-        log: one line per epoch.
     """
     cfg = config or TrainConfig()
     if labels.n_scenarios < 2:
         raise ValueError(f"objective training needs at least 2 labelled scenarios, got {labels.n_scenarios}")
-    mcfg = ObjectiveConfig(**{**(model_config or ObjectiveConfig()).to_dict(), "n_steps": labels.n_steps})
+    mcfg = replace(model_config or ObjectiveConfig(), n_steps=labels.n_steps)
     rng = np.random.default_rng(cfg.seed)
     torch.manual_seed(cfg.seed)
-    order = rng.permutation(labels.n_scenarios)
-    n_val = min(max(1, round(cfg.val_fraction * labels.n_scenarios)), labels.n_scenarios - 1)
-    val_s, train_s = np.sort(order[:n_val]), np.sort(order[n_val:])
-    tensors = PairTensors(labels)
-    n_cand = tensors.n_cand
-    prevs = np.arange(tensors.n_prev) if cfg.prev == "all" else np.array([LOGGED_ROW])
-    train_groups = tensors.groups(train_s, prevs)
-    val_pairs = tensors.group_pairs(validation_groups(tensors, val_s, cfg.prev, rng))
-
+    data = _split(labels, cfg, rng)
     net = ObjectiveNet(mcfg)
     opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-    groups_per_batch = max(1, cfg.batch_size // n_cand)
-    n_per_epoch = min(max(1, cfg.pairs_per_epoch // n_cand), len(train_groups))
-    steps_per_epoch = max(1, -(-n_per_epoch // groups_per_batch))
-    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=cfg.max_epochs * steps_per_epoch,
+    schedule = _Schedule.of(cfg, data.tensors.n_cand, len(data.train_groups))
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=cfg.max_epochs * schedule.steps_per_epoch,
                                                        eta_min=0.05 * cfg.lr)
     result = FitResult()
     best_state = {k: v.detach().clone() for k, v in net.state_dict().items()}
@@ -259,40 +342,14 @@ def train_objective(
     start = time.perf_counter()
     bad = 0
     for epoch in range(cfg.max_epochs):
-        net.train()
-        pick = rng.permutation(len(train_groups))[:n_per_epoch]
-        total, seen = 0.0, 0
-        out_of_time = False
-        for step in range(steps_per_epoch):
-            groups = train_groups[pick[step * groups_per_batch : (step + 1) * groups_per_batch]]
-            if len(groups) == 0:
-                break
-            idx = tensors.group_pairs(groups)
-            flip = np.repeat(rng.random(len(groups)) < 0.5, n_cand) if cfg.mirror else None
-            pred, target = tensors.batch(net, idx, flip)
-            loss = ((pred - target) ** 2).mean()
-            if cfg.correction_l2 > 0:
-                loss = loss + cfg.correction_l2 * (tensors.last_correction ** 2).mean()
-            if cfg.rank_weight > 0:
-                loss = loss + cfg.rank_weight * listnet_loss(pred, target, n_cand, cfg.rank_temperature)
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            sched.step()
-            total += float(loss.detach()) * len(idx)
-            seen += len(idx)
-            if on_step is not None:
-                on_step(epoch, step, steps_per_epoch)
-            if time.perf_counter() - start > 60.0 * cfg.max_minutes:
-                out_of_time = True
-                break
+        train_loss, out_of_time = _train_epoch(net, opt, sched, data, cfg, schedule, rng, epoch, on_step, start)
         net.eval()
-        val, val_rho = _validate(net, tensors, val_pairs)
-        row = {"epoch": epoch, "train_loss": total / max(seen, 1), "val_loss": val, "val_spearman": val_rho,
+        val, val_rho = _validate(net, data.tensors, data.val_pairs)
+        row = {"epoch": epoch, "train_loss": train_loss, "val_loss": val, "val_spearman": val_rho,
                "seconds": round(time.perf_counter() - start, 1)}
         result.history.append(row)
-        log(f"objective epoch {epoch}: train loss {row['train_loss']:.5f}, val MSE {val:.5f}, val Spearman "
-            f"{val_rho:.4f} ({row['seconds']} s)")
+        logger.info(f"objective epoch {epoch}: train loss {row['train_loss']:.5f}, val MSE {val:.5f}, val Spearman "
+                    f"{val_rho:.4f} ({row['seconds']} s)")
         key = val_rho if cfg.select == "spearman" else -val
         if key > best_key:
             best_key, result.best_val, result.best_val_spearman, result.best_epoch, bad = key, val, val_rho, epoch, 0
@@ -310,9 +367,4 @@ def train_objective(
     net.load_state_dict(best_state)
     net.eval()
     result.seconds = round(time.perf_counter() - start, 1)
-    info = {"train": cfg.to_dict(), "fit": {"best_epoch": result.best_epoch, "best_val_mse": result.best_val,
-                                            "best_val_spearman": result.best_val_spearman,
-                                            "stop_reason": result.stop_reason, "seconds": result.seconds,
-                                            "epochs": len(result.history)},
-            "train_scenarios": int(train_s.size), "val_scenarios": int(val_s.size)}
-    return ObjectiveModel(mcfg, net, info), result
+    return ObjectiveModel(mcfg, net, _fit_info(cfg, result, data)), result

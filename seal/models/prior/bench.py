@@ -34,13 +34,12 @@ def _median_ms(fn: Any, repeats: int) -> tuple[float, float]:
 
 
 def bench_prior(
-    prior: TrajectoryPrior, scenarios: Sequence[Scenario], repeats: int = 50, batch: int = 64, threads: int = 1,
+    prior: TrajectoryPrior, scenarios: Sequence[Scenario], repeats: int = 50, batch: int = 64,
     warmup: int = 5,
 ) -> dict[str, Any]:
     """Median latency (ms) of ``predict`` for one scenario (warm and cold cache) and for ``batch`` scenarios."""
     if not scenarios:
         raise ValueError("bench_prior needs at least one scenario")
-    torch.set_num_threads(threads)
     pool = list(scenarios)
     big = [pool[i % len(pool)] for i in range(batch)]
     state = {"i": 0}
@@ -61,7 +60,7 @@ def bench_prior(
     batched, batched_cpu = _median_ms(lambda: prior.predict(big), max(3, repeats // 5))
     return {
         "candidates": prior.n_candidates,
-        "threads": threads,
+        "threads": torch.get_num_threads(),  # set by the caller (entry point)
         "single_scenario_ms": round(single_warm, 2),
         "single_scenario_cpu_ms": round(single_warm_cpu, 2),
         "single_scenario_cold_cache_ms": round(single_cold, 2),

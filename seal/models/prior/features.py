@@ -163,8 +163,36 @@ def scenario_history(scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
     return hist.astype(np.float32), np.concatenate([size, types], axis=1).astype(np.float32)
 
 
+def _checked_targets(scenario: Scenario, agents: Sequence[int] | np.ndarray) -> np.ndarray:
+    """``agents`` as an int64 index array ``[T]``; `ValueError` naming the scenario and agent for an index out of
+    range or an agent not valid at `CURRENT_STEP`."""
+    tgt = np.asarray(agents, dtype=np.int64).reshape(-1)
+    if tgt.size == 0:
+        return tgt
+    bad = (tgt < 0) | (tgt >= scenario.n_agents)
+    if bad.any():
+        raise ValueError(
+            f"scenario {scenario.scenario_id!r}: agent index {int(tgt[bad][0])} out of range "
+            f"(scenario has {scenario.n_agents} agents)"
+        )
+    not_current = ~scenario.valid[tgt, CURRENT_STEP]
+    if not_current.any():
+        a = int(tgt[not_current][0])
+        raise ValueError(
+            f"scenario {scenario.scenario_id!r}: agent {int(scenario.agent_ids[a])} (index {a}) is not valid at "
+            f"the current step {CURRENT_STEP}; the prior predicts only agents present now"
+        )
+    return tgt
+
+
+def _padded_rows(parts: list[np.ndarray], pad_shape: tuple[int, ...], dtype: type = np.float32) -> torch.Tensor:
+    """``parts`` stacked row-wise under one zero padding row (index 0 = "none"), as a tensor of ``dtype``."""
+    rows = [np.zeros((1, *pad_shape)), *parts]
+    return torch.from_numpy(np.concatenate(rows).astype(dtype))
+
+
 def build_tables(
-    scenarios: Sequence[Scenario], targets: Sequence[Sequence[int]], cfg: FeatureConfig,
+    scenarios: Sequence[Scenario], targets: Sequence[Sequence[int] | np.ndarray], cfg: FeatureConfig,
     cache: ChunkCache | None = None, road_chunks: int = 0, road_lookahead_s: float = 8.0,
 ) -> ContextTables:
     """Tables for the targets ``targets[k]`` (agent indices) of ``scenarios[k]``, in that order.
@@ -181,23 +209,10 @@ def build_tables(
     r_idx: list[np.ndarray] = []
     road_cache = ChunkCache(cfg.chunk_length_m, cfg.chunk_points, open_edges=True) if road_chunks > 0 else None
     agent_offset, chunk_offset, road_offset = 1, 1, 1
-    for scenario, tgt in zip(scenarios, targets, strict=True):
-        tgt = np.asarray(tgt, dtype=np.int64).reshape(-1)
+    for scenario, agents in zip(scenarios, targets, strict=True):
+        tgt = _checked_targets(scenario, agents)
         if tgt.size == 0:
             continue
-        bad = (tgt < 0) | (tgt >= scenario.n_agents)
-        if bad.any():
-            raise ValueError(
-                f"scenario {scenario.scenario_id!r}: agent index {int(tgt[bad][0])} out of range "
-                f"(scenario has {scenario.n_agents} agents)"
-            )
-        not_current = ~scenario.valid[tgt, CURRENT_STEP]
-        if not_current.any():
-            a = int(tgt[not_current][0])
-            raise ValueError(
-                f"scenario {scenario.scenario_id!r}: agent {int(scenario.agent_ids[a])} (index {a}) is not valid at "
-                f"the current step {CURRENT_STEP}; the prior predicts only agents present now"
-            )
         hist, static = scenario_history(scenario)
         chunks = cache.get(scenario.road)
         cur = hist[tgt, CURRENT_STEP]  # [T, 6]
@@ -226,22 +241,18 @@ def build_tables(
         course = np.where(speed > 0.1, np.arctan2(vel[:, 1], vel[:, 0]) - heading, 0.0)
         starts.append(np.stack([speed, np.arctan2(np.sin(course), np.cos(course))], axis=1))
 
-    def cat(parts: list[np.ndarray], pad_shape: tuple[int, ...], dtype: type = np.float32) -> torch.Tensor:
-        rows = [np.zeros((1, *pad_shape)), *parts]
-        return torch.from_numpy(np.concatenate(rows).astype(dtype))
-
     p = cfg.chunk_points
     return ContextTables(
-        agent_hist=cat(hists, (N_HISTORY, HIST_FIELDS)),
-        agent_static=cat(statics, (STATIC_FIELDS,)),
-        chunk_points=cat(c_pts, (p, 2)),
-        chunk_dir=cat(c_dir, (p,)),
-        chunk_attrs=cat(c_attr, (len(CHUNK_ATTRS),)),
+        agent_hist=_padded_rows(hists, (N_HISTORY, HIST_FIELDS)),
+        agent_static=_padded_rows(statics, (STATIC_FIELDS,)),
+        chunk_points=_padded_rows(c_pts, (p, 2)),
+        chunk_dir=_padded_rows(c_dir, (p,)),
+        chunk_attrs=_padded_rows(c_attr, (len(CHUNK_ATTRS),)),
         agent_idx=torch.from_numpy(np.concatenate(a_idx) if a_idx else np.zeros((0, cfg.n_agents), np.int64)),
         chunk_idx=torch.from_numpy(np.concatenate(c_idx) if c_idx else np.zeros((0, cfg.n_chunks), np.int64)),
         pose=np.concatenate(poses) if poses else np.zeros((0, 3)),
         start=torch.from_numpy(np.concatenate(starts).astype(np.float32) if starts else np.zeros((0, 2), np.float32)),
-        road_points=cat(r_pts, (p, 2)) if r_pts else None,
+        road_points=_padded_rows(r_pts, (p, 2)) if r_pts else None,
         road_idx=torch.from_numpy(np.concatenate(r_idx)) if r_idx else None,
     )
 

@@ -87,6 +87,14 @@ def _mlp(n_in: int, n_hidden: int, n_out: int) -> nn.Sequential:
     return nn.Sequential(nn.Linear(n_in, n_hidden), nn.ReLU(), nn.Linear(n_hidden, n_out))
 
 
+def _out_layer(mlp: nn.Sequential) -> nn.Linear:
+    """The output layer of an `_mlp` (typed: `nn.Sequential` indexing gives a plain `nn.Module`)."""
+    layer = mlp[-1]
+    if not isinstance(layer, nn.Linear):
+        raise TypeError(f"expected an MLP ending in nn.Linear, got {type(layer).__name__}")
+    return layer
+
+
 def default_anchors(cfg: PriorConfig) -> torch.Tensor:
     """``[n_modes, 2, n_knots]`` anchor controls before any data: constant accelerations x constant yaw rates.
 
@@ -107,6 +115,10 @@ class PriorNet(nn.Module):
     built from its anchor, and its output is a correction in ``atanh`` space, so a fresh network predicts its
     anchors and the limits hold for any correction.
     """
+
+    # Buffers (`register_buffer`), declared so type checkers see tensors: anchors [K, 2, knots], knot matrix.
+    anchors: torch.Tensor
+    knots: torch.Tensor
 
     def __init__(self, cfg: PriorConfig) -> None:
         super().__init__()
@@ -132,9 +144,10 @@ class PriorNet(nn.Module):
         # of each decoded query; own heads, so the regression gradients do not drown the classifier.
         self.classify = _mlp(d, 2 * d, cfg.n_modes)
         self.score = _mlp(d, d, 1)
-        nn.init.zeros_(self.head[-1].bias)
+        head_out = _out_layer(self.head)
+        nn.init.zeros_(head_out.bias)
         with torch.no_grad():
-            self.head[-1].weight.mul_(0.1)  # start near the anchors
+            head_out.weight.mul_(0.1)  # start near the anchors
         self.register_buffer("knots", knot_matrix(cfg.n_knots, cfg.n_future), persistent=False)
 
     def _limits(self) -> torch.Tensor:

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 import shutil
 import zlib
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -98,7 +98,8 @@ class DemoConfig:
         unknown = sorted(set(d) - known)
         if unknown:
             raise ValueError(f"{where}: unknown key(s) {unknown}; known: {sorted(known)}")
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+        values: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
+        return cls(**values)
 
 
 def scenario_seed(base_seed: int, scenario_id: str) -> np.random.SeedSequence:
@@ -228,10 +229,6 @@ def _run_chunk(args: tuple[int, list[Scenario], dict[str, Any]]) -> tuple[int, D
     return index, Demonstrations.concat([roll_out_demonstrations(s, config) for s in scenarios], config.to_dict())
 
 
-def _fingerprint(config: DemoConfig, scenario_ids: Sequence[str], chunk_size: int) -> str:
-    return fingerprint({"config": config.to_dict(), "ids": list(scenario_ids), "chunk": chunk_size})
-
-
 def parts_dir(out: str | Path) -> Path:
     """Where `build_demonstrations` keeps finished chunks until the final file is written."""
     out = Path(out)
@@ -245,23 +242,23 @@ def build_demonstrations(
     workers: int = 2,
     chunk_size: int = 10,
     progress: bool = True,
-    log: Callable[[str], None] = print,
 ) -> Demonstrations:
     """Simulate ``scenarios`` in ``workers`` processes and write one `Demonstrations` file to ``out``.
 
     Resumable: finished chunks of ``chunk_size`` scenarios are kept in `parts_dir` (atomic writes) and reused by a
-    re-run with the same config and scenarios; the folder is removed once ``out`` is written.
+    re-run with the same config and scenarios (`seal.core.chunked.fingerprint` of both); the folder is removed
+    once ``out`` is written. Resuming / restarting is logged by `seal.core.chunked`.
     """
-
     cfg = config or DemoConfig()
     if not scenarios:
         raise ValueError("build_demonstrations: no scenarios")
     out = Path(out)
     parts = parts_dir(out)
     ids = [s.scenario_id for s in scenarios]
+    settings = fingerprint({"config": cfg.to_dict(), "ids": ids, "chunk": chunk_size})
     paths = run_chunked(
-        scenarios, parts, _fingerprint(cfg, ids, chunk_size), {}, _run_chunk, (cfg.to_dict(),),
-        lambda demos, file: demos.save(file, compress=False), workers, chunk_size, progress, "demonstrations", log,
+        scenarios, parts, settings, {}, _run_chunk, (cfg.to_dict(),),
+        lambda demos, file: demos.save(file, compress=False), workers, chunk_size, progress, "demonstrations",
     )
     merged = Demonstrations.concat([Demonstrations.load(p) for p in paths], cfg.to_dict())
     merged.save(out)

@@ -181,7 +181,7 @@ class Demonstrations:
             "collision_share_scenarios": round(scen_coll / max(1, len(self.scenario_ids)), 4),
             "collision_share_impaired": round(float(coll[imp].mean()) if imp.any() else 0.0, 4),
             "collision_share_unimpaired": round(float(coll[~imp].mean()) if (~imp).any() else 0.0, 4),
-            "out_of_road_share_agents": round(reasons["out_of_road"] / max(1, self.n_segments), 4),
+            "out_of_road_share_agents": round(reasons[END_REASONS[OUT_OF_ROAD]] / max(1, self.n_segments), 4),
             "windows_benign": int((win.label == BENIGN).sum()),
             "windows_adversarial": int((win.label == ADVERSARIAL).sum()),
             "windows_dropped": int(win.n_dropped),

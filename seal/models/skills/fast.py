@@ -71,14 +71,14 @@ class FastPriorSampler:
     """`ConditionalRealNVP.sample` for one state."""
 
     def __init__(self, prior: ConditionalRealNVP) -> None:
-        self._embed = _layers(prior.embed[0])
+        self._embed = _layers(prior.embed_mlp)
         self._cond_mean = prior.cond_mean.cpu().numpy().astype(np.float32)
         self._cond_std = prior.cond_std.cpu().numpy().astype(np.float32)
         self._z_mean = prior.z_mean.cpu().numpy().astype(np.float32)
         self._z_std = prior.z_std.cpu().numpy().astype(np.float32)
         self._couplings = [
             (c.keep.cpu().numpy(), c.change.cpu().numpy(), _layers(c.net), np.float32(c.clamp))
-            for c in prior.couplings
+            for c in prior.coupling_layers
         ]
 
     def sample(self, noise: np.ndarray, cond: np.ndarray) -> np.ndarray:

@@ -18,14 +18,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
 from torch import nn
 
 from seal.core.config_keys import check_keys
-from seal.models.skills.vae import mlp
+from seal.models.skills.vae import mlp, out_layer
 
 _MIN_STD = 1e-3
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -63,6 +63,10 @@ class RealNVPConfig:
 class AffineCoupling(nn.Module):
     """One conditional affine coupling: dims ``keep`` pass through and condition the map of dims ``change``."""
 
+    keep: torch.Tensor  # buffers: [len(keep)], [len(change)] dim indices
+    change: torch.Tensor
+    net: nn.Sequential
+
     def __init__(self, keep: list[int], change: list[int], cond_embed: int, hidden: int, scale_clamp: float) -> None:
         super().__init__()
         self.register_buffer("keep", torch.tensor(keep, dtype=torch.long))
@@ -70,8 +74,8 @@ class AffineCoupling(nn.Module):
         self.clamp = float(scale_clamp)
         self.net = mlp([len(keep) + cond_embed, hidden, hidden], 2 * len(change))
         # Identity at initialisation: training starts from the (standardised) Gaussian.
-        nn.init.zeros_(self.net[-1].weight)
-        nn.init.zeros_(self.net[-1].bias)
+        nn.init.zeros_(out_layer(self.net).weight)
+        nn.init.zeros_(out_layer(self.net).bias)
 
     def _scale_shift(self, x_keep: torch.Tensor, cond: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         raw, shift = self.net(torch.cat([x_keep, cond], dim=-1)).chunk(2, dim=-1)
@@ -98,6 +102,13 @@ class ConditionalRealNVP(nn.Module):
     Shapes: latents ``[B, latent_dim]``, states ``[B, cond_dim]``, noise ``[B, latent_dim]``.
     """
 
+    # Buffers (`register_buffer`): the state and latent standardisation.
+    cond_mean: torch.Tensor
+    cond_std: torch.Tensor
+    z_mean: torch.Tensor
+    z_std: torch.Tensor
+    embed: nn.Sequential
+
     def __init__(self, config: RealNVPConfig | None = None) -> None:
         super().__init__()
         self.config = cfg = config or RealNVPConfig()
@@ -115,6 +126,17 @@ class ConditionalRealNVP(nn.Module):
                            cfg.scale_clamp)
             for k in range(cfg.n_couplings)
         )
+
+    @property
+    def coupling_layers(self) -> list[AffineCoupling]:
+        """The couplings in data -> noise order (a typed view of the ``couplings`` module list, which holds only
+        `AffineCoupling` by construction)."""
+        return cast(list[AffineCoupling], list(self.couplings))
+
+    @property
+    def embed_mlp(self) -> nn.Sequential:
+        """The state embedding's MLP (``embed`` is this MLP followed by a ReLU)."""
+        return cast(nn.Sequential, self.embed[0])
 
     def fit_norm(self, z: np.ndarray, cond: np.ndarray) -> None:
         """Set the latent and state standardisation from training latents ``[N, L]`` and states ``[N, D]``."""
@@ -147,8 +169,11 @@ class ConditionalRealNVP(nn.Module):
     def sample(self, noise: torch.Tensor, cond: torch.Tensor | None = None, embedded: torch.Tensor | None = None
                ) -> torch.Tensor:
         """Latents ``z = f_s^{-1}(noise)`` ``[B, L]`` for states ``cond [B, D]`` (or their `embed_state`)."""
-        e = self.embed_state(cond) if embedded is None else embedded
+        if embedded is None:
+            if cond is None:
+                raise ValueError("ConditionalRealNVP.sample needs the states (cond) or their embedding (embedded)")
+            embedded = self.embed_state(cond)
         x = noise
-        for c in reversed(self.couplings):
-            x = c.inverse(x, e)
+        for c in reversed(self.coupling_layers):
+            x = c.inverse(x, embedded)
         return x * self.z_std + self.z_mean

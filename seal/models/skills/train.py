@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import csv
 import io
+import logging
 import math
 import time
 from collections.abc import Callable
@@ -29,6 +30,8 @@ from seal.core.config_keys import check_keys
 from seal.models.skills.demos import gather_windows
 from seal.models.skills.realnvp import ConditionalRealNVP
 from seal.models.skills.vae import SkillVAE
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -84,7 +87,7 @@ class FitResult:
     seconds: float
 
 
-def _write_csv(path: Path | None, rows: list[dict[str, float]]) -> None:
+def _write_csv(path: Path | None, rows: list[dict[str, float | str]]) -> None:
     if path is None or not rows:
         return
     buf = io.StringIO()
@@ -92,6 +95,43 @@ def _write_csv(path: Path | None, rows: list[dict[str, float]]) -> None:
     writer.writeheader()
     writer.writerows(rows)
     atomic_write_bytes(path, buf.getvalue().encode())
+
+
+def _train_epoch(
+    model: torch.nn.Module, opt: torch.optim.Optimizer, order: np.ndarray, n_batches: int,
+    batch_loss: Callable[[np.ndarray], tuple[torch.Tensor, dict[str, float]]], cfg: TrainConfig, bar_desc: str,
+    progress: bool,
+) -> dict[str, float]:
+    """One pass over the training indices ``order`` in ``n_batches`` batches; returns the summed losses (``"loss"``
+    and each part of ``batch_loss``)."""
+    from tqdm import tqdm
+
+    model.train()
+    sums: dict[str, float] = {}
+    bar = tqdm(range(n_batches), desc=bar_desc, unit="batch", disable=not progress, leave=False)
+    for b in bar:
+        idx = order[b * cfg.batch_size : (b + 1) * cfg.batch_size]
+        if idx.size == 0:
+            continue
+        loss, parts = batch_loss(idx)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+        opt.step()
+        sums["loss"] = sums.get("loss", 0.0) + loss.item()
+        for k, v in parts.items():
+            sums[k] = sums.get(k, 0.0) + v
+        if b % 20 == 0:
+            bar.set_postfix(loss=f"{sums['loss'] / (b + 1):.4f}")
+    bar.close()
+    return sums
+
+
+def _validated(model: torch.nn.Module, validate: Callable[[], dict[str, float]]) -> dict[str, float]:
+    """``validate()`` with ``model`` in eval mode and without gradients."""
+    model.eval()
+    with torch.no_grad():
+        return validate()
 
 
 def fit_loop(
@@ -103,12 +143,10 @@ def fit_loop(
     csv_path: str | Path | None = None,
     desc: str = "train",
     progress: bool = True,
-    log: Callable[[str], None] = print,
 ) -> FitResult:
     """Generic loop: ``batch_loss(indices)`` over shuffled training indices ``0..n_train-1``, ``validate()``
-    returning a dict with ``"loss"`` (lower is better) after each epoch; the best weights are restored at the end."""
-    from tqdm import tqdm
-
+    returning a dict with ``"loss"`` (lower is better) after each epoch; the best weights are restored at the end.
+    One INFO line per epoch goes to this module's logger."""
     if n_train < 1:
         raise ValueError(f"{desc}: no training windows")
     torch.manual_seed(cfg.seed)
@@ -120,52 +158,33 @@ def fit_loop(
     budget = None if cfg.max_minutes is None else 60.0 * cfg.max_minutes
     csv_file = None if csv_path is None else Path(csv_path)
     t0 = time.perf_counter()
-    model.eval()
-    with torch.no_grad():
-        val0 = validate()
+    val0 = _validated(model, validate)
     history: list[dict[str, float]] = [{"epoch": 0, **{f"val_{k}": round(v, 6) for k, v in val0.items()}}]
     best_val, best_epoch, bad = val0["loss"], 0, 0
-    log(f"{desc} epoch 0: val loss {val0['loss']:.4f} (starting weights)")
+    logger.info(f"{desc} epoch 0: val loss {val0['loss']:.4f} (starting weights)")
     best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
     stop = f"completed {cfg.max_epochs} epochs"
     for epoch in range(1, cfg.max_epochs + 1):
         t_epoch = time.perf_counter()
-        model.train()
         order = rng.permutation(n_train)[:per_epoch]
-        sums: dict[str, float] = {}
-        bar = tqdm(range(n_batches), desc=f"{desc} {epoch}/{cfg.max_epochs}", unit="batch", disable=not progress,
-                   leave=False)
-        for b in bar:
-            idx = order[b * cfg.batch_size : (b + 1) * cfg.batch_size]
-            if idx.size == 0:
-                continue
-            loss, parts = batch_loss(idx)
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
-            opt.step()
-            sums["loss"] = sums.get("loss", 0.0) + loss.item()
-            for k, v in parts.items():
-                sums[k] = sums.get(k, 0.0) + v
-            if b % 20 == 0:
-                bar.set_postfix(loss=f"{sums['loss'] / (b + 1):.4f}")
-        bar.close()
-        model.eval()
-        with torch.no_grad():
-            val = validate()
+        sums = _train_epoch(model, opt, order, n_batches, batch_loss, cfg, f"{desc} {epoch}/{cfg.max_epochs}",
+                            progress)
+        val = _validated(model, validate)
         epoch_s = time.perf_counter() - t_epoch
         row = {"epoch": epoch, **{f"train_{k}": round(v / n_batches, 6) for k, v in sums.items()},
                **{f"val_{k}": round(v, 6) for k, v in val.items()}, "seconds": round(epoch_s, 2)}
         history.append(row)
-        _write_csv(csv_file, [{**dict.fromkeys(row, ""), **r} for r in history])
+        blank: dict[str, float | str] = dict.fromkeys(row, "")  # epoch 0 has no train columns
+        rows: list[dict[str, float | str]] = [{**blank, **r} for r in history]
+        _write_csv(csv_file, rows)
         improved = val["loss"] < best_val
         if improved:
             best_val, best_epoch, bad = val["loss"], epoch, 0
             best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
         else:
             bad += 1
-        log(f"{desc} epoch {epoch}: train loss {row['train_loss']:.4f}, val loss {val['loss']:.4f} "
-            f"({epoch_s:.1f} s)" + (" *" if improved else ""))
+        logger.info(f"{desc} epoch {epoch}: train loss {row['train_loss']:.4f}, val loss {val['loss']:.4f} "
+                    f"({epoch_s:.1f} s)" + (" *" if improved else ""))
         elapsed = time.perf_counter() - t0
         if bad >= cfg.patience:
             stop = f"early stop: no better validation loss for {cfg.patience} epochs"
@@ -195,7 +214,7 @@ def fit_norm_from_rows(vae: SkillVAE, obs: np.ndarray, actions: np.ndarray, rows
 
 def train_vae(
     vae: SkillVAE, obs: np.ndarray, actions: np.ndarray, train_rows: np.ndarray, val_rows: np.ndarray,
-    cfg: TrainConfig, csv_path: str | Path | None = None, progress: bool = True, log: Callable[[str], None] = print,
+    cfg: TrainConfig, csv_path: str | Path | None = None, progress: bool = True,
 ) -> FitResult:
     """Train ``vae`` on windows starting at ``train_rows`` of the demonstration rows ``obs [M, D]`` /
     ``actions [M, 2]``; validation loss = recon (posterior mean) + beta KL on ``val_rows``."""
@@ -217,7 +236,7 @@ def train_vae(
         n = max(1, val_o.shape[0])
         return {"loss": (rec + vae.config.beta * kl) / n, "recon": rec / n, "kl": kl / n}
 
-    return fit_loop(vae, train_rows.size, batch_loss, validate, cfg, csv_path, "vae", progress, log)
+    return fit_loop(vae, train_rows.size, batch_loss, validate, cfg, csv_path, "vae", progress)
 
 
 @torch.no_grad()
@@ -235,7 +254,7 @@ def encode_windows(vae: SkillVAE, obs: np.ndarray, actions: np.ndarray, rows: np
 def train_prior(
     prior: ConditionalRealNVP, z_train: np.ndarray, cond_train: np.ndarray, z_val: np.ndarray, cond_val: np.ndarray,
     cfg: TrainConfig, csv_path: str | Path | None = None, progress: bool = True, desc: str = "prior",
-    log: Callable[[str], None] = print, fit_norm: bool = True,
+    fit_norm: bool = True,
 ) -> FitResult:
     """Fit ``prior`` by maximum likelihood of latents ``z [N, L]`` given states ``cond [N, D]``; the loss is the
     mean negative log-likelihood (nats per window). ``fit_norm`` False keeps the prior's standardisation (when
@@ -252,4 +271,4 @@ def train_prior(
     def validate() -> dict[str, float]:
         return {"loss": float(-prior.log_prob(zv, cv).mean())} if zv.shape[0] else {"loss": math.inf}
 
-    return fit_loop(prior, zt.shape[0], batch_loss, validate, cfg, csv_path, desc, progress, log)
+    return fit_loop(prior, zt.shape[0], batch_loss, validate, cfg, csv_path, desc, progress)

@@ -78,12 +78,26 @@ def mlp(sizes: list[int], out_dim: int) -> nn.Sequential:
     return nn.Sequential(*layers)
 
 
+def out_layer(net: nn.Sequential) -> nn.Linear:
+    """The output layer of an `mlp` (typed: `nn.Sequential` indexing gives a plain `nn.Module`)."""
+    layer = net[-1]
+    if not isinstance(layer, nn.Linear):
+        raise TypeError(f"expected an MLP ending in nn.Linear, got {type(layer).__name__}")
+    return layer
+
+
 class SkillVAE(nn.Module):
     """Skill VAE (see the module docstring).
 
     Shapes: observations ``[B, T, obs_dim]``, actions ``[B, T, action_dim]`` (normalised, in [-1, 1]), latents
     ``[B, latent_dim]``.
     """
+
+    # Buffers (`register_buffer`), declared so type checkers see tensors rather than `Module.__getattr__`'s union.
+    obs_mean: torch.Tensor
+    obs_std: torch.Tensor
+    act_std: torch.Tensor
+    decoder_keep: torch.Tensor
 
     def __init__(self, config: VAEConfig | None = None) -> None:
         super().__init__()
