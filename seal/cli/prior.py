@@ -66,12 +66,12 @@ def cmd_fit_prior(args: argparse.Namespace) -> int:
 
     from seal.core.atomic import atomic_write_json
     from seal.models.prior.network import PriorConfig
-    from seal.models.prior.train import TrainConfig, fit_prior
+    from seal.models.prior.train import PriorTrainConfig, fit_prior
 
     model_d, train_d = _load_config(args.config)
     try:
         model_cfg = PriorConfig.from_dict(model_d)
-        train_cfg = TrainConfig.from_dict(train_d)
+        train_cfg = PriorTrainConfig.from_dict(train_d)
     except (TypeError, ValueError) as exc:
         raise CliError(f"--config {args.config}: {exc}") from None
     overrides = {

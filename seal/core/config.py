@@ -45,7 +45,8 @@ class ConfigError(ValueError):
 
 
 def parse_override(text: str) -> tuple[str, Any]:
-    """``"a.b=VALUE"`` -> ``("a.b", VALUE parsed as YAML)``, e.g. ``"net_arch=[64, 64]"`` -> ``("net_arch", [64, 64])``."""
+    """``"a.b=VALUE"`` -> ``("a.b", VALUE parsed as YAML)``, e.g. ``"net_arch=[64, 64]"`` ->
+    ``("net_arch", [64, 64])``."""
     key, sep, value = text.partition("=")
     if not (sep and key.strip()):
         raise ConfigError(f"--set {text!r}: expected KEY=VALUE, e.g. hyperparams.td3.batch_size=128")
@@ -86,9 +87,23 @@ def read_yaml(path: str | Path, section: str | None = None) -> dict[str, Any]:
 
 
 def field_types(cls: type) -> dict[str, Any]:
-    """Field name -> resolved type annotation of dataclass ``cls``."""
-    hints = typing.get_type_hints(cls)
-    return {f.name: hints[f.name] for f in dataclasses.fields(cls)}
+    """Field name -> resolved type annotation of dataclass ``cls`` (Any where it cannot be resolved)."""
+    try:
+        hints = typing.get_type_hints(cls)
+    except (NameError, TypeError):
+        hints = {}
+    return {f.name: hints.get(f.name, Any) for f in dataclasses.fields(cls)}
+
+
+def overrides_field(of: type, **defaults: Any) -> Any:
+    """A dataclass field holding a partial mapping of the dataclass ``of``'s fields (keys and values checked
+    against ``of`` by the loader, kept as plain data): for sub-configs whose missing fields are filled in later
+    (e.g. from the data, or the run's seed). ``defaults``: the field's default mapping."""
+    return dataclasses.field(default_factory=lambda: dict(defaults), metadata={"overrides_of": of})
+
+
+def _overrides_of(cls: type) -> dict[str, type]:
+    return {f.name: f.metadata["overrides_of"] for f in dataclasses.fields(cls) if "overrides_of" in f.metadata}
 
 
 def check_keys(cls: type, d: Mapping[str, Any], where: str) -> None:
@@ -170,7 +185,7 @@ def coerce(value: Any, tp: Any, key: str, where: str) -> Any:
             return to_dict(value)
         if not isinstance(value, Mapping):
             raise _bad(value, tp, key, where)
-        return _apply(tp, to_dict(tp()) if _has_defaults(tp) else {}, value, where, f"{key}.")
+        return _apply(tp, defaults_of(tp), value, where, f"{key}.")
     return _coerce_scalar(value, tp, key, where)
 
 
@@ -217,9 +232,16 @@ def _bad(value: Any, tp: Any, key: str, where: str) -> ConfigError:
     return ConfigError(f"{where}: {key} must be {_describe(tp)}, got {value!r} ({type(value).__name__})")
 
 
-def _has_defaults(cls: type) -> bool:
-    return all(f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING
-               for f in dataclasses.fields(cls))
+def defaults_of(cls: type) -> dict[str, Any]:
+    """Plain data of the field defaults of ``cls`` (fields without one left out), without running its
+    ``__post_init__`` (a config may only be valid once a layer has set something, e.g. a candidate source)."""
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        if f.default is not dataclasses.MISSING:
+            out[f.name] = to_dict(f.default)
+        elif f.default_factory is not dataclasses.MISSING:
+            out[f.name] = to_dict(f.default_factory())
+    return out
 
 
 def _required(cls: type) -> set[str]:
@@ -227,7 +249,8 @@ def _required(cls: type) -> set[str]:
             if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING}
 
 
-def _apply(cls: type, base: Mapping[str, Any], layer: Mapping[str, Any], where: str, prefix: str = "") -> dict[str, Any]:
+def _apply(cls: type, base: Mapping[str, Any], layer: Mapping[str, Any], where: str,
+           prefix: str = "") -> dict[str, Any]:
     """``base`` (plain data of a ``cls``) updated with ``layer``: every key checked against ``cls``' fields and every
     value against its field type; errors name ``where`` and the dotted key."""
     if not isinstance(layer, Mapping):
@@ -238,10 +261,14 @@ def _apply(cls: type, base: Mapping[str, Any], layer: Mapping[str, Any], where: 
         raise ConfigError(f"{where}: unknown key(s) {[prefix + k for k in unknown]}; known: {sorted(types_)}"
                           + (f" (under {prefix.rstrip('.')})" if prefix else ""))
     out = dict(base)
+    partial = _overrides_of(cls)
     for name, value in layer.items():
         tp, key = types_[name], prefix + name
         sub = _dataclass_in(tp)
-        if sub is not None and isinstance(value, Mapping) and isinstance(out.get(name), Mapping):
+        if name in partial:
+            _apply(partial[name], {}, value, where, key + ".")  # checked; kept as given (fingerprints use it)
+            out[name] = {**(out.get(name) or {}), **to_dict(value)}
+        elif sub is not None and isinstance(value, Mapping) and isinstance(out.get(name), Mapping):
             out[name] = _apply(sub, out[name], value, where, key + ".")
         elif _mapping_value_type(tp) is not None and isinstance(value, Mapping) and isinstance(out.get(name), Mapping):
             out[name] = _merge_mapping(out[name], value, _mapping_value_type(tp), key, where)
@@ -303,7 +330,7 @@ def load_config(cls: type[T], preset: Layer = None, file: Layer = None, override
 def resolve_layers(cls: type, preset: Layer = None, file: Layer = None, overrides: Sequence[str] = (), *,
                    values: Mapping[str, Any] | None = None, section: str | None = None) -> dict[str, Any]:
     """The checked plain data `load_config` builds its dataclass from."""
-    data = to_dict(cls())
+    data = defaults_of(cls)
     for label, layer in (("preset", preset), ("config file", file)):
         if layer is None:
             continue

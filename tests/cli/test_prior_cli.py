@@ -11,7 +11,7 @@ import yaml
 
 from seal.cli import main
 from seal.core.dataset import Dataset, write_dataset
-from seal.models.prior import PriorConfig, TrainConfig, TrajectoryPrior
+from seal.models.prior import PriorConfig, PriorTrainConfig, TrajectoryPrior
 
 PRESET = Path(__file__).resolve().parents[2] / "experiments" / "configs" / "prior_default.yaml"
 TINY_YAML = {
@@ -106,4 +106,4 @@ def test_bad_split_and_config_are_named(dataset: Path, tmp_path: Path, capsys: p
 def test_shipped_preset_matches_the_defaults() -> None:
     doc = yaml.safe_load(PRESET.read_text())
     assert PriorConfig.from_dict(doc["model"]) == PriorConfig()
-    assert TrainConfig.from_dict(doc["train"]) == TrainConfig()
+    assert PriorTrainConfig.from_dict(doc["train"]) == PriorTrainConfig()

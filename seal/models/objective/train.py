@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from seal.core.config_keys import check_keys
+from seal.core.config import check_keys
 from seal.models.objective.labels import LOGGED_ROW, LabelSet
 from seal.models.objective.metrics import spearman
 from seal.models.objective.model import ObjectiveModel
@@ -40,7 +40,7 @@ VAL_PREVS = 5
 
 
 @dataclass(frozen=True)
-class TrainConfig:
+class ObjectiveTrainConfig:
     """Optimisation settings (see the module docstring).
 
     Attributes:
@@ -97,7 +97,7 @@ class TrainConfig:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any], where: str = "objective training config") -> TrainConfig:
+    def from_dict(cls, d: dict[str, Any], where: str = "objective training config") -> ObjectiveTrainConfig:
         check_keys(cls, d, where)
         return cls(**d)
 
@@ -218,7 +218,7 @@ def validation_groups(tensors: PairTensors, scenarios: np.ndarray, prev: str, rn
 def train_objective(
     labels: LabelSet,
     model_config: ObjectiveConfig | None = None,
-    config: TrainConfig | None = None,
+    config: ObjectiveTrainConfig | None = None,
     on_step: Callable[[int, int, float], None] | None = None,
     log: Callable[[str], None] = print,
 ) -> tuple[ObjectiveModel, FitResult]:
@@ -231,7 +231,7 @@ def train_objective(
         on_step: called after every optimiser step with (epoch, step in epoch, steps per epoch) for progress.
         log: one line per epoch.
     """
-    cfg = config or TrainConfig()
+    cfg = config or ObjectiveTrainConfig()
     if labels.n_scenarios < 2:
         raise ValueError(f"objective training needs at least 2 labelled scenarios, got {labels.n_scenarios}")
     mcfg = ObjectiveConfig(**{**(model_config or ObjectiveConfig()).to_dict(), "n_steps": labels.n_steps})

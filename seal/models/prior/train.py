@@ -25,7 +25,7 @@ from seal.models.prior.losses import anchor_assignment, batch_loss, evaluate_sam
 from seal.models.prior.network import PriorConfig, PriorNet, default_anchors
 from seal.models.prior.prior import TrajectoryPrior
 from seal.models.prior.samples import build_samples
-from seal.models.prior.train_config import TrainConfig
+from seal.models.prior.train_config import PriorTrainConfig
 
 STATE_EVERY_S = 30.0  # minimum seconds between two saves of the resumable training state
 
@@ -56,7 +56,7 @@ def fit_prior(
     scenarios: Sequence[Scenario],
     out: str | Path,
     model_cfg: PriorConfig | None = None,
-    train_cfg: TrainConfig | None = None,
+    train_cfg: PriorTrainConfig | None = None,
     data_info: dict[str, Any] | None = None,
     resume: bool = False,
     progress: bool = True,
@@ -68,7 +68,7 @@ def fit_prior(
         scenarios: training scenarios; ``train_cfg.val_fraction`` of them are held out for validation.
         out: model file, written (atomically) after every epoch that improves validation minADE@6.
         model_cfg: architecture (default `PriorConfig()`).
-        train_cfg: training settings (default `TrainConfig()`).
+        train_cfg: training settings (default `PriorTrainConfig()`).
         data_info: recorded in the model's training summary (dataset, split, ...).
         resume: continue from the training state an interrupted run left next to ``out``.
         progress: show a progress bar per epoch.
@@ -77,7 +77,7 @@ def fit_prior(
     from tqdm import tqdm
 
     model_cfg = model_cfg or PriorConfig()
-    tc = train_cfg or TrainConfig()
+    tc = train_cfg or PriorTrainConfig()
     torch.set_num_threads(tc.threads)
     t_start = time.perf_counter()
     cpu_start = time.process_time()
