@@ -53,7 +53,8 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--preset", choices=("quick", "standard"), default="standard",
                    help="YAML preset experiments/configs/objective_<preset>.yaml (default standard)")
     p.add_argument("--config", default=None,
-                   help="YAML config overriding the preset (keys: seal.experiments.fitting.objective.ObjectiveFitConfig)")
+                   help="YAML config overriding the preset (keys: "
+                   "seal.experiments.fitting.objective.ObjectiveFitConfig)")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--prior", default=None, help="trajectory prior file (seal fit prior) giving the candidates")
     src.add_argument("--candidates", default=None, choices=("lanes", "constant_velocity"),

@@ -42,7 +42,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         raise CliError("give exactly one of --out RUN (a new run) or --resume RUN (continue a killed run)")
     if args.resume is not None:
         options = (("--config", args.config), ("--pipeline", args.pipeline), ("--seed", args.seed),
-                   ("--set", args.set or None), ("--steps", args.steps), ("--algo", args.algo), ("--dataset", args.dataset),
+                   ("--set", args.set or None), ("--steps", args.steps), ("--algo", args.algo),
+                   ("--dataset", args.dataset),
                    ("--n-envs", args.n_envs), ("--prior", args.prior), ("--goose-model", args.goose_model),
                    ("--objective", args.objective), ("--skills", args.skills))
         given = [opt for opt, v in options if v is not None]
