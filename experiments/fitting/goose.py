@@ -195,7 +195,7 @@ def build_model(env: GooseEnv, config: GooseFitConfig, spec: GooseSpec) -> Any:
     from stable_baselines3 import SAC, TD3, HerReplayBuffer
     from stable_baselines3.common.noise import NormalActionNoise
 
-    common = dict(
+    common: dict[str, Any] = dict(
         learning_rate=config.learning_rate, buffer_size=int(config.buffer_size),
         learning_starts=int(config.learning_starts), batch_size=int(config.batch_size),
         tau=config.tau, gamma=config.gamma, train_freq=int(config.train_freq),

@@ -283,7 +283,7 @@ def fit_objective(dataset: str | Path, out: str | Path, config: ObjectiveFitConf
     train_cfg = ObjectiveTrainConfig.from_dict({"seed": config.seed, **config.train})
     bar = tqdm(total=train_cfg.max_epochs, desc="training", unit="epoch", disable=not progress)
 
-    def on_step(epoch: int, step: int, steps: int) -> None:
+    def on_step(epoch: int, step: int, steps: float) -> None:
         if step == steps - 1:
             bar.update(1)
 

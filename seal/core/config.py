@@ -285,8 +285,8 @@ def _merge_mapping(base: Mapping[str, Any], layer: Mapping[str, Any], inner: Any
     for k, v in layer.items():
         old = out.get(k)
         if cls is not None and isinstance(v, Mapping):
-            whole = old is None or _required(cls) <= set(v)
-            out[k] = _apply(cls, {} if whole else old, v, where, f"{key}.{k}.")
+            patch = isinstance(old, Mapping) and not _required(cls) <= set(v)
+            out[k] = _apply(cls, old if patch and isinstance(old, Mapping) else {}, v, where, f"{key}.{k}.")
         elif inner is Any and isinstance(v, Mapping) and isinstance(old, Mapping):
             out[k] = _merge_mapping(old, v, Any, f"{key}.{k}", where)
         else:

@@ -197,10 +197,10 @@ def _validate(net: ObjectiveNet, tensors: PairTensors, idx: np.ndarray, batch_si
             pred, target = tensors.batch(net, idx[start : start + batch_size])
             preds.append(pred.numpy())
             targets.append(target.numpy())
-    pred, target = np.concatenate(preds), np.concatenate(targets)
-    mse = float(((pred - target) ** 2).mean())
+    pred_all, target_all = np.concatenate(preds), np.concatenate(targets)
+    mse = float(((pred_all - target_all) ** 2).mean())
     n = tensors.n_cand
-    rho = spearman(pred.sum(-1).reshape(-1, n), target.sum(-1).reshape(-1, n))
+    rho = spearman(pred_all.sum(-1).reshape(-1, n), target_all.sum(-1).reshape(-1, n))
     return mse, float(rho.mean())
 
 

@@ -157,7 +157,8 @@ def fit_loop(
         row = {"epoch": epoch, **{f"train_{k}": round(v / n_batches, 6) for k, v in sums.items()},
                **{f"val_{k}": round(v, 6) for k, v in val.items()}, "seconds": round(epoch_s, 2)}
         history.append(row)
-        _write_csv(csv_file, [{**dict.fromkeys(row, ""), **r} for r in history])
+        blank: dict[str, Any] = dict.fromkeys(row, "")  # rows of early epochs lack later columns
+        _write_csv(csv_file, [{**blank, **r} for r in history])
         improved = val["loss"] < best_val
         if improved:
             best_val, best_epoch, bad = val["loss"], epoch, 0
