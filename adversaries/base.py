@@ -62,15 +62,82 @@ class AdversaryGenerator(ABC):
 
 _REGISTRY: dict[str, Callable[..., AdversaryGenerator]] = {}
 
-GENERATOR_MODULES: dict[str, str] = {
-    "replay": "seal.adversaries.replay",
-    "rule": "seal.adversaries.rule",
-    "cat": "seal.adversaries.cat.generator",
-    "goose": "seal.adversaries.goose.generator",
-    "seal": "seal.adversaries.seal.generator",
+@dataclass(frozen=True)
+class GeneratorOption:
+    """One constructor option of a generator, as configs and the command line give it."""
+
+    name: str
+    """Keyword argument of the generator's constructor."""
+    model_file: bool = False
+    """The value is a path to a fitted model (file or folder) that must exist before the generator is built."""
+    builtins: tuple[str, ...] = ()
+    """Values of a ``model_file`` option that name a built-in instead of a path (e.g. SEAL's ``objective: cat``)."""
+
+
+@dataclass(frozen=True)
+class GeneratorSpec:
+    """A built-in generator: where it lives, its options and whether it is a training pipeline."""
+
+    name: str
+    """Registry name used in configs and on the command line."""
+    module: str
+    """Module whose import registers the class (imported on first lookup)."""
+    options: tuple[GeneratorOption, ...] = ()
+    """Constructor options settable from configs (``--gen-opt NAME.KEY=VALUE``, ``train.pipelines.NAME.kwargs``)."""
+    pipeline: bool = False
+    """A ``seal train`` / ``seal run`` pipeline of the same name trains the ego against this generator."""
+
+    def model_files(self) -> tuple[str, ...]:
+        """Names of the options that are model files."""
+        return tuple(o.name for o in self.options if o.model_file)
+
+    def option(self, name: str) -> GeneratorOption | None:
+        return next((o for o in self.options if o.name == name), None)
+
+
+def _opts(*names: str, models: tuple[str, ...] = (), builtins: dict[str, tuple[str, ...]] | None = None
+          ) -> tuple[GeneratorOption, ...]:
+    return tuple(GeneratorOption(n, model_file=n in models, builtins=(builtins or {}).get(n, ())) for n in names)
+
+
+_CANDIDATE_OPTIONS = ("prior", "candidates", "follow", "stride", "decay", "n_kept_modes")
+
+GENERATORS: dict[str, GeneratorSpec] = {
+    "replay": GeneratorSpec("replay", "seal.adversaries.replay"),
+    "rule": GeneratorSpec("rule", "seal.adversaries.rule",
+                          _opts("max_accel_mps2", "max_lat_accel_mps2", "min_arrival_s")),
+    "goose": GeneratorSpec("goose", "seal.adversaries.goose.generator",
+                           _opts("model", "deterministic", "max_updates", models=("model",)), pipeline=True),
+    "cat": GeneratorSpec("cat", "seal.adversaries.cat.generator", _opts(*_CANDIDATE_OPTIONS, models=("prior",)),
+                         pipeline=True),
+    "seal": GeneratorSpec("seal", "seal.adversaries.seal.generator", _opts(
+        *_CANDIDATE_OPTIONS, "objective", "skills", "switch", "switch_offset_steps", "noise_scale",
+        models=("prior", "objective", "skills"), builtins={"objective": ("cat",)}), pipeline=True),
 }
-"""Module that registers each built-in generator, imported on first lookup (so a name resolves without importing
-every generator, and even when ``adversaries/__init__.py`` did not run). Add a line per new generator."""
+"""The built-in generators, one entry each (add a line per new generator). Each module is imported on first lookup
+(so a name resolves without importing every generator, and even when ``adversaries/__init__.py`` did not run)."""
+
+GENERATOR_MODULES: dict[str, str] = {name: spec.module for name, spec in GENERATORS.items()}
+"""Module that registers each built-in generator (from `GENERATORS`)."""
+
+NO_ADVERSARY = "noadv"
+"""The training pipeline without an adversary (the ego sees logged traffic only)."""
+
+
+def pipeline_names() -> tuple[str, ...]:
+    """Training pipelines in their canonical order: `NO_ADVERSARY`, then each generator marked ``pipeline``."""
+    return (NO_ADVERSARY, *(name for name, spec in GENERATORS.items() if spec.pipeline))
+
+
+def generator_spec(name: str) -> GeneratorSpec | None:
+    """The built-in spec of generator ``name`` (None for one registered only at run time)."""
+    return GENERATORS.get(name)
+
+
+def model_file_options(name: str) -> dict[str, tuple[str, ...]]:
+    """Options of generator ``name`` that are model files -> their built-in (non-path) values."""
+    spec = GENERATORS.get(name)
+    return {} if spec is None else {o.name: o.builtins for o in spec.options if o.model_file}
 
 
 def register(name: str) -> Callable[[type[AdversaryGenerator]], type[AdversaryGenerator]]:

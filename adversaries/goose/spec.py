@@ -4,12 +4,13 @@ observation layout), kept in one place so a trained agent carries them with it.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
 
 from seal.adversaries.base import K_ROLLOUTS
+from seal.core.config import check_keys
 
 GOAL_NAMES = ("min_gap_m", "max_abs_acc_mps2", "max_abs_yaw_rate_radps")
 """Goal components: the smallest ego-adversary body gap, the adversary's largest |acceleration| (time derivative
@@ -91,10 +92,7 @@ class GooseSpec:
     @classmethod
     def from_dict(cls, d: dict[str, Any], where: str = "goose spec") -> GooseSpec:
         """Build from a plain dict; unknown keys raise an error naming them and ``where``."""
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"{where}: unknown GOOSE spec keys {unknown}; known: {sorted(known)}")
+        check_keys(cls, d, f"{where}: GOOSE spec")
         d = dict(d)
         for key in ("desired_goal", "point_scale"):
             if key in d:

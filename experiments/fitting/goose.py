@@ -12,85 +12,98 @@ from __future__ import annotations
 import csv
 import importlib.util
 import io
+import logging
 import time
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import yaml
 from tqdm import tqdm
 
-from seal.adversaries.goose.agent import ALGOS, GooseAgent, load_goose_agent, policy_kwargs, save_goose_agent
+from seal.adversaries.goose.agent import GooseAgent, load_goose_agent, policy_kwargs, save_goose_agent
 from seal.adversaries.goose.env import GooseEnv
 from seal.adversaries.goose.spec import GooseSpec
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
+from seal.core.config import load_config, overrides_field, to_dict
 from seal.experiments import presets
 from seal.experiments.evaluation.goose_eval import evaluate, random_actor, zero_actor
 
+logger = logging.getLogger(__name__)
+
 PRESETS = ("quick", "standard")
-
-DEFAULTS: dict[str, Any] = {
-    "algo": "sac",
-    "total_steps": 5000,
-    "learning_starts": 300,
-    "batch_size": 128,
-    "buffer_size": 50_000,
-    "learning_rate": 0.001,
-    "gamma": 0.9,
-    "tau": 0.02,
-    "train_freq": 1,
-    "gradient_steps": 1,
-    "net_arch": [128, 128],
-    "gru_hidden": 32,
-    "her_n_sampled_goal": 4,
-    "her_strategy": "future",
-    "td3_action_noise": 0.2,
-    "seed": 0,
-    "split": "train",
-    "limit": None,
-    "eval_split": "eval",
-    "eval_limit": None,
-    "log_every": 500,
-    "spec": {},
-}
-"""Config keys: SB3 hyper-parameters (``algo`` sac | td3, ``total_steps`` = env steps = observed roll-outs,
-``learning_starts`` random-action steps, ``batch_size``, ``buffer_size``, ``learning_rate``, ``gamma``, ``tau``,
-``train_freq``, ``gradient_steps``, ``net_arch``, ``gru_hidden``, ``her_n_sampled_goal``, ``her_strategy``
-future | final | episode, ``td3_action_noise`` Gaussian sigma for TD3), data (``split`` / ``limit`` training
-scenarios, ``eval_split`` / ``eval_limit`` held-out scenarios, None = skip the evaluation when the split is
-None), ``seed``, ``log_every`` (steps per success.csv row) and ``spec`` (`GooseSpec` overrides)."""
+FIT_THREADS = 1
+"""Torch threads of ``seal fit goose``: small networks, threads only add overhead on a shared 2-core machine."""
 
 
-def load_preset(name: str) -> dict[str, Any]:
+@dataclass(frozen=True)
+class GooseFitConfig:
+    """Settings of ``seal fit goose`` (presets: ``experiments/configs/goose_<preset>.yaml``)."""
+
+    algo: Literal["sac", "td3"] = "sac"
+    """SB3 algorithm."""
+    total_steps: int = 5000
+    """Env steps = observed roll-outs of training."""
+    learning_starts: int = 300
+    """Random-action steps before learning."""
+    batch_size: int = 128
+    """Transitions per gradient step."""
+    buffer_size: int = 50_000
+    """Replay buffer capacity."""
+    learning_rate: float = 0.001
+    """Adam learning rate."""
+    gamma: float = 0.9
+    """Discount factor."""
+    tau: float = 0.02
+    """Polyak averaging coefficient."""
+    train_freq: int = 1
+    """Env steps between training calls."""
+    gradient_steps: int = 1
+    """Gradient steps per training call."""
+    net_arch: tuple[int, ...] = (128, 128)
+    """Hidden layer widths of actor and critics."""
+    gru_hidden: int = 32
+    """GRU width of the roll-out encoder."""
+    her_n_sampled_goal: int = 4
+    """HER: relabelled goals per transition."""
+    her_strategy: Literal["future", "final", "episode"] = "future"
+    """HER goal selection strategy."""
+    td3_action_noise: float = 0.2
+    """Gaussian exploration sigma for TD3."""
+    seed: int = 0
+    """Random seed."""
+    split: str | None = "train"
+    """Split of the training scenarios."""
+    limit: int | None = None
+    """Use the first N training scenarios (None: all)."""
+    eval_split: str | None = "eval"
+    """Held-out split (None: skip the held-out evaluation)."""
+    eval_limit: int | None = None
+    """Use the first N held-out scenarios (None: all)."""
+    log_every: int = 500
+    """Env steps per success.csv row."""
+    spec: dict[str, Any] = overrides_field(GooseSpec)
+    """`GooseSpec` overrides."""
+
+    def __post_init__(self) -> None:
+        for key in ("total_steps", "batch_size", "buffer_size", "log_every", "gru_hidden", "train_freq"):
+            if int(getattr(self, key)) < 1:
+                raise ValueError(f"{key} must be >= 1, got {getattr(self, key)}")
+        GooseSpec.from_dict(self.spec or {}, where="config key 'spec'")
+
+
+def preset_file(name: str) -> Path:
     """The YAML preset ``experiments/configs/goose_<name>.yaml``."""
-    return presets.load_preset("goose", name, PRESETS, DEFAULTS)
+    return presets.preset_file("goose", name, PRESETS)
 
 
-def _read_yaml(path: Path) -> dict[str, Any]:
-    return presets.read_options(path, DEFAULTS)
-
-
-def resolve_config(preset: str | None = "standard", config_file: str | Path | None = None,
-                   **overrides: Any) -> dict[str, Any]:
-    """Defaults < preset < YAML config file < explicit overrides (None values ignored); validated."""
-    config = dict(DEFAULTS)
-    if preset is not None:
-        config.update(load_preset(preset))
-    if config_file is not None:
-        config.update(_read_yaml(Path(config_file)))
-    unknown = sorted(set(overrides) - set(DEFAULTS))
-    if unknown:
-        raise ValueError(f"unknown option(s) {unknown}; known: {sorted(DEFAULTS)}")
-    config.update({k: v for k, v in overrides.items() if v is not None})
-    if config["algo"] not in ALGOS:
-        raise ValueError(f"algo must be one of {ALGOS}, got {config['algo']!r}")
-    if config["her_strategy"] not in ("future", "final", "episode"):
-        raise ValueError(f"her_strategy must be future, final or episode, got {config['her_strategy']!r}")
-    for key in ("total_steps", "batch_size", "buffer_size", "log_every", "gru_hidden", "train_freq"):
-        if int(config[key]) < 1:
-            raise ValueError(f"{key} must be >= 1, got {config[key]}")
-    GooseSpec.from_dict(config["spec"] or {}, where="config key 'spec'")
-    return config
+def resolve_config(preset: str | None = "standard", config_file: str | Path | None = None, sets: Sequence[str] = (),
+                   **values: Any) -> GooseFitConfig:
+    """Defaults < preset < YAML config file < ``values`` (None values ignored) < ``sets`` (``key=value``)."""
+    return load_config(GooseFitConfig, preset=None if preset is None else preset_file(preset), file=config_file,
+                       values=values, overrides=sets)
 
 
 class _Progress:
@@ -177,24 +190,24 @@ def _scenarios(dataset: str | Path, split: str | None, limit: int | None) -> lis
     return scenarios
 
 
-def build_model(env: GooseEnv, config: dict[str, Any], spec: GooseSpec) -> Any:
+def build_model(env: GooseEnv, config: GooseFitConfig, spec: GooseSpec) -> Any:
     """An SB3 SAC / TD3 model with the GOOSE policy and a HER replay buffer, from a resolved config."""
     from stable_baselines3 import SAC, TD3, HerReplayBuffer
     from stable_baselines3.common.noise import NormalActionNoise
 
-    common = dict(
-        learning_rate=config["learning_rate"], buffer_size=int(config["buffer_size"]),
-        learning_starts=int(config["learning_starts"]), batch_size=int(config["batch_size"]),
-        tau=config["tau"], gamma=config["gamma"], train_freq=int(config["train_freq"]),
-        gradient_steps=int(config["gradient_steps"]), replay_buffer_class=HerReplayBuffer,
-        replay_buffer_kwargs={"n_sampled_goal": int(config["her_n_sampled_goal"]),
-                              "goal_selection_strategy": config["her_strategy"]},
-        policy_kwargs=policy_kwargs(spec, config["net_arch"], config["gru_hidden"]),
-        seed=int(config["seed"]), device="cpu", verbose=0,
+    common: dict[str, Any] = dict(
+        learning_rate=config.learning_rate, buffer_size=int(config.buffer_size),
+        learning_starts=int(config.learning_starts), batch_size=int(config.batch_size),
+        tau=config.tau, gamma=config.gamma, train_freq=int(config.train_freq),
+        gradient_steps=int(config.gradient_steps), replay_buffer_class=HerReplayBuffer,
+        replay_buffer_kwargs={"n_sampled_goal": int(config.her_n_sampled_goal),
+                              "goal_selection_strategy": config.her_strategy},
+        policy_kwargs=policy_kwargs(spec, list(config.net_arch), config.gru_hidden),
+        seed=int(config.seed), device="cpu", verbose=0,
     )
-    if config["algo"] == "sac":
+    if config.algo == "sac":
         return SAC("MultiInputPolicy", env, **common)
-    noise = NormalActionNoise(np.zeros(12), float(config["td3_action_noise"]) * np.ones(12))
+    noise = NormalActionNoise(np.zeros(12), float(config.td3_action_noise) * np.ones(12))
     return TD3("MultiInputPolicy", env, action_noise=noise, **common)
 
 
@@ -204,24 +217,24 @@ def default_run_dir(out: str | Path) -> Path:
 
 
 def fit_goose(
-    dataset: str | Path, out: str | Path, config: dict[str, Any], run_dir: str | Path | None = None,
+    dataset: str | Path, out: str | Path, config: GooseFitConfig, run_dir: str | Path | None = None,
     progress: bool = True,
 ) -> dict[str, Any]:
-    """Train, save the agent to ``out``, evaluate; returns the summary (also written to the run folder)."""
-    import torch
+    """Train, save the agent to ``out``, evaluate; returns the summary (also written to the run folder).
+
+    The caller sets torch's threads (the CLI: one, `FIT_THREADS`)."""
     from stable_baselines3.common.logger import configure
 
-    spec = GooseSpec.from_dict(config["spec"] or {}, where="config key 'spec'")
-    train = _scenarios(dataset, config["split"], config["limit"])
+    spec = GooseSpec.from_dict(config.spec or {}, where="config key 'spec'")
+    train = _scenarios(dataset, config.split, config.limit)
     held_scenarios = None
-    if config["eval_split"] is not None:
-        held_scenarios = _scenarios(dataset, config["eval_split"], config["eval_limit"])
+    if config.eval_split is not None:
+        held_scenarios = _scenarios(dataset, config.eval_split, config.eval_limit)
     out = Path(out)
     run = Path(run_dir) if run_dir is not None else default_run_dir(out)
     run.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(run / "config.yaml", yaml.safe_dump(
-        {**config, "dataset": str(dataset), "out": str(out)}, sort_keys=True).encode())
-    torch.set_num_threads(1)  # small networks: threads only add overhead on a shared 2-core machine
+        {**to_dict(config), "dataset": str(dataset), "out": str(out)}, sort_keys=True).encode())
 
     env = GooseEnv(train, spec)
     model = build_model(env, config, spec)
@@ -233,15 +246,15 @@ def fit_goose(
 
     evaluation: dict[str, Any] = {}
     if held_out is not None:
-        print(f"held-out baseline on {len(ids)} {config['eval_split']} scenarios (zero, random, untrained)")
-        untrained = GooseAgent(model.policy, spec, config["algo"])
+        logger.info(f"held-out baseline on {len(ids)} {config.eval_split} scenarios (zero, random, untrained)")
+        untrained = GooseAgent(model.policy, spec, config.algo)
         evaluation.update(evaluate(held_out, ids, {
-            "zero": zero_actor, "random": random_actor(int(config["seed"])), "untrained": untrained.act,
+            "zero": zero_actor, "random": random_actor(int(config.seed)), "untrained": untrained.act,
         }, progress))
 
-    tracker = _Progress(int(config["total_steps"]), int(config["log_every"]), run / "success.csv", progress)
+    tracker = _Progress(int(config.total_steps), int(config.log_every), run / "success.csv", progress)
     start = time.perf_counter()
-    model.learn(total_timesteps=int(config["total_steps"]), callback=tracker.callback)
+    model.learn(total_timesteps=int(config.total_steps), callback=tracker.callback)
     train_s = time.perf_counter() - start
     drawn, solved = env.start_counts
     summary_train = {
@@ -250,11 +263,11 @@ def fit_goose(
         "env_steps": int(model.num_timesteps), "steps_per_s": round(model.num_timesteps / train_s, 2),
         "success_curve": tracker.rows,
     }
-    save_goose_agent(out, model.policy, config["algo"], spec, config["net_arch"], config["gru_hidden"],
+    save_goose_agent(out, model.policy, config.algo, spec, list(config.net_arch), config.gru_hidden,
                      summary={k: v for k, v in summary_train.items() if k != "success_curve"})
 
     if held_out is not None:
-        print(f"held-out evaluation of the trained agent (as saved in {out}) on {len(ids)} scenarios")
+        logger.info(f"held-out evaluation of the trained agent (as saved in {out}) on {len(ids)} scenarios")
         evaluation.update(evaluate(held_out, ids, {"trained": load_goose_agent(out).act}, progress))
         atomic_write_json(run / "eval.json", evaluation)
     summary = {

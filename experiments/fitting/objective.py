@@ -29,8 +29,11 @@ from __future__ import annotations
 
 import csv
 import io
+import logging
 import time
-from collections.abc import Callable
+import typing
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -38,8 +41,13 @@ import numpy as np
 import yaml
 
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
+from seal.core.config import load_config, overrides_field, to_dict
 from seal.experiments import presets
 from seal.models.objective.labels import LOGGED_ROW, LabelSet
+from seal.models.objective.network import ObjectiveConfig
+from seal.models.objective.train import ObjectiveTrainConfig
+
+logger = logging.getLogger(__name__)
 
 PRESETS = ("quick", "standard")
 MODEL_FILE = "objective.pt"
@@ -47,56 +55,70 @@ K_PREV = 5
 """Previous roll-outs per scenario in the K-roll-out ranking metric (SEAL's K)."""
 LATENCY_CALLS = 200
 
-DEFAULTS: dict[str, Any] = {
-    "split": "train",
-    "eval_split": "eval",
-    "limit": None,
-    "eval_limit": None,
-    "prior": None,
-    "candidates": None,
-    "n_candidates": 32,
-    "seed": 0,
-    "threads": 1,
-    "workers": 2,
-    "chunk_size": 10,
-    "model": {},
-    "train": {},
-}
-"""Config keys: ``split`` (training scenarios) and ``eval_split`` (held-out report), ``limit`` / ``eval_limit``
-(first N scenarios of each), the candidate source (``prior``: a trajectory prior file, or ``candidates``: a
-built-in source name), ``n_candidates`` per scenario, ``seed``, torch ``threads`` for training, label building
-(``workers`` processes, ``chunk_size`` scenarios per resumable chunk), ``model``
-(`seal.models.objective.ObjectiveConfig` overrides) and ``train`` (`seal.models.objective.TrainConfig` overrides)."""
+@dataclass(frozen=True)
+class ObjectiveFitConfig:
+    """Settings of ``seal fit objective`` / ``seal eval objective`` (presets:
+    ``experiments/configs/objective_<preset>.yaml``)."""
+
+    split: str = "train"
+    """Split of the training scenarios."""
+    eval_split: str = "eval"
+    """Split of the held-out report."""
+    limit: int | None = None
+    """Use the first N training scenarios (None: all)."""
+    eval_limit: int | None = None
+    """Use the first N held-out scenarios (None: all)."""
+    prior: Path | None = None
+    """Trajectory prior file giving the candidates (exactly one of ``prior`` / ``candidates``)."""
+    candidates: str | None = None
+    """Built-in candidate source name instead of a prior (lanes | constant_velocity)."""
+    n_candidates: int = 32
+    """Candidates per scenario."""
+    seed: int = 0
+    """Random seed."""
+    threads: int = 1
+    """Torch threads of training (set by the command-line entry point)."""
+    workers: int = 2
+    """Processes simulating the labels."""
+    chunk_size: int = 10
+    """Scenarios per resumable label chunk."""
+    model: dict[str, Any] = overrides_field(ObjectiveConfig)
+    """`seal.models.objective.ObjectiveConfig` overrides."""
+    train: dict[str, Any] = overrides_field(ObjectiveTrainConfig)
+    """`seal.models.objective.ObjectiveTrainConfig` overrides (the seed defaults to ``seed``)."""
+
+    def __post_init__(self) -> None:
+        ObjectiveConfig.from_dict(self.model, "config key 'model'")
+        ObjectiveTrainConfig.from_dict(self.train, "config key 'train'")
+        for key in ("workers", "chunk_size", "n_candidates", "threads"):
+            if int(getattr(self, key)) < 1:
+                raise ValueError(f"config key {key!r} must be >= 1, got {getattr(self, key)}")
+        for key in ("limit", "eval_limit"):
+            if getattr(self, key) is not None and int(getattr(self, key)) < 1:
+                raise ValueError(f"config key {key!r} must be >= 1 or null, got {getattr(self, key)}")
+        if (self.prior is None) == (self.candidates is None):
+            raise ValueError("give exactly one candidate source: --prior FILE (config key 'prior') or --candidates "
+                             "NAME (config key 'candidates', e.g. lanes or constant_velocity)")
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data (the prior path as a string), as recorded in ``config.yaml``."""
+        return typing.cast(dict[str, Any], to_dict(self))
 
 
-def load_preset(name: str) -> dict[str, Any]:
+def preset_file(name: str) -> Path:
     """The YAML preset ``experiments/configs/objective_<name>.yaml``."""
-    return presets.load_preset("objective", name, PRESETS, DEFAULTS)
+    return presets.preset_file("objective", name, PRESETS)
 
 
-def resolve_config(preset: str | None = "standard", config_file: str | Path | None = None,
-                   **overrides: Any) -> dict[str, Any]:
-    """Defaults < preset < YAML config file < explicit overrides (None values ignored); validated."""
-    from seal.models.objective import ObjectiveConfig, TrainConfig
-
-    config = presets.layered_options("objective", PRESETS, DEFAULTS, preset, config_file, overrides)
-    ObjectiveConfig.from_dict(config["model"], "config key 'model'")
-    TrainConfig.from_dict(config["train"], "config key 'train'")
-    for key in ("workers", "chunk_size", "n_candidates", "threads"):
-        if int(config[key]) < 1:
-            raise ValueError(f"config key {key!r} must be >= 1, got {config[key]}")
-    for key in ("limit", "eval_limit"):
-        if config[key] is not None and int(config[key]) < 1:
-            raise ValueError(f"config key {key!r} must be >= 1 or null, got {config[key]}")
-    if (config["prior"] is None) == (config["candidates"] is None):
-        raise ValueError("give exactly one candidate source: --prior FILE (config key 'prior') or --candidates NAME "
-                         "(config key 'candidates', e.g. lanes or constant_velocity)")
-    return config
+def resolve_config(preset: str | None = "standard", config_file: str | Path | None = None, sets: Sequence[str] = (),
+                   **values: Any) -> ObjectiveFitConfig:
+    """Defaults < preset < YAML config file < ``values`` (None values ignored) < ``sets`` (``key=value``)."""
+    return load_config(ObjectiveFitConfig, preset=None if preset is None else preset_file(preset), file=config_file,
+                       values=values, overrides=sets)
 
 
 def labels_for_split(
-    dataset: str | Path, split: str, limit: int | None, folder: Path, config: dict[str, Any], progress: bool,
-    log: Callable[[str], None],
+    dataset: str | Path, split: str, limit: int | None, folder: Path, config: ObjectiveFitConfig, progress: bool,
 ) -> tuple[LabelSet, float]:
     """Build (or resume / reuse) the labels of ``split``'s first ``limit`` scenarios in ``folder``; returns the
     labels and the seconds it took."""
@@ -110,11 +132,11 @@ def labels_for_split(
     scenarios = ds.load(split=split, limit=limit)
     if not scenarios:
         raise ValueError(f"dataset {dataset}: split {split!r} is empty")
-    spec = source_spec(config["prior"], config["candidates"])
+    spec = source_spec(None if config.prior is None else str(config.prior), config.candidates)
     start = time.perf_counter()
-    labels = build_labels(scenarios, folder, spec, n_candidates=int(config["n_candidates"]),
-                          workers=int(config["workers"]), chunk_size=int(config["chunk_size"]), progress=progress,
-                          desc=f"labels {split}", log=log)
+    labels = build_labels(scenarios, folder, spec, n_candidates=config.n_candidates,
+                          workers=config.workers, chunk_size=config.chunk_size, progress=progress,
+                          desc=f"labels {split}")
     return labels, round(time.perf_counter() - start, 1)
 
 
@@ -235,70 +257,70 @@ def _write_log(path: Path, history: list[dict[str, float]]) -> None:
     atomic_write_bytes(path, buf.getvalue().encode())
 
 
-def fit_objective(dataset: str | Path, out: str | Path, config: dict[str, Any], progress: bool = True,
-                  log: Callable[[str], None] = print) -> dict[str, Any]:
-    """Run the pipeline of the module docstring; returns the report (also in ``out/report.json`` / ``.md``)."""
-    import torch
+def fit_objective(dataset: str | Path, out: str | Path, config: ObjectiveFitConfig,
+                  progress: bool = True) -> dict[str, Any]:
+    """Run the pipeline of the module docstring; returns the report (also in ``out/report.json`` / ``.md``).
+
+    The caller sets torch's threads (the CLI: ``config.threads``); label chunks run on one thread each."""
     from tqdm import tqdm
 
-    from seal.models.objective import ObjectiveConfig, TrainConfig, train_objective
+    from seal.models.objective import train_objective
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_bytes(out / "config.yaml", yaml.safe_dump({**config, "dataset": str(dataset), "out": str(out)},
-                                                           sort_keys=True).encode())
+    atomic_write_bytes(out / "config.yaml", yaml.safe_dump(
+        {**config.to_dict(), "dataset": str(dataset), "out": str(out)}, sort_keys=True).encode())
     timings: dict[str, float] = {}
     train_labels, timings["labels_train_s"] = labels_for_split(
-        dataset, config["split"], config["limit"], out / "labels" / config["split"], config, progress, log)
+        dataset, config.split, config.limit, out / "labels" / config.split, config, progress)
     eval_labels, timings["labels_eval_s"] = labels_for_split(
-        dataset, config["eval_split"], config["eval_limit"], out / "labels" / config["eval_split"], config, progress,
-        log)
+        dataset, config.eval_split, config.eval_limit, out / "labels" / config.eval_split, config, progress)
     overlap = set(train_labels.scenario_ids.tolist()) & set(eval_labels.scenario_ids.tolist())
     if overlap:
-        raise ValueError(f"splits {config['split']!r} and {config['eval_split']!r} share {len(overlap)} scenarios; "
+        raise ValueError(f"splits {config.split!r} and {config.eval_split!r} share {len(overlap)} scenarios; "
                          "the report must be on held-out scenarios")
 
-    torch.set_num_threads(int(config["threads"]))
-    train_cfg = TrainConfig.from_dict({"seed": int(config["seed"]), **config["train"]})
+    train_cfg = ObjectiveTrainConfig.from_dict({"seed": config.seed, **config.train})
     bar = tqdm(total=train_cfg.max_epochs, desc="training", unit="epoch", disable=not progress)
 
-    def on_step(epoch: int, step: int, steps: int) -> None:
+    def on_step(epoch: int, step: int, steps: float) -> None:
         if step == steps - 1:
             bar.update(1)
 
-    model, fit = train_objective(train_labels, ObjectiveConfig.from_dict(config["model"]), train_cfg,
+    model, fit = train_objective(train_labels, ObjectiveConfig.from_dict(config.model), train_cfg,
                                  on_step=on_step)
     bar.close()
     timings["training_s"] = fit.seconds
     _write_log(out / "train_log.csv", fit.history)
     report = {
-        "dataset": str(dataset), "train_split": config["split"], "eval_split": config["eval_split"],
+        "dataset": str(dataset), "train_split": config.split, "eval_split": config.eval_split,
         "out": str(out), "model": model.config.to_dict(), "fit": model.info.get("fit", {}),
         "train_labels": label_stats(train_labels),
     }
-    report.update(evaluate(model, eval_labels, int(config["seed"])))
+    report.update(evaluate(model, eval_labels, config.seed))
     report["rank_latency"] = rank_latency_ms(model)
     report["timings"] = timings
-    model.info.update({"dataset": str(dataset), "train_split": config["split"],
-                       "train_scenarios": train_labels.n_scenarios, "candidate_source": config["prior"]
-                       or config["candidates"], "held_out": {k: report[k] for k in ("mse", "ranking_logged_prev")}})
+    source = str(config.prior) if config.prior is not None else config.candidates
+    model.info.update({"dataset": str(dataset), "train_split": config.split,
+                       "train_scenarios": train_labels.n_scenarios, "candidate_source": source,
+                       "held_out": {k: report[k] for k in ("mse", "ranking_logged_prev")}})
     model.save(out / MODEL_FILE)
     write_report(out, report)
     return report
 
 
-def eval_objective(model_path: str | Path, dataset: str | Path, config: dict[str, Any], labels_dir: str | Path,
-                   out: str | Path, progress: bool = True, log: Callable[[str], None] = print) -> dict[str, Any]:
-    """Recompute the held-out report of a saved model on ``config['eval_split']`` (labels built or reused in
+def eval_objective(model_path: str | Path, dataset: str | Path, config: ObjectiveFitConfig, labels_dir: str | Path,
+                   out: str | Path, progress: bool = True) -> dict[str, Any]:
+    """Recompute the held-out report of a saved model on ``config.eval_split`` (labels built or reused in
     ``labels_dir``); writes ``report.json`` / ``report.md`` to ``out``."""
     from seal.models.objective import ObjectiveModel
 
     model = ObjectiveModel.load(model_path)
-    labels, seconds = labels_for_split(dataset, config["eval_split"], config["eval_limit"], Path(labels_dir), config,
-                                       progress, log)
+    labels, seconds = labels_for_split(dataset, config.eval_split, config.eval_limit, Path(labels_dir), config,
+                                       progress)
     report: dict[str, Any] = {"model_file": str(model_path), "dataset": str(dataset),
-                              "eval_split": config["eval_split"], "out": str(out), "model": model.config.to_dict()}
-    report.update(evaluate(model, labels, int(config["seed"])))
+                              "eval_split": config.eval_split, "out": str(out), "model": model.config.to_dict()}
+    report.update(evaluate(model, labels, config.seed))
     report["rank_latency"] = rank_latency_ms(model)
     report["timings"] = {"labels_eval_s": seconds}
     write_report(Path(out), report)

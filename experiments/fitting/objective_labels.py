@@ -27,6 +27,7 @@ Building is resumable and parallel: scenarios are cut into chunks of ``chunk_siz
 from __future__ import annotations
 
 import hashlib
+import logging
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -36,6 +37,8 @@ import numpy as np
 from seal.core.chunked import fingerprint, run_chunked
 from seal.core.scenario import CURRENT_STEP, HEADING, LENGTH, N_FUTURE, VALID, WIDTH, Scenario, X, Y
 from seal.models.objective.labels import LabelSet
+
+logger = logging.getLogger(__name__)
 
 N_CANDIDATES = 32
 """Candidates per scenario (pi_gen's mode count)."""
@@ -153,9 +156,13 @@ def _run_chunk(args: tuple[int, list[Scenario], str, int]) -> tuple[int, LabelSe
     index, scenarios, spec, n_candidates = args
     import torch
 
-    torch.set_num_threads(1)
-    source = _candidate_source(spec)
-    return index, LabelSet.concat([label_scenario(s, source, n_candidates) for s in scenarios])
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # one thread per chunk worker; restored for a chunk run in the calling process
+    try:
+        source = _candidate_source(spec)
+        return index, LabelSet.concat([label_scenario(s, source, n_candidates) for s in scenarios])
+    finally:
+        torch.set_num_threads(threads)
 
 
 def _fingerprint(spec: str, ids: Sequence[str], chunk_size: int, n_candidates: int) -> str:
@@ -175,7 +182,6 @@ def build_labels(
     chunk_size: int = 10,
     progress: bool = True,
     desc: str = "objective labels",
-    log: Callable[[str], None] = print,
 ) -> LabelSet:
     """Label ``scenarios`` in ``workers`` processes into chunk files ``out/part_NNNNN.npz`` (resumable, see the
     module docstring) and return all of them as one `LabelSet`, in scenario order.
@@ -189,7 +195,8 @@ def build_labels(
         chunk_size: scenarios per chunk file.
         progress: show a tqdm bar.
         desc: the bar's label.
-        log: where to report resuming / restarting.
+
+    Resuming / restarting is reported through this module's logger.
     """
     if not scenarios:
         raise ValueError("build_labels: no scenarios")

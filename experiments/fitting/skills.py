@@ -27,114 +27,132 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import yaml
 
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
+from seal.core.config import load_config, overrides_field, to_dict
 from seal.experiments import presets
+from seal.models.skills.demonstrations import DemoConfig
 from seal.models.skills.demos import ADVERSARIAL, BENIGN, Demonstrations, WindowSpec, label_windows, split_by_scenario
+from seal.models.skills.realnvp import RealNVPConfig
+from seal.models.skills.train import SkillTrainConfig
+from seal.models.skills.vae import VAEConfig
+
+logger = logging.getLogger(__name__)
 
 PRESETS = ("quick", "standard")
 
-DEFAULTS: dict[str, Any] = {
-    "split": "train",
-    "limit": None,
-    "seed": 0,
-    "threads": 1,
-    "workers": 2,
-    "chunk_size": 10,
-    "demos": {},
-    "windows": {},
-    "val_fraction": 0.1,
-    "max_benign_windows": 150000,
-    "max_val_windows": 20000,
-    "vae": {},
-    "vae_train": {"batch_size": 512, "lr": 1e-3, "max_epochs": 20, "patience": 3, "max_minutes": 6.0},
-    "prior": {},
-    "prior_train": {"batch_size": 512, "lr": 1e-3, "max_epochs": 60, "patience": 6, "max_minutes": 1.5},
-    "adversarial_init": "benign",
-    "plot_states": 300,
-    "plot_samples_per_state": 10,
-}
-"""Config keys: data (``split``, ``limit`` first N scenarios), ``seed``, torch ``threads``, demonstration build
-(``workers`` processes, ``chunk_size`` scenarios per resumable chunk, ``demos``:
-`seal.models.skills.demonstrations.DemoConfig`
-overrides), ``windows`` (`seal.models.skills.demos.WindowSpec` overrides), ``val_fraction`` (held-out share of the
-scenarios), ``max_benign_windows`` (benign training windows kept, drawn at random), ``max_val_windows`` (per class,
-for validation and metrics), ``vae`` / ``prior`` (`VAEConfig` / `RealNVPConfig` overrides), ``vae_train`` /
-``prior_train`` (`seal.models.skills.train.TrainConfig`), ``adversarial_init`` (``benign``: fine-tune the adversarial
-prior
-from the benign one; ``scratch``), ``plot_states`` and ``plot_samples_per_state`` (the embedding
-plot)."""
+
+@dataclass(frozen=True)
+class SkillsFitConfig:
+    """Settings of ``seal fit skills`` (presets: ``experiments/configs/skills_<preset>.yaml``)."""
+
+    split: str | None = "train"
+    """Split to learn from."""
+    limit: int | None = None
+    """Use the first N scenarios of the split (None: all)."""
+    seed: int = 0
+    """Random seed (demonstrations, window draws, model initialisation and shuffling)."""
+    threads: int = 1
+    """Torch threads (set by the command-line entry point)."""
+    workers: int = 2
+    """Processes building the demonstrations."""
+    chunk_size: int = 10
+    """Scenarios per resumable demonstration chunk."""
+    demos: dict[str, Any] = overrides_field(DemoConfig)
+    """`seal.models.skills.demonstrations.DemoConfig` overrides (the seed defaults to ``seed``)."""
+    windows: dict[str, Any] = overrides_field(WindowSpec)
+    """`seal.models.skills.demos.WindowSpec` overrides."""
+    val_fraction: float = 0.1
+    """Held-out share of the scenarios, in (0, 1)."""
+    max_benign_windows: int = 150000
+    """Benign training windows kept (drawn at random)."""
+    max_val_windows: int = 20000
+    """Validation (and metrics) windows kept per class."""
+    vae: dict[str, Any] = overrides_field(VAEConfig)
+    """`VAEConfig` overrides (obs_dim and horizon default to the data's)."""
+    vae_train: dict[str, Any] = overrides_field(
+        SkillTrainConfig, batch_size=512, lr=1e-3, max_epochs=20, patience=3, max_minutes=6.0)
+    """`SkillTrainConfig` of the VAE (the seed defaults to ``seed``)."""
+    prior: dict[str, Any] = overrides_field(RealNVPConfig)
+    """`RealNVPConfig` overrides (latent_dim and cond_dim default to the VAE's)."""
+    prior_train: dict[str, Any] = overrides_field(
+        SkillTrainConfig, batch_size=512, lr=1e-3, max_epochs=60, patience=6, max_minutes=1.5)
+    """`SkillTrainConfig` of both priors (the seed defaults to ``seed``)."""
+    adversarial_init: Literal["benign", "scratch"] = "benign"
+    """``benign``: fine-tune the adversarial prior from the benign one; ``scratch``: train it alone."""
+    plot_states: int = 300
+    """Held-out states of the embedding plot."""
+    plot_samples_per_state: int = 10
+    """Prior samples per state in the embedding plot."""
+
+    def __post_init__(self) -> None:
+        """Build every sub-config once, so a bad value fails here and names its section."""
+        DemoConfig.from_dict(self.demos, "config key 'demos'")
+        WindowSpec(**self.windows)
+        VAEConfig.from_dict(self.vae, "config key 'vae'")
+        RealNVPConfig.from_dict(self.prior, "config key 'prior'")
+        SkillTrainConfig.from_dict(self.vae_train, "config key 'vae_train'")
+        SkillTrainConfig.from_dict(self.prior_train, "config key 'prior_train'")
+        if not 0.0 < float(self.val_fraction) < 1.0:
+            raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
+        for key in ("workers", "chunk_size", "max_benign_windows", "max_val_windows", "plot_states",
+                    "plot_samples_per_state", "threads"):
+            if int(getattr(self, key)) < 1:
+                raise ValueError(f"{key} must be >= 1, got {getattr(self, key)}")
 
 
-def load_preset(name: str) -> dict[str, Any]:
+def preset_file(name: str) -> Path:
     """The YAML preset ``experiments/configs/skills_<name>.yaml``."""
-    return presets.load_preset("skills", name, PRESETS, DEFAULTS)
+    return presets.preset_file("skills", name, PRESETS)
 
 
-def resolve_config(preset: str | None = "standard", config_file: str | Path | None = None,
-                   **overrides: Any) -> dict[str, Any]:
-    """Defaults < preset < YAML config file < explicit overrides (None values ignored); validated by building
-    every sub-config once."""
-    from seal.models.skills.demonstrations import DemoConfig
-    from seal.models.skills.realnvp import RealNVPConfig
-    from seal.models.skills.train import TrainConfig
-    from seal.models.skills.vae import VAEConfig
-
-    config = presets.layered_options("skills", PRESETS, DEFAULTS, preset, config_file, overrides)
-    DemoConfig.from_dict(config["demos"], "config key 'demos'")
-    WindowSpec(**config["windows"])
-    VAEConfig.from_dict(config["vae"], "config key 'vae'")
-    RealNVPConfig.from_dict(config["prior"], "config key 'prior'")
-    TrainConfig.from_dict(config["vae_train"], "config key 'vae_train'")
-    TrainConfig.from_dict(config["prior_train"], "config key 'prior_train'")
-    if config["adversarial_init"] not in ("benign", "scratch"):
-        raise ValueError(f"adversarial_init must be 'benign' or 'scratch', got {config['adversarial_init']!r}")
-    if not 0.0 < float(config["val_fraction"]) < 1.0:
-        raise ValueError(f"val_fraction must be in (0, 1), got {config['val_fraction']}")
-    for key in ("workers", "chunk_size", "max_benign_windows", "max_val_windows", "plot_states",
-                "plot_samples_per_state", "threads"):
-        if int(config[key]) < 1:
-            raise ValueError(f"{key} must be >= 1, got {config[key]}")
-    return config
+def resolve_config(preset: str | None = "standard", config_file: str | Path | None = None, sets: Sequence[str] = (),
+                   **values: Any) -> SkillsFitConfig:
+    """Defaults < preset < YAML config file < ``values`` (None values ignored) < ``sets`` (``key=value``); the
+    sub-configs are checked by building each once."""
+    return load_config(SkillsFitConfig, preset=None if preset is None else preset_file(preset), file=config_file,
+                       values=values, overrides=sets)
 
 
 def _fingerprint(*parts: Any) -> str:
     return hashlib.sha256(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
-def get_demonstrations(
-    dataset: str | Path, config: dict[str, Any], path: Path, progress: bool, log: Callable[[str], None]
-) -> tuple[Demonstrations, bool]:
+def get_demonstrations(dataset: str | Path, config: SkillsFitConfig, path: Path,
+                       progress: bool) -> tuple[Demonstrations, bool]:
     """The demonstrations of the configured split and whether they were reused from ``path`` (same scenarios and
     settings) rather than built (resumably) and written there."""
     from seal.core.dataset import Dataset
-    from seal.models.skills.demonstrations import DemoConfig, build_demonstrations
+    from seal.models.skills.demonstrations import build_demonstrations
 
     ds = Dataset.open(dataset)
-    split = config["split"]
+    split = config.split
     if split is not None and split not in ds.splits:
         raise ValueError(f"dataset {dataset} has no split {split!r}; splits: {sorted(ds.splits) or 'none'}")
-    scenarios = ds.load(split=split, limit=config["limit"])
+    scenarios = ds.load(split=split, limit=config.limit)
     if len(scenarios) < 2:
         raise ValueError(f"dataset {dataset}: split {split!r} has {len(scenarios)} scenario(s); need at least 2")
-    demo_cfg = DemoConfig.from_dict({"seed": config["seed"], **config["demos"]}, "config key 'demos'")
+    demo_cfg = DemoConfig.from_dict({"seed": config.seed, **config.demos}, "config key 'demos'")
     ids = [s.scenario_id for s in scenarios]
     if path.exists():
         demos = Demonstrations.load(path)
         if demos.params == demo_cfg.to_dict() and list(demos.scenario_ids) == ids:
-            log(f"demonstrations: reusing {path} ({demos.n_segments} agents, {demos.n_rows} steps)")
+            logger.info(f"demonstrations: reusing {path} ({demos.n_segments} agents, {demos.n_rows} steps)")
             return demos, True
-        log(f"demonstrations: {path} was built from other scenarios or settings; rebuilding")
-    log(f"demonstrations: simulating {len(scenarios)} scenarios of split {split!r} with {config['workers']} processes")
-    demos = build_demonstrations(scenarios, path, demo_cfg, workers=int(config["workers"]),
-                                 chunk_size=int(config["chunk_size"]), progress=progress)
+        logger.info(f"demonstrations: {path} was built from other scenarios or settings; rebuilding")
+    logger.info(f"demonstrations: simulating {len(scenarios)} scenarios of split {split!r} with {config.workers} "
+                "processes")
+    demos = build_demonstrations(scenarios, path, demo_cfg, workers=config.workers, chunk_size=config.chunk_size,
+                                 progress=progress)
     return demos, False
 
 
@@ -142,99 +160,79 @@ def _cap(rows: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
     return rows if rows.size <= n else np.sort(rng.choice(rows, n, replace=False))
 
 
-def fit_skills(
-    dataset: str | Path, out: str | Path, config: dict[str, Any], demos_path: str | Path | None = None,
-    progress: bool = True, log: Callable[[str], None] = print,
-) -> dict[str, Any]:
-    """Run the pipeline of the module docstring; returns the metrics (also written to ``out/metrics.json``)."""
-    import torch
+Rows = dict[tuple[str, str], np.ndarray]
+"""Window start rows per (``train`` | ``val``, ``benign`` | ``adversarial``)."""
 
-    from seal.experiments.fitting.skill_embedding import plot_embedding, prior_samples
-    from seal.models.skills.io import VAE_FILE, load_model, prior_file, save_model
-    from seal.models.skills.metrics import gaussian_nll, prior_nll, vae_metrics
-    from seal.models.skills.realnvp import ConditionalRealNVP, RealNVPConfig
-    from seal.models.skills.train import TrainConfig, encode_windows, train_prior, train_vae
-    from seal.models.skills.vae import SkillVAE, VAEConfig
+_CLASSES = ((BENIGN, "benign"), (ADVERSARIAL, "adversarial"))
 
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    demos_file = Path(demos_path) if demos_path is not None else out / "demos.npz"
-    atomic_write_bytes(out / "config.yaml", yaml.safe_dump(
-        {**config, "dataset": str(dataset), "out": str(out), "demos_path": str(demos_file)}, sort_keys=True).encode())
-    torch.set_num_threads(int(config["threads"]))
-    timings: dict[str, float] = {}
-    reused: list[str] = []
 
-    t = time.perf_counter()
-    demos, demos_reused = get_demonstrations(dataset, config, demos_file, progress, log)
-    timings["demonstrations_s"] = round(time.perf_counter() - t, 1)
-    if demos_reused:
-        reused.append("demonstrations")
-    spec = WindowSpec(**config["windows"])
-    vae_cfg = VAEConfig.from_dict({"obs_dim": demos.obs_dim, "horizon": spec.horizon, **config["vae"]})
-    if vae_cfg.horizon != spec.horizon:
-        raise ValueError(f"config: vae.horizon ({vae_cfg.horizon}) must equal windows.horizon ({spec.horizon})")
-    stats = demos.stats(spec)
-    log("demonstrations: " + ", ".join(f"{k} {v}" for k, v in stats.items() if not isinstance(v, dict))
-        + f", end reasons {stats['end_reasons']}")
-
-    # Windows, held out by scenario; per class capped for training (benign) and validation (both).
-    seed = int(config["seed"])
+def _window_rows(demos: Demonstrations, spec: WindowSpec, config: SkillsFitConfig) -> tuple[Rows, dict[str, int]]:
+    """Windows held out by scenario; per class capped for training (benign) and validation (both); the counts."""
+    seed = config.seed
     rng = np.random.default_rng(seed)
     windows = label_windows(demos.seg_row, demos.seg_len, demos.seg_end_reason, spec)
     train_w, val_w = split_by_scenario(windows, demos.seg_scenario, len(demos.scenario_ids),
-                                       float(config["val_fraction"]), seed)
-    rows = {
-        ("train", name): train_w.row[train_w.label == label] for label, name in ((BENIGN, "benign"),
-                                                                                 (ADVERSARIAL, "adversarial"))
-    }
-    rows.update({("val", name): val_w.row[val_w.label == label] for label, name in ((BENIGN, "benign"),
-                                                                                  (ADVERSARIAL, "adversarial"))})
-    rows["train", "benign"] = _cap(rows["train", "benign"], int(config["max_benign_windows"]), rng)
+                                       float(config.val_fraction), seed)
+    rows = {("train", name): train_w.row[train_w.label == label] for label, name in _CLASSES}
+    rows.update({("val", name): val_w.row[val_w.label == label] for label, name in _CLASSES})
+    rows["train", "benign"] = _cap(rows["train", "benign"], config.max_benign_windows, rng)
     for name in ("benign", "adversarial"):
-        rows["val", name] = _cap(rows["val", name], int(config["max_val_windows"]), rng)
+        rows["val", name] = _cap(rows["val", name], config.max_val_windows, rng)
     counts = {f"{split}_{name}": int(r.size) for (split, name), r in rows.items()}
-    log("windows used: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    logger.info("windows used: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
     for key, n in counts.items():
         if n == 0:
             raise ValueError(f"no {key.replace('_', ' ')} windows: simulate more scenarios (--limit) or raise the "
                              "demonstration noise (config key 'demos')")
-    obs, actions = demos.obs, demos.actions
-    data_fp = _fingerprint(demos.params, list(demos.scenario_ids), spec.to_dict(), config["val_fraction"],
-                           config["max_benign_windows"], seed)
+    return rows, counts
 
-    # The VAE.
-    t = time.perf_counter()
-    vae_train = TrainConfig.from_dict({"seed": seed, **config["vae_train"]})
+
+def _fit_vae(demos: Demonstrations, rows: Rows, counts: dict[str, int], vae_cfg: VAEConfig, data_fp: str,
+             config: SkillsFitConfig, out: Path, progress: bool) -> tuple[Any, str, bool]:
+    """The skill VAE (reused from ``out`` when trained from the same data and settings); its fingerprint; reused?"""
+    import torch
+
+    from seal.models.skills.io import VAE_FILE, load_model, save_model
+    from seal.models.skills.train import train_vae
+    from seal.models.skills.vae import SkillVAE
+
+    seed = config.seed
+    vae_train = SkillTrainConfig.from_dict({"seed": seed, **config.vae_train})
     vae_fp = _fingerprint(data_fp, vae_cfg.to_dict(), vae_train.to_dict())
-    vae = _reuse(out / VAE_FILE, vae_fp, load_model, log)
+    vae = _reuse(out / VAE_FILE, vae_fp, load_model)
     if vae is not None:
-        reused.append("vae")
-    else:
-        torch.manual_seed(seed)
-        vae = SkillVAE(vae_cfg)
-        train_rows = np.concatenate([rows["train", "benign"], rows["train", "adversarial"]])
-        val_rows = np.concatenate([rows["val", "benign"], rows["val", "adversarial"]])
-        fit = train_vae(vae, obs, actions, train_rows, val_rows, vae_train, out / "vae_log.csv", progress)
-        save_model(vae, out / VAE_FILE, {"fingerprint": vae_fp, "fit": _fit_info(fit), "windows": counts})
-        log(f"vae: {fit.stop_reason}; best epoch {fit.best_epoch} (val loss {fit.best_val:.4f})")
-    timings["vae_s"] = round(time.perf_counter() - t, 1)
+        return vae, vae_fp, True
+    torch.manual_seed(seed)
+    vae = SkillVAE(vae_cfg)
+    train_rows = np.concatenate([rows["train", "benign"], rows["train", "adversarial"]])
+    val_rows = np.concatenate([rows["val", "benign"], rows["val", "adversarial"]])
+    fit = train_vae(vae, demos.obs, demos.actions, train_rows, val_rows, vae_train, out / "vae_log.csv", progress)
+    save_model(vae, out / VAE_FILE, {"fingerprint": vae_fp, "fit": _fit_info(fit), "windows": counts})
+    logger.info(f"vae: {fit.stop_reason}; best epoch {fit.best_epoch} (val loss {fit.best_val:.4f})")
+    return vae, vae_fp, False
 
-    # The priors on posterior means, conditioned on each window's first observation.
-    t = time.perf_counter()
-    z = {key: encode_windows(vae, obs, actions, r) for key, r in rows.items()}
-    cond = {key: obs[r].astype(np.float32) for key, r in rows.items()}
-    prior_cfg = RealNVPConfig.from_dict({"latent_dim": vae_cfg.latent_dim, "cond_dim": demos.obs_dim,
-                                         **config["prior"]})
-    prior_train = TrainConfig.from_dict({"seed": seed, **config["prior_train"]})
+
+def _fit_priors(z: Rows, cond: Rows, counts: dict[str, int], prior_cfg: RealNVPConfig, vae_fp: str,
+                config: SkillsFitConfig, out: Path, progress: bool) -> tuple[dict[str, Any], list[str]]:
+    """The benign and adversarial priors on posterior means ``z`` conditioned on ``cond`` (reused when trained from
+    the same data and settings); the names of the reused ones."""
+    import torch
+
+    from seal.models.skills.io import load_model, prior_file, save_model
+    from seal.models.skills.realnvp import ConditionalRealNVP
+    from seal.models.skills.train import train_prior
+
+    seed = config.seed
+    prior_train = SkillTrainConfig.from_dict({"seed": seed, **config.prior_train})
     priors: dict[str, ConditionalRealNVP] = {}
     prior_fps: dict[str, str] = {}
+    reused: list[str] = []
     for name in ("benign", "adversarial"):
-        from_benign = name == "adversarial" and config["adversarial_init"] == "benign"
+        from_benign = name == "adversarial" and config.adversarial_init == "benign"
         fp = _fingerprint(vae_fp, name, prior_cfg.to_dict(), prior_train.to_dict(),
                           prior_fps["benign"] if from_benign else None)
         prior_fps[name] = fp
-        prior = _reuse(out / prior_file(name), fp, load_model, log)
+        prior = _reuse(out / prior_file(name), fp, load_model)
         if prior is not None:
             reused.append(f"prior_{name}")
         else:
@@ -246,12 +244,18 @@ def fit_skills(
                               prior_train, out / f"prior_{name}_log.csv", progress, f"prior {name}",
                               fit_norm=not from_benign)
             save_model(prior, out / prior_file(name), {"fingerprint": fp, "fit": _fit_info(fit), "windows": counts})
-            log(f"prior {name}: {fit.stop_reason}; best epoch {fit.best_epoch} (val NLL {fit.best_val:.3f})")
+            logger.info(f"prior {name}: {fit.stop_reason}; best epoch {fit.best_epoch} (val NLL {fit.best_val:.3f})")
         priors[name] = prior
-    timings["priors_s"] = round(time.perf_counter() - t, 1)
+    return priors, reused
 
-    # Held-out metrics.
-    t = time.perf_counter()
+
+def _held_out_metrics(vae: Any, priors: dict[str, Any], demos: Demonstrations, rows: Rows, z: Rows, cond: Rows,
+                      config: SkillsFitConfig, out: Path) -> dict[str, Any]:
+    """Reconstruction, prior NLL per class (cross terms too) against a Gaussian reference, and the embedding plot."""
+    from seal.experiments.fitting.skill_embedding import plot_embedding, prior_samples
+    from seal.models.skills.metrics import gaussian_nll, prior_nll, vae_metrics
+
+    seed, obs, actions = config.seed, demos.obs, demos.actions
     val_all = np.concatenate([rows["val", "benign"], rows["val", "adversarial"]])
     recon = {
         "all": vae_metrics(vae, obs, actions, val_all, seed),
@@ -269,23 +273,75 @@ def fit_skills(
         for cname in ("benign", "adversarial")
     }
     # The picture: both priors over the same held-out states (drawn from both classes).
-    n_states = int(config["plot_states"])
-    state_rows = _cap(val_all, n_states, np.random.default_rng(seed + 1))
+    state_rows = _cap(val_all, config.plot_states, np.random.default_rng(seed + 1))
     states = obs[state_rows].astype(np.float32)
-    samples = {name: prior_samples(p, states, int(config["plot_samples_per_state"]), seed + k)
+    samples = {name: prior_samples(p, states, config.plot_samples_per_state, seed + k)
                for k, (name, p) in enumerate(priors.items())}
     embedding = plot_embedding(samples, out / "embedding.png",
                                f"skill latents of both priors over {state_rows.size} held-out states (PCA)")
-    timings["metrics_s"] = round(time.perf_counter() - t, 1)
-
-    metrics = {
-        "dataset": str(dataset), "split": config["split"], "out": str(out), "demos_path": str(demos_file),
-        "demonstrations": stats, "windows_used": counts, "window_spec": spec.to_dict(),
+    return {
         "reconstruction": {k: {m: round(v, 5) if isinstance(v, float) else v for m, v in r.items()}
                            for k, r in recon.items()},
         "action_std_train": [round(float(v), 5) for v in vae.act_std.tolist()],
         "prior_nll_nats": nll,
         "embedding": embedding,
+    }
+
+
+def fit_skills(dataset: str | Path, out: str | Path, config: SkillsFitConfig, demos_path: str | Path | None = None,
+               progress: bool = True) -> dict[str, Any]:
+    """Run the pipeline of the module docstring; returns the metrics (also written to ``out/metrics.json``).
+
+    The caller sets torch's threads (the CLI: ``config.threads``)."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    demos_file = Path(demos_path) if demos_path is not None else out / "demos.npz"
+    atomic_write_bytes(out / "config.yaml", yaml.safe_dump(
+        {**to_dict(config), "dataset": str(dataset), "out": str(out), "demos_path": str(demos_file)},
+        sort_keys=True).encode())
+    timings: dict[str, float] = {}
+    reused: list[str] = []
+
+    t = time.perf_counter()
+    demos, demos_reused = get_demonstrations(dataset, config, demos_file, progress)
+    timings["demonstrations_s"] = round(time.perf_counter() - t, 1)
+    if demos_reused:
+        reused.append("demonstrations")
+    spec = WindowSpec(**config.windows)
+    vae_cfg = VAEConfig.from_dict({"obs_dim": demos.obs_dim, "horizon": spec.horizon, **config.vae})
+    if vae_cfg.horizon != spec.horizon:
+        raise ValueError(f"config: vae.horizon ({vae_cfg.horizon}) must equal windows.horizon ({spec.horizon})")
+    stats = demos.stats(spec)
+    logger.info("demonstrations: " + ", ".join(f"{k} {v}" for k, v in stats.items() if not isinstance(v, dict))
+                + f", end reasons {stats['end_reasons']}")
+    rows, counts = _window_rows(demos, spec, config)
+    data_fp = _fingerprint(demos.params, list(demos.scenario_ids), spec.to_dict(), config.val_fraction,
+                           config.max_benign_windows, config.seed)
+
+    t = time.perf_counter()
+    vae, vae_fp, vae_reused = _fit_vae(demos, rows, counts, vae_cfg, data_fp, config, out, progress)
+    reused += ["vae"] if vae_reused else []
+    timings["vae_s"] = round(time.perf_counter() - t, 1)
+
+    # The priors on posterior means, conditioned on each window's first observation.
+    from seal.models.skills.train import encode_windows
+
+    t = time.perf_counter()
+    z = {key: encode_windows(vae, demos.obs, demos.actions, r) for key, r in rows.items()}
+    cond = {key: demos.obs[r].astype(np.float32) for key, r in rows.items()}
+    prior_cfg = RealNVPConfig.from_dict({"latent_dim": vae_cfg.latent_dim, "cond_dim": demos.obs_dim,
+                                         **config.prior})
+    priors, priors_reused = _fit_priors(z, cond, counts, prior_cfg, vae_fp, config, out, progress)
+    reused += priors_reused
+    timings["priors_s"] = round(time.perf_counter() - t, 1)
+
+    t = time.perf_counter()
+    held_out = _held_out_metrics(vae, priors, demos, rows, z, cond, config, out)
+    timings["metrics_s"] = round(time.perf_counter() - t, 1)
+    metrics = {
+        "dataset": str(dataset), "split": config.split, "out": str(out), "demos_path": str(demos_file),
+        "demonstrations": stats, "windows_used": counts, "window_spec": spec.to_dict(),
+        **held_out,
         "models": {"vae": vae_cfg.to_dict(), "prior": prior_cfg.to_dict()},
         "timings": timings,
         "stages_reused": reused,  # their timings are load times, not training times
@@ -299,13 +355,13 @@ def _fit_info(fit: Any) -> dict[str, Any]:
             "seconds": fit.seconds, "epochs": len(fit.history)}
 
 
-def _reuse(path: Path, fingerprint: str, load: Callable[..., Any], log: Callable[[str], None]) -> Any:
+def _reuse(path: Path, fingerprint: str, load: Callable[..., Any]) -> Any:
     """The model at ``path`` when it was trained with ``fingerprint`` (resume), else None."""
     if not path.exists():
         return None
     model, info = load(path)
     if info.get("fingerprint") == fingerprint:
-        log(f"reusing {path} (same data and settings)")
+        logger.info(f"reusing {path} (same data and settings)")
         return model
     return None
 

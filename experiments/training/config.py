@@ -1,123 +1,196 @@
 """Configuration of ``seal train``: the ``train:`` section of a preset YAML (``experiments/configs/<preset>.yaml``)
-resolved for one pipeline and seed.
+as the frozen dataclass `EgoTrainConfig`, resolved for one pipeline and seed.
 
-Resolution: `DEFAULTS` < the file's ``train:`` section < overrides (dotted keys, e.g.
-``{"pipeline": "cat", "seed": 1, "hyperparams.td3.learning_starts": 500}``). The resolved config (what a run
-folder's ``config.yaml`` records) keeps the chosen algorithm's hyper-parameters only and the pipeline's generator
-as ``generator: {name, kwargs}`` (``name`` None for ``noadv``). Other top-level sections of a preset file
-(``data``, ``fit``, ``eval``, ``pipelines``, ``seeds``) belong to the orchestrator and are not read here.
+Resolution (`seal.core.config.load_config`): `EgoTrainConfig` defaults < the file's ``train:`` section < options
+(dotted keys, e.g. ``{"pipeline": "cat", "seed": 1, "hyperparams.td3.learning_starts": 500}``) < ``--set KEY=VALUE``.
+The resolved config (`resolve`; what a run folder's ``config.yaml`` records) is a plain mapping that keeps the chosen
+algorithm's hyper-parameters only and the pipeline's generator as ``generator: {name, kwargs}`` (``name`` None for
+``noadv``). Other top-level sections of a preset file (``data``, ``fit``, ``eval``, ``pipelines``, ``seeds``) belong
+to the orchestrator and are not read here.
 """
 
 from __future__ import annotations
 
-import copy
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
+from seal.adversaries.base import GENERATORS, NO_ADVERSARY, model_file_options, pipeline_names
+from seal.core.config import ConfigError, coerce, load_config, read_yaml, to_dict
 
 ALGOS = ("td3", "sac", "ppo")
-PIPELINES = ("noadv", "goose", "cat", "seal")
+PIPELINES = pipeline_names()
+"""``noadv`` and every generator the registry marks as a training pipeline (`seal.adversaries.base.GENERATORS`)."""
 
-DEFAULTS: dict[str, Any] = {
-    "algo": "td3",
-    "pipeline": "cat",
-    "seed": 0,
-    "total_timesteps": 1_000_000,
-    "dataset": None,
-    "train_split": "train",
-    "train_limit": None,
-    "eval_split": "eval",
-    "n_envs": None,
-    "k": 5,
-    "curriculum": {"slope": 1.8, "cap": 0.9},
-    "env": {"terminate_on_crash": False},
-    "eval_env": {"terminate_on_crash": True},
-    "eval_every": 50_000,
-    "eval_episodes": 100,
-    "checkpoint_every": 50_000,
-    "torch_threads": 1,
-    "device": "cpu",
-    "hyperparams": {
-        "td3": {
-            "learning_rate": 3e-4, "gamma": 0.99, "tau": 0.005, "batch_size": 256, "learning_starts": 10_000,
-            "buffer_size": 1_000_000, "net_arch": [256, 256], "train_freq": 1, "gradient_steps": -1,
-            "policy_delay": 2, "action_noise_std": 0.1,
-        },
-        "sac": {
-            "learning_rate": 3e-4, "gamma": 0.99, "tau": 0.005, "batch_size": 256, "learning_starts": 10_000,
-            "buffer_size": 1_000_000, "net_arch": [256, 256], "train_freq": 1, "gradient_steps": -1,
-            "ent_coef": "auto",
-        },
-        "ppo": {
-            "learning_rate": 3e-4, "gamma": 0.99, "n_steps": 1024, "batch_size": 256, "n_epochs": 10,
-            "gae_lambda": 0.95, "clip_range": 0.2, "ent_coef": 0.0, "net_arch": [256, 256],
-        },
-    },
-    "pipelines": {
-        "noadv": None,
-        "goose": {"name": "goose", "kwargs": {"model": None}},
-        "cat": {"name": "cat", "kwargs": {"prior": None}},
-        "seal": {"name": "seal", "kwargs": {"prior": None, "objective": None, "skills": None}},
-    },
-}
-"""Keys of the ``train:`` section:
 
-* ``algo``: td3 | sac | ppo (SB3); ``hyperparams.<algo>``: its settings. Off-policy: ``train_freq`` in vec-env
-  steps (each is ``n_envs`` env steps), ``gradient_steps`` per training call (-1: as many as env steps collected,
-  i.e. one gradient step per env step as in CAT), ``action_noise_std`` (TD3: Gaussian exploration noise, 0 = none).
-* ``pipeline``: noadv | goose | cat | seal; ``pipelines.<name>``: ``{name: generator, kwargs: {...}}`` (None for
-  noadv); paths in the kwargs (prior, GOOSE model, objective, skills) are filled in by the preset or ``seal run``.
-* ``seed``; ``total_timesteps``: env steps of the run (a multiple of ``n_envs``; PPO: of ``n_envs * n_steps``).
-* ``dataset``: dataset directory; ``train_split`` / ``train_limit``: the training scenarios (first N of the split);
-  ``eval_split``: the Normal evaluation split; ``eval_every`` (env steps, 0 = never) / ``eval_episodes`` (the first
-  N scenarios of the split, one deterministic episode each).
-* ``n_envs``: env worker processes (None: the machine's cores); ``k``: roll-out queue length.
-* ``curriculum``: ``slope`` and ``cap`` of p(t) = min(slope t / T, cap).
-* ``env`` / ``eval_env``: `ScenarioEnv` config overrides for training (CAT: episodes go on after a crash) and
-  evaluation (a crash ends the episode).
-* ``checkpoint_every``: env steps between checkpoints (model, replay buffer, queues, rng); ``torch_threads``;
-  ``device``.
-"""
+@dataclass(frozen=True)
+class TD3Hyperparams:
+    """SB3 TD3 settings (off-policy: ``train_freq`` in vec-env steps, each ``n_envs`` env steps)."""
+
+    learning_rate: float = 3e-4
+    """Adam learning rate."""
+    gamma: float = 0.99
+    """Discount factor."""
+    tau: float = 0.005
+    """Polyak averaging coefficient of the target networks."""
+    batch_size: int = 256
+    """Transitions per gradient step."""
+    learning_starts: int = 10_000
+    """Env steps of random actions before learning."""
+    buffer_size: int = 1_000_000
+    """Replay buffer capacity (transitions)."""
+    net_arch: tuple[int, ...] = (256, 256)
+    """Hidden layer widths of actor and critics."""
+    train_freq: int = 1
+    """Vec-env steps between training calls."""
+    gradient_steps: int = -1
+    """Gradient steps per training call (-1: as many as env steps collected, one per env step as in CAT)."""
+    policy_delay: int = 2
+    """Critic updates per actor update."""
+    action_noise_std: float = 0.1
+    """Gaussian exploration noise (0 = none)."""
+
+
+@dataclass(frozen=True)
+class SACHyperparams:
+    """SB3 SAC settings (see `TD3Hyperparams` for the shared ones)."""
+
+    learning_rate: float = 3e-4
+    """Adam learning rate."""
+    gamma: float = 0.99
+    """Discount factor."""
+    tau: float = 0.005
+    """Polyak averaging coefficient of the target networks."""
+    batch_size: int = 256
+    """Transitions per gradient step."""
+    learning_starts: int = 10_000
+    """Env steps of random actions before learning."""
+    buffer_size: int = 1_000_000
+    """Replay buffer capacity (transitions)."""
+    net_arch: tuple[int, ...] = (256, 256)
+    """Hidden layer widths of actor and critics."""
+    train_freq: int = 1
+    """Vec-env steps between training calls."""
+    gradient_steps: int = -1
+    """Gradient steps per training call (-1: one per env step collected)."""
+    ent_coef: str | float = "auto"
+    """Entropy coefficient (``"auto"``: learned)."""
+
+
+@dataclass(frozen=True)
+class PPOHyperparams:
+    """SB3 PPO settings."""
+
+    learning_rate: float = 3e-4
+    """Adam learning rate."""
+    gamma: float = 0.99
+    """Discount factor."""
+    n_steps: int = 1024
+    """Roll-out length per env between updates."""
+    batch_size: int = 256
+    """Mini-batch size."""
+    n_epochs: int = 10
+    """Epochs over each roll-out."""
+    gae_lambda: float = 0.95
+    """GAE lambda."""
+    clip_range: float = 0.2
+    """Policy ratio clip."""
+    ent_coef: float = 0.0
+    """Entropy bonus weight."""
+    net_arch: tuple[int, ...] = (256, 256)
+    """Hidden layer widths of policy and value networks."""
+
+
+@dataclass(frozen=True)
+class Hyperparams:
+    """Settings of each algorithm (the run uses ``algo``'s)."""
+
+    td3: TD3Hyperparams = field(default_factory=TD3Hyperparams)
+    """TD3 settings."""
+    sac: SACHyperparams = field(default_factory=SACHyperparams)
+    """SAC settings."""
+    ppo: PPOHyperparams = field(default_factory=PPOHyperparams)
+    """PPO settings."""
+
+
+@dataclass(frozen=True)
+class Curriculum:
+    """CAT's perturbation probability p(t) = min(slope t / T, cap)."""
+
+    slope: float = 1.8
+    """Growth of p over the run (per fraction of total_timesteps)."""
+    cap: float = 0.9
+    """Largest p."""
+
+
+@dataclass(frozen=True)
+class PipelineSpec:
+    """What a pipeline trains against: a registered generator and its constructor options."""
+
+    name: str
+    """Generator name (`seal.adversaries.base.GENERATORS`)."""
+    kwargs: dict[str, Any] = field(default_factory=dict)
+    """Constructor options; model-file options (prior, GOOSE model, objective, skills) are paths filled in by the
+    preset, the command line or ``seal run``."""
+
+
+def default_pipelines() -> dict[str, PipelineSpec | None]:
+    """``noadv: None`` and, per pipeline generator, its model-file options unset."""
+    pipelines: dict[str, PipelineSpec | None] = {NO_ADVERSARY: None}
+    for name in PIPELINES[1:]:
+        pipelines[name] = PipelineSpec(name, {opt: None for opt in GENERATORS[name].model_files()})
+    return pipelines
+
+
+@dataclass(frozen=True)
+class EgoTrainConfig:
+    """The ``train:`` section of a preset: everything ``seal train`` needs besides the run folder."""
+
+    algo: str = "td3"
+    """SB3 algorithm: td3 | sac | ppo."""
+    pipeline: str = "cat"
+    """Adversary pipeline: one of ``pipelines`` (noadv | goose | cat | seal)."""
+    seed: int = 0
+    """Random seed of the run."""
+    total_timesteps: int = 1_000_000
+    """Env steps of the run (a multiple of n_envs; PPO: of n_envs * n_steps)."""
+    dataset: Path | None = None
+    """Dataset directory."""
+    train_split: str | None = "train"
+    """Split of the training scenarios."""
+    train_limit: int | None = None
+    """Use the first N training scenarios (None: all)."""
+    eval_split: str | None = "eval"
+    """Split of the Normal evaluation."""
+    n_envs: int | None = None
+    """Env worker processes (None: the machine's cores)."""
+    k: int = 5
+    """Roll-out queue length per scenario."""
+    curriculum: Curriculum = field(default_factory=Curriculum)
+    """Perturbation probability schedule."""
+    env: dict[str, Any] = field(default_factory=lambda: {"terminate_on_crash": False})
+    """`ScenarioEnv` config overrides for training (CAT: episodes go on after a crash)."""
+    eval_env: dict[str, Any] = field(default_factory=lambda: {"terminate_on_crash": True})
+    """`ScenarioEnv` config overrides for evaluation (a crash ends the episode)."""
+    eval_every: int = 50_000
+    """Env steps between evaluations (0 = never)."""
+    eval_episodes: int = 100
+    """Evaluation scenarios (the first N of the split, one deterministic episode each)."""
+    checkpoint_every: int = 50_000
+    """Env steps between checkpoints (model, replay buffer, queues, rng)."""
+    torch_threads: int = 1
+    """Torch threads of the learner."""
+    device: str = "cpu"
+    """Torch device of the learner."""
+    hyperparams: Hyperparams = field(default_factory=Hyperparams)
+    """Per-algorithm settings."""
+    pipelines: dict[str, PipelineSpec | None] = field(default_factory=default_pipelines)
+    """Pipeline name -> generator (None for noadv). An entry naming its generator replaces the old one whole; one
+    without ``name`` (``pipelines.cat.kwargs.prior``) patches it."""
+
 
 RESOLVED_ONLY = ("generator", "preset", "hyperparams")
-
-
-def _merge(base: dict[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
-    """Deep merge; a pipeline entry that names its generator (``pipelines.X: {name: ...}``) replaces the old
-    entry whole (its kwargs belong to that generator), one without ``name`` (``pipelines.X.kwargs.prior``) merges."""
-    out = copy.deepcopy(base)
-    for k, v in over.items():
-        if k == "pipelines" and isinstance(v, Mapping) and isinstance(out.get(k), dict):
-            out[k] = {**out[k]}
-            for name, spec in v.items():
-                keep = isinstance(spec, Mapping) and "name" not in spec and isinstance(out[k].get(name), dict)
-                out[k][name] = _merge(out[k][name], spec) if keep else copy.deepcopy(spec)
-        elif isinstance(v, Mapping) and isinstance(out.get(k), dict):
-            out[k] = _merge(out[k], v)
-        else:
-            out[k] = copy.deepcopy(v)
-    return out
-
-
-def _check_keys(given: Mapping[str, Any], known: Mapping[str, Any], where: str) -> None:
-    unknown = sorted(set(given) - set(known))
-    if unknown:
-        raise ValueError(f"{where}: unknown key(s) {unknown}; known: {sorted(known)}")
-
-
-def _dotted(overrides: Mapping[str, Any]) -> dict[str, Any]:
-    """``{"a.b": 1}`` -> ``{"a": {"b": 1}}`` (plain keys kept)."""
-    nested: dict[str, Any] = {}
-    for key, value in overrides.items():
-        parts = key.split(".")
-        node = nested
-        for part in parts[:-1]:
-            node = node.setdefault(part, {})
-        node[parts[-1]] = value
-    return nested
-
 
 PRESETS = ("quick", "standard", "paper")
 DEFAULT_PRESET = "standard"
@@ -133,72 +206,77 @@ def preset_path(name_or_path: str | Path) -> Path:
 
 
 def read_train_section(path: str | Path) -> dict[str, Any]:
-    """The ``train:`` mapping of the YAML file ``path`` (keys checked against `DEFAULTS`)."""
+    """The ``train:`` mapping of the YAML file ``path`` (a preset name or a path; keys checked when loaded)."""
     path = preset_path(path)
     if not path.is_file():
         raise FileNotFoundError(
             f"--config {path}: no such file (presets: experiments/configs/quick|standard|paper.yaml)"
         )
-    loaded = yaml.safe_load(path.read_text()) or {}
-    if not isinstance(loaded, dict) or not isinstance(loaded.get("train"), dict):
-        raise ValueError(f"{path}: no 'train:' section (a mapping of the keys of "
-            f"seal.experiments.training.config.DEFAULTS)")
-    section = loaded["train"]
-    _check_keys(section, DEFAULTS, f"{path}: train")
-    return section
+    loaded = read_yaml(path)
+    if not isinstance(loaded.get("train"), dict):
+        raise ConfigError(f"{path}: no 'train:' section (a mapping of the fields of "
+                          f"seal.experiments.training.config.EgoTrainConfig)")
+    return dict(loaded["train"])
 
 
-def load_train_config(path: str | Path, overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    """Resolve the run config from the preset file ``path`` (or a preset name, `preset_path`; its ``train:``
-    section) and ``overrides`` (dotted keys; None values ignored): `DEFAULTS` < file < overrides, then `resolve`.
+def load_ego_train_config(path: str | Path, overrides: Mapping[str, Any] | None = None,
+                          sets: Sequence[str] = ()) -> EgoTrainConfig:
+    """The `EgoTrainConfig` of the preset file ``path`` (or a preset name) with ``overrides`` (dotted keys; None
+    values ignored) and ``sets`` (``"key.sub=value"``) on top."""
+    file = preset_path(path)
+    read_train_section(file)  # a clear error for a missing file or section
+    return load_config(EgoTrainConfig, file=file, section="train", values=overrides, overrides=sets)
+
+
+def load_train_config(path: str | Path, overrides: Mapping[str, Any] | None = None,
+                      sets: Sequence[str] = ()) -> dict[str, Any]:
+    """The resolved run config (`resolve`) of the preset file ``path`` (or a preset name, `preset_path`; its
+    ``train:`` section), ``overrides`` (dotted keys; None values ignored) and ``sets`` (``--set`` strings).
     ``preset`` is the file's stem."""
-    section = read_train_section(path)
-    given = _dotted({k: v for k, v in (overrides or {}).items() if v is not None})
-    _check_keys(given, DEFAULTS, "train config overrides")
-    config = _merge(_merge(DEFAULTS, section), given)
+    config = load_ego_train_config(path, overrides, sets)
     return resolve(config, preset=preset_path(path).stem)
 
 
-def resolve(config: Mapping[str, Any], preset: str) -> dict[str, Any]:
-    """Validate a merged config and reduce it to the run's settings (module docstring)."""
-    c = dict(config)
-    algo = str(c["algo"]).lower()
-    if algo not in ALGOS:
-        raise ValueError(f"train.algo must be one of {ALGOS}, got {c['algo']!r}")
-    pipeline = str(c["pipeline"])
-    if pipeline not in c["pipelines"]:
-        raise ValueError(f"--pipeline must be one of {sorted(c['pipelines'])}, got {pipeline!r}")
-    spec = c["pipelines"][pipeline]
+def _generator(config: EgoTrainConfig) -> dict[str, Any]:
+    if config.pipeline not in config.pipelines:
+        raise ConfigError(f"--pipeline must be one of {sorted(config.pipelines)}, got {config.pipeline!r}")
+    spec = config.pipelines[config.pipeline]
     if spec is None:
-        generator: dict[str, Any] = {"name": None, "kwargs": {}}
-    else:
-        if not isinstance(spec, Mapping) or "name" not in spec:
-            raise ValueError(f"train.pipelines.{pipeline}: expected {{name: GENERATOR, kwargs: {{...}}}} or null")
-        generator = {"name": str(spec["name"]), "kwargs": dict(spec.get("kwargs") or {})}
+        return {"name": None, "kwargs": {}}
+    kwargs = dict(spec.kwargs)
+    for option in model_file_options(spec.name):  # model files are paths (or a declared built-in name)
+        if kwargs.get(option) is not None:
+            where = f"train.pipelines.{config.pipeline}.kwargs"
+            kwargs[option] = to_dict(coerce(kwargs[option], Path, option, where))
+    return {"name": spec.name, "kwargs": kwargs}
+
+
+def resolve(config: EgoTrainConfig, preset: str) -> dict[str, Any]:
+    """Validate a config and reduce it to the run's settings (module docstring)."""
+    algo = config.algo.lower()
+    if algo not in ALGOS:
+        raise ConfigError(f"train.algo must be one of {ALGOS}, got {config.algo!r}")
+    generator = _generator(config)
     for key in ("total_timesteps", "k", "eval_episodes", "torch_threads"):
-        if int(c[key]) < 1:
-            raise ValueError(f"train.{key} must be >= 1, got {c[key]}")
+        if getattr(config, key) < 1:
+            raise ConfigError(f"train.{key} must be >= 1, got {getattr(config, key)}")
     for key in ("eval_every", "checkpoint_every"):
-        if int(c[key]) < 0:
-            raise ValueError(f"train.{key} must be >= 0, got {c[key]}")
-    if c["n_envs"] is not None and int(c["n_envs"]) < 1:
-        raise ValueError(f"train.n_envs must be >= 1 or null (all cores), got {c['n_envs']}")
-    _check_keys(c["curriculum"], DEFAULTS["curriculum"], "train.curriculum")
-    hyper = dict(c["hyperparams"].get(algo) or {})
-    _check_keys(hyper, DEFAULTS["hyperparams"][algo], f"train.hyperparams.{algo}")
-    hyper = {**DEFAULTS["hyperparams"][algo], **hyper}
-    out = {k: v for k, v in c.items() if k not in ("pipelines", "hyperparams")}
-    out.update(algo=algo, pipeline=pipeline, seed=int(c["seed"]), total_timesteps=int(c["total_timesteps"]),
-               generator=generator, hyperparams=hyper, preset=preset)
+        if getattr(config, key) < 0:
+            raise ConfigError(f"train.{key} must be >= 0, got {getattr(config, key)}")
+    if config.n_envs is not None and config.n_envs < 1:
+        raise ConfigError(f"train.n_envs must be >= 1 or null (all cores), got {config.n_envs}")
+    plain = to_dict(config)
+    out = {k: v for k, v in plain.items() if k not in ("pipelines", "hyperparams")}
+    out.update(algo=algo, generator=generator, hyperparams=plain["hyperparams"][algo], preset=preset)
     return out
 
 
 def check_resolved(config: Mapping[str, Any], source: str) -> dict[str, Any]:
     """A run folder's recorded config (``source`` names the file), checked for the keys a run needs."""
     if not isinstance(config, Mapping):
-        raise ValueError(f"{source}: expected a mapping")
-    need = set(DEFAULTS) - {"pipelines"} | set(RESOLVED_ONLY)
+        raise ConfigError(f"{source}: expected a mapping")
+    need = {f for f in EgoTrainConfig.__dataclass_fields__ if f != "pipelines"} | set(RESOLVED_ONLY)
     missing = sorted(need - set(config))
     if missing:
-        raise ValueError(f"{source}: missing key(s) {missing}; not a `seal train` run config")
+        raise ConfigError(f"{source}: missing key(s) {missing}; not a `seal train` run config")
     return dict(config)

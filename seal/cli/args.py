@@ -3,13 +3,59 @@
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
+import importlib
+from collections.abc import Callable, Iterator, Sequence
+from typing import overload
 
 LAYOUTS = ("highway", "merge", "intersection", "roundabout")
 
 
 class CliError(Exception):
     """A user error: printed without a traceback, exit status 2."""
+
+
+class RegistryChoices(Sequence[str]):
+    """``choices`` of an option read from the generator registry (`seal.adversaries.base`) on first use: argparse
+    only looks at them when it parses that option or prints that command's help, so ``seal --help`` does not
+    import the adversaries."""
+
+    def __init__(self, function: str) -> None:
+        self.function = function
+        self._names: tuple[str, ...] | None = None
+
+    def _load(self) -> tuple[str, ...]:
+        if self._names is None:
+            registry = importlib.import_module("seal.adversaries.base")
+            self._names = tuple(getattr(registry, self.function)())
+        return self._names
+
+    @overload
+    def __getitem__(self, index: int) -> str: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> Sequence[str]: ...
+
+    def __getitem__(self, index: int | slice) -> str | Sequence[str]:
+        return self._load()[index]
+
+    def __len__(self) -> int:
+        return len(self._load())
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._load())
+
+    def __contains__(self, item: object) -> bool:
+        return item in self._load()
+
+
+def pipeline_choices() -> RegistryChoices:
+    """The training pipelines (``noadv`` and each generator the registry marks as a pipeline)."""
+    return RegistryChoices("pipeline_names")
+
+
+def generator_choices() -> RegistryChoices:
+    """Every registered generator name."""
+    return RegistryChoices("available_generators")
 
 
 def positive_int(name: str) -> Callable[[str], int]:
@@ -64,6 +110,23 @@ def layouts(text: str) -> list[str]:
     if unknown or not names:
         raise argparse.ArgumentTypeError(f"unknown layout(s) {unknown}; choose from {', '.join(LAYOUTS)}")
     return names
+
+
+SET_HELP = ("override a config key (dotted, value read as YAML), e.g. {example}; repeatable; applied after the "
+            "preset, --config and the named options")
+
+
+def add_set_option(p: argparse.ArgumentParser, example: str) -> None:
+    """``--set KEY=VALUE`` (repeatable) for a command whose config is loaded by `seal.core.config.load_config`;
+    the strings are kept as given (``args.set``) and parsed by the loader, which names a bad key or value."""
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help=SET_HELP.format(example=example))
+
+
+def set_torch_threads(threads: int) -> None:
+    """Torch's CPU threads for this process (entry points only: library code leaves the setting alone)."""
+    import torch
+
+    torch.set_num_threads(int(threads))
 
 
 def print_result(result: dict, as_json: bool, width: int = 32) -> None:

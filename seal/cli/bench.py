@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from seal.cli.args import positive_int, print_result
+from seal.cli.args import pipeline_choices, positive_int, print_result
 from seal.cli.tree import CommandTree
 
 
@@ -79,7 +79,7 @@ def register(tree: CommandTree) -> None:
                         help="preset name (quick | standard | paper) or YAML file with a train: section (default: "
                         "standard, the default preset of seal train)")
     btrain.add_argument("--steps", type=positive_int("--steps"), default=3000, help="env steps per measurement")
-    btrain.add_argument("--pipeline", choices=("noadv", "goose", "cat", "seal"), default=None,
+    btrain.add_argument("--pipeline", choices=pipeline_choices(), default=None,
                         help="pipeline (default: the config's, cat)")
     btrain.add_argument("--dataset", default=None, help="dataset directory (default: the config's)")
     btrain.add_argument("--prior", default=None, help="trajectory prior for the cat / seal pipelines")

@@ -121,7 +121,14 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def register(tree: CommandTree) -> None:
+    _register_demo(tree)
+    data_sub = tree.group("data")
+    _register_generate(data_sub)
+    _register_dataset_tools(data_sub)
+    _register_render(tree)
 
+
+def _register_demo(tree: CommandTree) -> None:
     demo = tree.top.add_parser(
         "demo",
         help="the main job on the embedded default: build a small dataset, roll out, video, table",
@@ -135,8 +142,8 @@ def register(tree: CommandTree) -> None:
     demo.add_argument("--overwrite", action="store_true", help="replace an existing --out folder")
     demo.set_defaults(func=cmd_demo)
 
-    data_sub = tree.group("data")
 
+def _register_generate(data_sub: argparse._SubParsersAction) -> None:
     gen = data_sub.add_parser(
         "generate",
         help="generate base scenarios from highway-env traffic",
@@ -172,6 +179,9 @@ def register(tree: CommandTree) -> None:
     gen.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     gen.set_defaults(func=cmd_data_generate)
 
+
+def _register_dataset_tools(data_sub: argparse._SubParsersAction) -> None:
+    """``seal data info | score | split | report``."""
     info = data_sub.add_parser(
         "info",
         help="counts per layout and split, agents per scenario, track lengths",
@@ -217,6 +227,8 @@ def register(tree: CommandTree) -> None:
     report.add_argument("--out", required=True, help="output folder")
     report.set_defaults(func=cmd_data_report)
 
+
+def _register_render(tree: CommandTree) -> None:
     render = tree.top.add_parser(
         "render",
         help="top-down video of a scenario roll-out",

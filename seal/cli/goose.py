@@ -4,21 +4,23 @@ from __future__ import annotations
 
 import argparse
 
-from seal.cli.args import positive_int
+from seal.cli.args import add_set_option, positive_int, set_torch_threads
 from seal.cli.tree import CommandTree
 
 
 def cmd_fit_goose(args: argparse.Namespace) -> int:
+    import dataclasses
     import json
 
-    from seal.experiments.fitting.goose import fit_goose, format_summary, resolve_config
+    from seal.experiments.fitting.goose import FIT_THREADS, fit_goose, format_summary, resolve_config
 
     config = resolve_config(
-        preset=args.preset, config_file=args.config, algo=args.algo, total_steps=args.steps, seed=args.seed,
-        split=args.split, limit=args.limit, eval_split=args.eval_split, eval_limit=args.eval_limit,
+        preset=args.preset, config_file=args.config, sets=args.set, algo=args.algo, total_steps=args.steps,
+        seed=args.seed, split=args.split, limit=args.limit, eval_split=args.eval_split, eval_limit=args.eval_limit,
     )
     if args.no_eval:
-        config["eval_split"] = None
+        config = dataclasses.replace(config, eval_split=None)
+    set_torch_threads(FIT_THREADS)
     summary = fit_goose(args.dataset, args.out, config, run_dir=args.run_dir, progress=not args.no_progress)
     print(json.dumps(summary, indent=2, default=str) if args.json else format_summary(summary))
     return 0
@@ -39,7 +41,7 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--preset", choices=("quick", "standard"), default="standard",
                    help="YAML preset from experiments/configs/goose_<preset>.yaml (default standard)")
     p.add_argument("--config", default=None,
-                   help="YAML config overriding the preset (keys: seal.experiments.fitting.goose.DEFAULTS)")
+                   help="YAML config overriding the preset (keys: seal.experiments.fitting.goose.GooseFitConfig)")
     p.add_argument("--algo", choices=("sac", "td3"), default=None, help="RL algorithm (default from the preset: sac)")
     p.add_argument("--steps", type=positive_int("--steps"), default=None, help="training roll-outs (env steps)")
     p.add_argument("--split", default=None, help="training split (default train)")
@@ -51,6 +53,7 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--no-eval", action="store_true", help="skip the held-out check")
     p.add_argument("--run-dir", default=None, help="run folder (default: OUT without suffix + '_run')")
     p.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
+    add_set_option(p, "spec.max_updates=3 or net_arch=[64,64]")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=cmd_fit_goose)

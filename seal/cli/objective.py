@@ -4,15 +4,20 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from seal.cli.args import positive_int
+from seal.cli.args import add_set_option, positive_int, set_torch_threads
 from seal.cli.tree import CommandTree
 
+if TYPE_CHECKING:
+    from seal.experiments.fitting.objective import ObjectiveFitConfig
 
-def _config(args: argparse.Namespace) -> dict:
+
+def _config(args: argparse.Namespace) -> ObjectiveFitConfig:
     from seal.experiments.fitting.objective import resolve_config
 
-    return resolve_config(preset=args.preset, config_file=args.config, prior=args.prior, candidates=args.candidates,
+    return resolve_config(preset=args.preset, config_file=args.config, sets=args.set, prior=args.prior,
+                          candidates=args.candidates,
                           eval_split=args.eval_split, eval_limit=args.eval_limit, workers=args.workers, seed=args.seed,
                           **({"split": args.split, "limit": args.limit} if hasattr(args, "split") else {}))
 
@@ -22,7 +27,9 @@ def cmd_fit_objective(args: argparse.Namespace) -> int:
 
     from seal.experiments.fitting.objective import fit_objective, format_summary
 
-    report = fit_objective(args.dataset, args.out, _config(args), progress=not args.no_progress)
+    config = _config(args)
+    set_torch_threads(config.threads)
+    report = fit_objective(args.dataset, args.out, config, progress=not args.no_progress)
     print(json.dumps(report, indent=2, default=str) if args.json else format_summary(report))
     return 0
 
@@ -34,7 +41,7 @@ def cmd_eval_objective(args: argparse.Namespace) -> int:
 
     model = Path(args.model)
     config = _config(args)
-    labels = Path(args.labels) if args.labels else model.parent / "labels" / config["eval_split"]
+    labels = Path(args.labels) if args.labels else model.parent / "labels" / config.eval_split
     out = Path(args.out) if args.out else model.parent
     report = eval_objective(model, args.dataset, config, labels, out, progress=not args.no_progress)
     print(json.dumps(report, indent=2, default=str) if args.json else format_report(report))
@@ -46,7 +53,8 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--preset", choices=("quick", "standard"), default="standard",
                    help="YAML preset experiments/configs/objective_<preset>.yaml (default standard)")
     p.add_argument("--config", default=None,
-                   help="YAML config overriding the preset (keys: seal.experiments.fitting.objective.DEFAULTS)")
+                   help="YAML config overriding the preset (keys: "
+                   "seal.experiments.fitting.objective.ObjectiveFitConfig)")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--prior", default=None, help="trajectory prior file (seal fit prior) giving the candidates")
     src.add_argument("--candidates", default=None, choices=("lanes", "constant_velocity"),
@@ -57,6 +65,7 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=positive_int("--workers"), default=None,
                    help="processes simulating the labels (default 2)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
+    add_set_option(p, "train.max_epochs=4 or model.hidden=32")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
 

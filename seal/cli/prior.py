@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from seal.cli.args import CliError, positive_float, positive_int, print_result
+from seal.cli.args import CliError, add_set_option, positive_float, positive_int, print_result
 from seal.cli.tree import CommandTree
 
 #: ``--split`` values besides the dataset's own split names.
@@ -45,20 +47,33 @@ def load_split(dataset: str, split: str, limit: int | None = None) -> tuple[list
     return scenarios, info
 
 
-def _load_config(path: str | None) -> tuple[dict[str, Any], dict[str, Any]]:
-    if path is None:
-        return {}, {}
+def _load_config(path: str | None, values: dict[str, Any],
+                 sets: Sequence[str]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The ``model`` and ``train`` overrides of the YAML ``--config`` file < named options ``values`` (dotted keys)
+    < ``--set``, checked by the loader against `PriorConfig` / `PriorTrainConfig`. The file's dataclass is made
+    here, not at module level: its fields name the model classes, whose import pulls in torch."""
     import yaml
 
+    from seal.core.config import load_config, overrides_field
+    from seal.models.prior.network import PriorConfig
+    from seal.models.prior.train_config import PriorTrainConfig
+
+    @dataclass(frozen=True)
+    class PriorFitFile:
+        """The ``--config`` file of ``seal fit prior`` (``experiments/configs/prior_default.yaml``)."""
+
+        model: dict[str, Any] = overrides_field(PriorConfig)
+        """`PriorConfig` overrides."""
+        train: dict[str, Any] = overrides_field(PriorTrainConfig)
+        """`PriorTrainConfig` overrides."""
+
+    if path is not None and not Path(path).is_file():
+        raise CliError(f"--config: file {path} not found")
     try:
-        doc = yaml.safe_load(Path(path).read_text()) or {}
-    except FileNotFoundError:
-        raise CliError(f"--config: file {path} not found") from None
+        doc = load_config(PriorFitFile, file=path, values=values, overrides=sets)
     except yaml.YAMLError as exc:
         raise CliError(f"--config: {path} is not valid YAML ({exc})") from None
-    if not isinstance(doc, dict) or set(doc) - {"model", "train"}:
-        raise CliError(f"--config: {path} must be a mapping with sections 'model' and/or 'train'")
-    return dict(doc.get("model") or {}), dict(doc.get("train") or {})
+    return dict(doc.model), dict(doc.train)
 
 
 def cmd_fit_prior(args: argparse.Namespace) -> int:
@@ -68,18 +83,15 @@ def cmd_fit_prior(args: argparse.Namespace) -> int:
 
     from seal.core.atomic import atomic_write_json
     from seal.models.prior.network import PriorConfig
-    from seal.models.prior.train import TrainConfig, fit_prior
+    from seal.models.prior.train import PriorTrainConfig, fit_prior
 
-    model_d, train_d = _load_config(args.config)
+    named = {"epochs": args.epochs, "max_minutes": args.max_minutes, "threads": args.threads, "seed": args.seed}
+    model_d, train_d = _load_config(args.config, {f"train.{k}": v for k, v in named.items()}, args.set)
     try:
         model_cfg = PriorConfig.from_dict(model_d)
-        train_cfg = TrainConfig.from_dict(train_d)
+        train_cfg = PriorTrainConfig.from_dict(train_d)
     except (TypeError, ValueError) as exc:
         raise CliError(f"--config {args.config}: {exc}") from None
-    overrides = {
-        "epochs": args.epochs, "max_minutes": args.max_minutes, "threads": args.threads, "seed": args.seed,
-    }
-    train_cfg = replace(train_cfg, **{k: v for k, v in overrides.items() if v is not None})
     if args.no_time_budget:
         train_cfg = replace(train_cfg, max_minutes=None)
     scenarios, info = load_split(args.dataset, args.split, args.limit)
@@ -206,6 +218,7 @@ def register(tree: CommandTree) -> None:
     fit.add_argument("--limit", type=positive_int("--limit"), default=None, help="use only the first N scenarios")
     fit.add_argument("--resume", action="store_true", help="continue an interrupted run with the same --out")
     fit.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_set_option(fit, "train.road_weight=1.0 or model.n_modes=16")
     fit.set_defaults(func=cmd_fit_prior)
 
     ev = tree.group("eval").add_parser(

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from seal.cli.args import positive_int
+from seal.cli.args import add_set_option, positive_int, set_torch_threads
 from seal.cli.tree import CommandTree
 
 
@@ -13,8 +13,9 @@ def cmd_fit_skills(args: argparse.Namespace) -> int:
 
     from seal.experiments.fitting.skills import fit_skills, format_summary, resolve_config
 
-    config = resolve_config(preset=args.preset, config_file=args.config, split=args.split, limit=args.limit,
-                            seed=args.seed, workers=args.workers)
+    config = resolve_config(preset=args.preset, config_file=args.config, sets=args.set, split=args.split,
+                            limit=args.limit, seed=args.seed, workers=args.workers)
+    set_torch_threads(config.threads)
     metrics = fit_skills(args.dataset, args.out, config, demos_path=args.demos, progress=not args.no_progress)
     print(json.dumps(metrics, indent=2, default=str) if args.json else format_summary(metrics))
     return 0
@@ -37,7 +38,7 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--preset", choices=("quick", "standard"), default="standard",
                    help="YAML preset experiments/configs/skills_<preset>.yaml (default standard)")
     p.add_argument("--config", default=None,
-                   help="YAML config overriding the preset (keys: seal.experiments.fitting.skills.DEFAULTS)")
+                   help="YAML config overriding the preset (keys: seal.experiments.fitting.skills.SkillsFitConfig)")
     p.add_argument("--split", default=None, help="split to learn from (default train)")
     p.add_argument("--limit", type=positive_int("--limit"), default=None, help="use only the first N scenarios")
     p.add_argument("--demos", default=None,
@@ -45,6 +46,7 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--workers", type=positive_int("--workers"), default=None,
                    help="processes for the demonstrations (default 2)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
+    add_set_option(p, "vae_train.max_epochs=5")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument("--json", action="store_true", help="print the metrics as JSON")
     p.set_defaults(func=cmd_fit_skills)

@@ -4,23 +4,16 @@ from __future__ import annotations
 
 import argparse
 
-from seal.cli.args import CliError, positive_int
+from seal.cli.args import CliError, add_set_option, pipeline_choices, positive_int
 from seal.cli.tree import CommandTree
 
 DEFAULT_CONFIG = "standard"
-
-
-def _set_option(text: str) -> tuple[str, object]:
-    import yaml
-
-    key, sep, value = text.partition("=")
-    if not (sep and key):
-        raise argparse.ArgumentTypeError(f"--set {text!r}: expected KEY=VALUE, e.g. hyperparams.td3.batch_size=128")
-    return key.strip(), yaml.safe_load(value)
+ALGOS = ("td3", "sac", "ppo")
+"""SB3 algorithms (`seal.experiments.training.config.ALGOS`, repeated so ``seal --help`` stays light)."""
 
 
 def overrides_from_args(args: argparse.Namespace) -> dict[str, object]:
-    """Config overrides (dotted keys) from the command-line options."""
+    """Config overrides (dotted keys) from the named command-line options (``--set`` goes on top of them)."""
     over: dict[str, object] = {"pipeline": args.pipeline, "seed": args.seed, "algo": args.algo,
                                "dataset": args.dataset, "total_timesteps": args.steps, "n_envs": args.n_envs}
     if args.prior is not None:
@@ -32,8 +25,6 @@ def overrides_from_args(args: argparse.Namespace) -> dict[str, object]:
         over["pipelines.seal.kwargs.objective"] = args.objective
     if args.skills is not None:
         over["pipelines.seal.kwargs.skills"] = args.skills
-    for key, value in args.set or []:
-        over[key] = value
     return over
 
 
@@ -51,7 +42,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         raise CliError("give exactly one of --out RUN (a new run) or --resume RUN (continue a killed run)")
     if args.resume is not None:
         options = (("--config", args.config), ("--pipeline", args.pipeline), ("--seed", args.seed),
-                   ("--set", args.set), ("--steps", args.steps), ("--algo", args.algo), ("--dataset", args.dataset),
+                   ("--set", args.set or None), ("--steps", args.steps), ("--algo", args.algo),
+                   ("--dataset", args.dataset),
                    ("--n-envs", args.n_envs), ("--prior", args.prior), ("--goose-model", args.goose_model),
                    ("--objective", args.objective), ("--skills", args.skills))
         given = [opt for opt, v in options if v is not None]
@@ -60,7 +52,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         out, config = Path(args.resume), {}
     else:
         out = Path(args.out)
-        config = load_train_config(args.config or DEFAULT_CONFIG, overrides_from_args(args))
+        config = load_train_config(args.config or DEFAULT_CONFIG, overrides_from_args(args), sets=args.set)
     def interrupt(signum: int, frame: object) -> None:
         raise KeyboardInterrupt  # `timeout` / a scheduler's SIGTERM: close the env workers, say how to resume
 
@@ -94,12 +86,12 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--config", default=None,
                    help="preset name (quick | standard | paper: experiments/configs/<name>.yaml) or a YAML file with a "
                    f"train: section (default {DEFAULT_CONFIG})")
-    p.add_argument("--pipeline", choices=("noadv", "goose", "cat", "seal"), default=None,
+    p.add_argument("--pipeline", choices=pipeline_choices(), default=None,
                    help="adversary pipeline (default: the config's, cat)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: the config's, 0)")
     p.add_argument("--out", default=None, help="new run folder (must be absent or empty)")
     p.add_argument("--resume", default=None, metavar="RUN", help="continue the unfinished run in RUN")
-    p.add_argument("--algo", choices=("td3", "sac", "ppo"), default=None, help="SB3 algorithm (default td3)")
+    p.add_argument("--algo", choices=ALGOS, default=None, help="SB3 algorithm (default td3)")
     p.add_argument("--dataset", default=None, help="dataset directory with train / eval splits (default: config)")
     p.add_argument("--steps", type=positive_int("--steps"), default=None, help="total env steps (default: config)")
     p.add_argument("--n-envs", type=positive_int("--n-envs"), default=None,
@@ -108,9 +100,7 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--goose-model", default=None, help="GOOSE agent file for the goose pipeline")
     p.add_argument("--objective", default=None, help="SEAL objective network file for the seal pipeline")
     p.add_argument("--skills", default=None, help="SEAL skills folder (seal fit skills) for the seal pipeline")
-    p.add_argument("--set", type=_set_option, action="append", metavar="KEY=VALUE",
-                   help="override a train: key (dotted, value read as YAML), e.g. hyperparams.td3.learning_starts=500; "
-                   "repeatable")
+    add_set_option(p, "hyperparams.td3.learning_starts=500 (a train: key)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print done.json as JSON")
     p.set_defaults(func=cmd_train)

@@ -172,12 +172,15 @@ def test_fit_goose_command_trains_saves_and_evaluates(
 
 
 def test_config_resolution_names_bad_keys(tmp_path: Path) -> None:
-    from seal.experiments.fitting.goose import DEFAULTS, resolve_config
+    import dataclasses
+
+    from seal.experiments.fitting.goose import GooseFitConfig, resolve_config
 
     quick = resolve_config("quick")
-    assert quick["total_steps"] < resolve_config("standard")["total_steps"]
-    assert resolve_config("standard", total_steps=77)["total_steps"] == 77
-    assert set(quick) == set(DEFAULTS)
+    assert quick.total_steps < resolve_config("standard").total_steps
+    assert resolve_config("standard", total_steps=77).total_steps == 77
+    assert resolve_config("standard", sets=["total_steps=78"], total_steps=77).total_steps == 78  # --set last
+    assert {f.name for f in dataclasses.fields(quick)} == {f.name for f in dataclasses.fields(GooseFitConfig)}
     bad = tmp_path / "bad.yaml"
     bad.write_text("total_step: 3\n")
     with pytest.raises(ValueError, match=r"bad\.yaml.*total_step"):

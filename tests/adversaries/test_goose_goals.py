@@ -118,7 +118,7 @@ def test_observation_dict_fits_the_space() -> None:
 def test_spec_validation_and_round_trip() -> None:
     spec = GooseSpec(shift_m=3.0, desired_goal=(1.0, 6.0, 0.5))
     assert GooseSpec.from_dict(spec.to_dict()) == spec
-    with pytest.raises(ValueError, match="unknown GOOSE spec keys"):
+    with pytest.raises(ValueError, match="GOOSE spec: unknown key"):
         GooseSpec.from_dict({"shift": 3.0}, where="cfg")
     with pytest.raises(ValueError, match="desired_goal"):
         GooseSpec(desired_goal=(0.0, 8.0))

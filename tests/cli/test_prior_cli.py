@@ -11,7 +11,7 @@ import yaml
 
 from seal.cli import main
 from seal.core.dataset import Dataset, write_dataset
-from seal.models.prior import PriorConfig, TrainConfig, TrajectoryPrior
+from seal.models.prior import PriorConfig, PriorTrainConfig, TrajectoryPrior
 
 PRESET = Path(__file__).resolve().parents[2] / "experiments" / "configs" / "prior_default.yaml"
 TINY_YAML = {
@@ -106,4 +106,20 @@ def test_bad_split_and_config_are_named(dataset: Path, tmp_path: Path, capsys: p
 def test_shipped_preset_matches_the_defaults() -> None:
     doc = yaml.safe_load(PRESET.read_text())
     assert PriorConfig.from_dict(doc["model"]) == PriorConfig()
-    assert TrainConfig.from_dict(doc["train"]) == TrainConfig()
+    assert PriorTrainConfig.from_dict(doc["train"]) == PriorTrainConfig()
+
+
+def test_config_file_options_and_set_layer_in_order(tmp_path: Path) -> None:
+    from seal.cli.prior import _load_config
+    from seal.core.config import ConfigError
+
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump({"model": {"n_modes": 16}, "train": {"epochs": 4, "lr": 0.001}}))
+    model, train = _load_config(str(path), {"train.epochs": 3, "train.seed": None}, ["train.lr=0.01"])
+    assert model == {"n_modes": 16} and train == {"epochs": 3, "lr": 0.01}
+    assert _load_config(None, {}, []) == ({}, {})
+    with pytest.raises(ConfigError, match=r"--set train\.epoch=2: unknown key\(s\) \['train\.epoch'\]"):
+        _load_config(None, {}, ["train.epoch=2"])
+    path.write_text(yaml.safe_dump({"modle": {}}))
+    with pytest.raises(ConfigError, match=r"c\.yaml: unknown key\(s\) \['modle'\]; known: \['model', 'train'\]"):
+        _load_config(str(path), {}, [])

@@ -23,8 +23,7 @@ def scenarios():
 def built(scenarios, tmp_path_factory) -> tuple[LabelSet, object]:
     out = tmp_path_factory.mktemp("labels")
     spec = ol.source_spec(candidates="constant_velocity")
-    labels = ol.build_labels(scenarios, out, spec, n_candidates=N_CAND, workers=1, chunk_size=1, progress=False,
-                             log=lambda _: None)
+    labels = ol.build_labels(scenarios, out, spec, n_candidates=N_CAND, workers=1, chunk_size=1, progress=False)
     return labels, out
 
 
@@ -84,7 +83,7 @@ def test_build_resumes_skips_finished_chunks_and_restarts_on_other_settings(buil
 
     monkeypatch.setattr(ol, "label_scenario", counting)
     spec = ol.source_spec(candidates="constant_velocity")
-    kw = {"workers": 1, "chunk_size": 1, "progress": False, "log": lambda _: None}
+    kw = {"workers": 1, "chunk_size": 1, "progress": False}
     again = ol.build_labels(scenarios, out, spec, n_candidates=N_CAND, **kw)
     assert calls == []  # everything reused
     np.testing.assert_array_equal(again.f_diff, labels.f_diff)

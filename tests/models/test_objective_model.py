@@ -16,7 +16,7 @@ from seal.models.objective import (
     ObjectiveConfig,
     ObjectiveFileError,
     ObjectiveModel,
-    TrainConfig,
+    ObjectiveTrainConfig,
     align_ego_rollouts,
     pair_features,
     train_objective,
@@ -213,8 +213,8 @@ def test_network_learns_a_synthetic_ranking_closer_candidates_score_higher() -> 
     held_out = _synthetic_labels(rng, 20)
     target = held_out.f_coll + held_out.f_diff[:, 0]
     # 54 training scenarios x 12 candidates = 648 pairs (logged previous roll-out only): ~11 steps per epoch.
-    cfg = TrainConfig(batch_size=64, lr=3e-3, max_epochs=30, pairs_per_epoch=4000, patience=30, max_minutes=1.0,
-                      prev="logged", seed=0)
+    cfg = ObjectiveTrainConfig(batch_size=64, lr=3e-3, max_epochs=30, pairs_per_epoch=4000, patience=30,
+                               max_minutes=1.0, prev="logged", seed=0)
     model, fit = train_objective(train, ObjectiveConfig(hidden=32), cfg)
     rho = spearman(_ranks(model, held_out), target)
     assert rho.mean() > 0.8
@@ -283,17 +283,18 @@ def test_config_from_dict_casts_types_and_rejects_bad_values() -> None:
     with pytest.raises(ValueError, match="unknown key"):
         ObjectiveConfig.from_dict({"width": 3})
     with pytest.raises(ValueError, match="select"):
-        TrainConfig(select="loss")
+        ObjectiveTrainConfig(select="loss")
     with pytest.raises(ValueError, match="rank_weight"):
-        TrainConfig(rank_weight=-1.0)
+        ObjectiveTrainConfig(rank_weight=-1.0)
 
 
 def test_selection_on_validation_spearman_and_correction_penalty_keeps_closeness_order() -> None:
     rng = np.random.default_rng(4)
     train = _synthetic_labels(rng, 20)
     held_out = _synthetic_labels(rng, 10)
-    cfg = TrainConfig(batch_size=48, lr=3e-3, max_epochs=3, pairs_per_epoch=480, patience=3, max_minutes=1.0,
-                      prev="logged", correction_l2=100.0, rank_weight=0.5, mirror=True, seed=0)
+    cfg = ObjectiveTrainConfig(batch_size=48, lr=3e-3, max_epochs=3, pairs_per_epoch=480, patience=3,
+                               max_minutes=1.0, prev="logged", correction_l2=100.0, rank_weight=0.5, mirror=True,
+                               seed=0)
     model, fit = train_objective(train, ObjectiveConfig(hidden=8), cfg)
     rhos = [row["val_spearman"] for row in fit.history]
     assert len(rhos) == 3 and fit.best_epoch == int(np.argmax(rhos)) and fit.best_val_spearman == max(rhos)

@@ -14,7 +14,7 @@ import torch
 
 from seal.core.road import LaneSpec, RoadDescription
 from seal.core.scenario import CURRENT_STEP, DT_S, Scenario
-from seal.models.prior import FeatureConfig, PriorConfig, TrainConfig, TrajectoryPrior, fit_prior
+from seal.models.prior import FeatureConfig, PriorConfig, PriorTrainConfig, TrajectoryPrior, fit_prior
 from seal.models.prior.prior import PriorFileError
 from seal.models.prior.samples import TargetFilter
 
@@ -23,8 +23,8 @@ TINY = PriorConfig(
 )
 
 
-def tiny_train(epochs: int, seed: int = 0, val_fraction: float = 0.2, road_weight: float = 1.0) -> TrainConfig:
-    return TrainConfig(
+def tiny_train(epochs: int, seed: int = 0, val_fraction: float = 0.2, road_weight: float = 1.0) -> PriorTrainConfig:
+    return PriorTrainConfig(
         epochs=epochs, batch_size=256, lr=3e-3, warmup_steps=5, val_fraction=val_fraction, patience=10_000,
         max_minutes=None, seed=seed, road_weight=road_weight, road_chunks=24,
     )

@@ -12,7 +12,7 @@ from seal.models.skills.fast import FastDecoder, FastPriorSampler
 from seal.models.skills.io import SkillModelError, load_model, load_skill_models, prior_file, save_model
 from seal.models.skills.policy import SkillPolicy
 from seal.models.skills.realnvp import ConditionalRealNVP, RealNVPConfig
-from seal.models.skills.train import TrainConfig, train_prior
+from seal.models.skills.train import SkillTrainConfig, train_prior
 from seal.models.skills.vae import SkillVAE, VAEConfig
 
 TINY_VAE = VAEConfig(obs_dim=6, horizon=5, latent_dim=4, encoder_hidden=32, decoder_hidden=(32, 32),
@@ -155,7 +155,7 @@ def test_trained_prior_recovers_a_state_dependence() -> None:
     prior = ConditionalRealNVP(TINY_PRIOR)
     torch.manual_seed(0)
     fit = train_prior(prior, z[:2500], s[:2500], z[2500:], s[2500:],
-                      TrainConfig(batch_size=128, lr=3e-3, max_epochs=25, patience=25), progress=False)
+                      SkillTrainConfig(batch_size=128, lr=3e-3, max_epochs=25, patience=25), progress=False)
     true_nll = 4 * (math.log(0.1) + 0.5 * math.log(2 * math.pi) + 0.5)
     marginal_nll = float(np.sum(0.5 * np.log(2 * math.pi * math.e * z.var(0))))
     assert fit.best_val < true_nll + 1.5

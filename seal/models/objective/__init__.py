@@ -10,9 +10,9 @@ from seal.models.objective.features import FEATURE_NAMES, align_ego_rollouts, pa
 from seal.models.objective.labels import LOGGED_ROW, LabelSet
 from seal.models.objective.model import ObjectiveFileError, ObjectiveModel
 from seal.models.objective.network import ObjectiveConfig, ObjectiveNet
-from seal.models.objective.train import FitResult, TrainConfig, train_objective
+from seal.models.objective.train import FitResult, ObjectiveTrainConfig, train_objective
 
 __all__ = [
     "FEATURE_NAMES", "LOGGED_ROW", "FitResult", "LabelSet", "ObjectiveConfig", "ObjectiveFileError", "ObjectiveModel",
-    "ObjectiveNet", "TrainConfig", "align_ego_rollouts", "pair_features", "train_objective",
+    "ObjectiveNet", "ObjectiveTrainConfig", "align_ego_rollouts", "pair_features", "train_objective",
 ]

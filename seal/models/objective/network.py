@@ -18,7 +18,7 @@ from typing import Any, Literal, overload
 import torch
 from torch import nn
 
-from seal.core.config_keys import check_keys
+from seal.core.config import check_keys
 from seal.core.scenario import N_FUTURE
 from seal.models.objective.features import FEATURE_NAMES, N_FEATURES, pair_features
 

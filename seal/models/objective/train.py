@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from seal.core.config_keys import check_keys
+from seal.core.config import check_keys
 from seal.models.objective.labels import LOGGED_ROW, LabelSet
 from seal.models.objective.metrics import spearman
 from seal.models.objective.model import ObjectiveModel
@@ -43,7 +43,7 @@ VAL_PREVS = 5
 
 
 @dataclass(frozen=True)
-class TrainConfig:
+class ObjectiveTrainConfig:
     """Optimisation settings (see the module docstring).
 
     Attributes:
@@ -100,7 +100,7 @@ class TrainConfig:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any], where: str = "objective training config") -> TrainConfig:
+    def from_dict(cls, d: dict[str, Any], where: str = "objective training config") -> ObjectiveTrainConfig:
         check_keys(cls, d, where)
         return cls(**d)
 
@@ -229,7 +229,7 @@ class _FitData:
     val_pairs: np.ndarray
 
 
-def _split(labels: LabelSet, cfg: TrainConfig, rng: np.random.Generator) -> _FitData:
+def _split(labels: LabelSet, cfg: ObjectiveTrainConfig, rng: np.random.Generator) -> _FitData:
     """Hold out ``cfg.val_fraction`` of the scenarios (at least one, at most all but one) and build the groups."""
     order = rng.permutation(labels.n_scenarios)
     n_val = min(max(1, round(cfg.val_fraction * labels.n_scenarios)), labels.n_scenarios - 1)
@@ -250,13 +250,13 @@ class _Schedule:
     steps_per_epoch: int
 
     @classmethod
-    def of(cls, cfg: TrainConfig, n_cand: int, n_groups: int) -> _Schedule:
+    def of(cls, cfg: ObjectiveTrainConfig, n_cand: int, n_groups: int) -> _Schedule:
         groups_per_batch = max(1, cfg.batch_size // n_cand)
         n_per_epoch = min(max(1, cfg.pairs_per_epoch // n_cand), n_groups)
         return cls(groups_per_batch, n_per_epoch, max(1, -(-n_per_epoch // groups_per_batch)))
 
 
-def _batch_loss(net: ObjectiveNet, tensors: PairTensors, groups: np.ndarray, cfg: TrainConfig,
+def _batch_loss(net: ObjectiveNet, tensors: PairTensors, groups: np.ndarray, cfg: ObjectiveTrainConfig,
                 rng: np.random.Generator) -> tuple[torch.Tensor, int]:
     """The training loss of the pairs of ``groups`` (mirrored at random with ``cfg.mirror``) and their count."""
     n_cand = tensors.n_cand
@@ -273,7 +273,7 @@ def _batch_loss(net: ObjectiveNet, tensors: PairTensors, groups: np.ndarray, cfg
 
 def _train_epoch(
     net: ObjectiveNet, opt: torch.optim.Optimizer, sched: torch.optim.lr_scheduler.LRScheduler, data: _FitData,
-    cfg: TrainConfig, schedule: _Schedule, rng: np.random.Generator, epoch: int,
+    cfg: ObjectiveTrainConfig, schedule: _Schedule, rng: np.random.Generator, epoch: int,
     on_step: Callable[[int, int, int], None] | None, start: float,
 ) -> tuple[float, bool]:
     """One epoch over ``schedule.n_per_epoch`` random training groups; returns the mean pair loss and whether the
@@ -300,7 +300,7 @@ def _train_epoch(
     return total / max(seen, 1), False
 
 
-def _fit_info(cfg: TrainConfig, result: FitResult, data: _FitData) -> dict[str, Any]:
+def _fit_info(cfg: ObjectiveTrainConfig, result: FitResult, data: _FitData) -> dict[str, Any]:
     """The training record stored with the model."""
     return {"train": cfg.to_dict(), "fit": {"best_epoch": result.best_epoch, "best_val_mse": result.best_val,
                                             "best_val_spearman": result.best_val_spearman,
@@ -312,8 +312,8 @@ def _fit_info(cfg: TrainConfig, result: FitResult, data: _FitData) -> dict[str, 
 def train_objective(
     labels: LabelSet,
     model_config: ObjectiveConfig | None = None,
-    config: TrainConfig | None = None,
-    on_step: Callable[[int, int, int], None] | None = None,
+    config: ObjectiveTrainConfig | None = None,
+    on_step: Callable[[int, int, float], None] | None = None,
 ) -> tuple[ObjectiveModel, FitResult]:
     """Train a fresh pi_score on ``labels`` (see the module docstring); one INFO line per epoch to this module's
     logger.
@@ -324,7 +324,7 @@ def train_objective(
         config: optimisation settings.
         on_step: called after every optimiser step with (epoch, step in epoch, steps per epoch) for progress.
     """
-    cfg = config or TrainConfig()
+    cfg = config or ObjectiveTrainConfig()
     if labels.n_scenarios < 2:
         raise ValueError(f"objective training needs at least 2 labelled scenarios, got {labels.n_scenarios}")
     mcfg = replace(model_config or ObjectiveConfig(), n_steps=labels.n_steps)

@@ -5,7 +5,7 @@ Public API:
 * `Candidates` — K candidate futures of one agent in the world frame (the contract with the generators).
 * `TrajectoryPrior` — ``load`` / ``save`` / ``predict`` / ``encode`` / ``decode`` of a trained prior.
 * `constant_velocity_candidates` — the constant-velocity baseline and the prior's fallback.
-* `PriorConfig`, `FeatureConfig`, `TrainConfig`, `fit_prior`, `evaluate_prior`, `Encoding`.
+* `PriorConfig`, `FeatureConfig`, `PriorTrainConfig`, `fit_prior`, `evaluate_prior`, `Encoding`.
 
 Everything that needs torch is imported on first use, so ``from seal.models.prior import Candidates`` stays light.
 """
@@ -24,7 +24,7 @@ _LAZY = {
     "PriorFileError": "seal.models.prior.prior",
     "PriorConfig": "seal.models.prior.network",
     "FeatureConfig": "seal.models.prior.features",
-    "TrainConfig": "seal.models.prior.train_config",
+    "PriorTrainConfig": "seal.models.prior.train_config",
     "fit_prior": "seal.models.prior.train",
     "evaluate_prior": "seal.models.prior.evaluate",
 }

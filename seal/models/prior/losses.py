@@ -17,7 +17,7 @@ from seal.models.prior.features import featurise, road_points
 from seal.models.prior.metrics import ROAD_CHECK_EVERY, displacement_errors, top_k_min
 from seal.models.prior.network import PriorNet
 from seal.models.prior.samples import SampleSet
-from seal.models.prior.train_config import TrainConfig
+from seal.models.prior.train_config import PriorTrainConfig
 
 
 def prior_loss(
@@ -62,7 +62,7 @@ def road_loss(xy: torch.Tensor, points: torch.Tensor, mask: torch.Tensor, margin
 
 
 def batch_loss(
-    net: PriorNet, samples: SampleSet, rows: torch.Tensor, tc: TrainConfig, assigned: torch.Tensor | None,
+    net: PriorNet, samples: SampleSet, rows: torch.Tensor, tc: PriorTrainConfig, assigned: torch.Tensor | None,
     generator: torch.Generator | None = None,
 ) -> torch.Tensor:
     """Training loss of the targets ``rows``; ``assigned`` are the anchor assignments of all targets (None for
@@ -99,7 +99,7 @@ def batch_loss(
 
 @torch.no_grad()
 def training_loss(
-    net: PriorNet, samples: SampleSet, tc: TrainConfig, assigned: torch.Tensor | None, max_targets: int = 2048
+    net: PriorNet, samples: SampleSet, tc: PriorTrainConfig, assigned: torch.Tensor | None, max_targets: int = 2048
 ) -> float:
     """Mean training loss of ``net`` (eval mode) over the first ``max_targets`` targets of ``samples``."""
     was_training = net.training

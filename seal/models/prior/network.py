@@ -20,6 +20,7 @@ from typing import Any
 import torch
 from torch import nn
 
+from seal.core.config import check_keys
 from seal.core.scenario import N_FUTURE
 from seal.models.prior.features import AGENT_FEATURES, FeatureConfig
 from seal.models.prior.kinematics import integrate_controls, knot_matrix
@@ -71,14 +72,10 @@ class PriorConfig:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> PriorConfig:
         d = dict(d)
-        unknown = set(d) - {f for f in cls.__dataclass_fields__}
-        if unknown:
-            raise ValueError(f"prior config: unknown field(s) {sorted(unknown)}")
+        check_keys(cls, d, "prior config")
         feats = d.pop("features", {})
         if isinstance(feats, dict):
-            unknown = set(feats) - set(FeatureConfig.__dataclass_fields__)
-            if unknown:
-                raise ValueError(f"prior config: unknown field(s) features.{sorted(unknown)}")
+            check_keys(FeatureConfig, feats, "prior config: features")
             feats = FeatureConfig(**feats)
         return cls(features=feats, **d)
 

@@ -27,7 +27,7 @@ from seal.models.prior.losses import anchor_assignment, batch_loss, evaluate_sam
 from seal.models.prior.network import PriorConfig, PriorNet, default_anchors
 from seal.models.prior.prior import TrajectoryPrior
 from seal.models.prior.samples import SampleSet, build_samples
-from seal.models.prior.train_config import TrainConfig
+from seal.models.prior.train_config import PriorTrainConfig
 
 logger = logging.getLogger(__name__)
 
@@ -66,7 +66,9 @@ class _FitData:
     val_set: SampleSet
 
 
-def _prepare_data(scenarios: Sequence[Scenario], model_cfg: PriorConfig, tc: TrainConfig, t_start: float) -> _FitData:
+def _prepare_data(
+    scenarios: Sequence[Scenario], model_cfg: PriorConfig, tc: PriorTrainConfig, t_start: float
+) -> _FitData:
     """Split off the validation scenarios and build both sample sets."""
     train_idx, val_idx = split_validation(len(scenarios), tc.val_fraction, tc.seed)
     train_s = [scenarios[i] for i in train_idx]
@@ -82,7 +84,7 @@ def _prepare_data(scenarios: Sequence[Scenario], model_cfg: PriorConfig, tc: Tra
 
 
 def _initial_model(
-    model_cfg: PriorConfig, tc: TrainConfig, train_set: SampleSet
+    model_cfg: PriorConfig, tc: PriorTrainConfig, train_set: SampleSet
 ) -> tuple[PriorNet, torch.optim.Optimizer]:
     """A fresh network (seeded by ``tc.seed``) with anchors fitted to the training targets, and its optimiser."""
     torch.manual_seed(tc.seed)
@@ -121,8 +123,8 @@ def _restore_state(
 
 
 def _train_epoch(
-    net: PriorNet, opt: torch.optim.Optimizer, train_set: SampleSet, tc: TrainConfig, assigned: torch.Tensor | None,
-    st: dict[str, Any], epoch: int, progress: bool,
+    net: PriorNet, opt: torch.optim.Optimizer, train_set: SampleSet, tc: PriorTrainConfig,
+    assigned: torch.Tensor | None, st: dict[str, Any], epoch: int, progress: bool,
 ) -> float:
     """One pass over the training samples (order and batch noise from the epoch's seed); advances ``st["step"]``
     and returns the mean batch loss."""
@@ -166,7 +168,7 @@ def _log_epoch(epoch: int, train_loss: float, val: dict[str, float], epoch_s: fl
     )
 
 
-def _plan_and_stop(st: dict[str, Any], tc: TrainConfig, epoch: int, elapsed: float, epoch_s: float) -> None:
+def _plan_and_stop(st: dict[str, Any], tc: PriorTrainConfig, epoch: int, elapsed: float, epoch_s: float) -> None:
     """After epoch ``epoch``: shrink the plan to the epochs that fit the time budget (after the first epoch) and set
     ``st["stop_reason"]`` on early stopping or when the next epoch would overrun the budget."""
     budget_s = None if tc.max_minutes is None else 60.0 * tc.max_minutes
@@ -186,7 +188,7 @@ class _PriorFit:
     """One run of `fit_prior`: its data, network, optimiser and progress ``st`` (saved for resumption)."""
 
     def __init__(
-        self, scenarios: Sequence[Scenario], out: str | Path, model_cfg: PriorConfig, tc: TrainConfig,
+        self, scenarios: Sequence[Scenario], out: str | Path, model_cfg: PriorConfig, tc: PriorTrainConfig,
         data_info: dict[str, Any] | None, resume: bool,
     ) -> None:
         self.out, self.model_cfg, self.tc, self.data_info = out, model_cfg, tc, data_info
@@ -280,7 +282,7 @@ def fit_prior(
     scenarios: Sequence[Scenario],
     out: str | Path,
     model_cfg: PriorConfig | None = None,
-    train_cfg: TrainConfig | None = None,
+    train_cfg: PriorTrainConfig | None = None,
     data_info: dict[str, Any] | None = None,
     resume: bool = False,
     progress: bool = True,
@@ -293,12 +295,12 @@ def fit_prior(
         scenarios: training scenarios; ``train_cfg.val_fraction`` of them are held out for validation.
         out: model file, written (atomically) after every epoch that improves validation minADE@6.
         model_cfg: architecture (default `PriorConfig()`).
-        train_cfg: training settings (default `TrainConfig()`).
+        train_cfg: training settings (default `PriorTrainConfig()`).
         data_info: recorded in the model's training summary (dataset, split, ...).
         resume: continue from the training state an interrupted run left next to ``out``.
         progress: show a progress bar per epoch.
     """
-    run = _PriorFit(scenarios, out, model_cfg or PriorConfig(), train_cfg or TrainConfig(), data_info, resume)
+    run = _PriorFit(scenarios, out, model_cfg or PriorConfig(), train_cfg or PriorTrainConfig(), data_info, resume)
     while run.st["epoch"] < run.st["planned_epochs"] and run.st["stop_reason"] is None:
         run.epoch(progress)
     return run.finish()

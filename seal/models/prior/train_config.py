@@ -5,11 +5,12 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from seal.core.config import check_keys
 from seal.models.prior.samples import TargetFilter
 
 
 @dataclass(frozen=True)
-class TrainConfig:
+class PriorTrainConfig:
     """How the prior is trained (recorded in the saved model).
 
     Attributes:
@@ -65,15 +66,11 @@ class TrainConfig:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
+    def from_dict(cls, d: dict[str, Any]) -> PriorTrainConfig:
         d = dict(d)
-        unknown = set(d) - set(cls.__dataclass_fields__)
-        if unknown:
-            raise ValueError(f"training config: unknown field(s) {sorted(unknown)}")
+        check_keys(cls, d, "training config")
         targets = d.pop("targets", {})
         if isinstance(targets, dict):
-            unknown = set(targets) - set(TargetFilter.__dataclass_fields__)
-            if unknown:
-                raise ValueError(f"training config: unknown field(s) targets.{sorted(unknown)}")
+            check_keys(TargetFilter, targets, "training config: targets")
             targets = TargetFilter(**targets)
         return cls(targets=targets, **d)

@@ -23,13 +23,14 @@ import math
 import shutil
 import zlib
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from seal.core.chunked import fingerprint, run_chunked
+from seal.core.config import check_keys
 from seal.core.scenario import DT_S, N_STEPS, Scenario
 from seal.envs import observation as ob
 from seal.envs.heuristic import HeuristicDriver
@@ -94,10 +95,7 @@ class DemoConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], where: str = "demo config") -> DemoConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"{where}: unknown key(s) {unknown}; known: {sorted(known)}")
+        check_keys(cls, d, where)
         values: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
         return cls(**values)
 

@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from seal.core.config_keys import check_keys
+from seal.core.config import check_keys
 from seal.models.skills.vae import mlp, out_layer
 
 _MIN_STD = 1e-3

@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 from seal.core.atomic import atomic_write_bytes
-from seal.core.config_keys import check_keys
+from seal.core.config import check_keys
 from seal.models.skills.demos import gather_windows
 from seal.models.skills.realnvp import ConditionalRealNVP
 from seal.models.skills.vae import SkillVAE
@@ -35,7 +35,7 @@ logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
-class TrainConfig:
+class SkillTrainConfig:
     """Optimisation settings of one model.
 
     Attributes:
@@ -71,7 +71,7 @@ class TrainConfig:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any], where: str = "training config") -> TrainConfig:
+    def from_dict(cls, d: dict[str, Any], where: str = "training config") -> SkillTrainConfig:
         check_keys(cls, d, where)
         return cls(**d)
 
@@ -99,7 +99,7 @@ def _write_csv(path: Path | None, rows: list[dict[str, float | str]]) -> None:
 
 def _train_epoch(
     model: torch.nn.Module, opt: torch.optim.Optimizer, order: np.ndarray, n_batches: int,
-    batch_loss: Callable[[np.ndarray], tuple[torch.Tensor, dict[str, float]]], cfg: TrainConfig, bar_desc: str,
+    batch_loss: Callable[[np.ndarray], tuple[torch.Tensor, dict[str, float]]], cfg: SkillTrainConfig, bar_desc: str,
     progress: bool,
 ) -> dict[str, float]:
     """One pass over the training indices ``order`` in ``n_batches`` batches; returns the summed losses (``"loss"``
@@ -139,7 +139,7 @@ def fit_loop(
     n_train: int,
     batch_loss: Callable[[np.ndarray], tuple[torch.Tensor, dict[str, float]]],
     validate: Callable[[], dict[str, float]],
-    cfg: TrainConfig,
+    cfg: SkillTrainConfig,
     csv_path: str | Path | None = None,
     desc: str = "train",
     progress: bool = True,
@@ -214,7 +214,7 @@ def fit_norm_from_rows(vae: SkillVAE, obs: np.ndarray, actions: np.ndarray, rows
 
 def train_vae(
     vae: SkillVAE, obs: np.ndarray, actions: np.ndarray, train_rows: np.ndarray, val_rows: np.ndarray,
-    cfg: TrainConfig, csv_path: str | Path | None = None, progress: bool = True,
+    cfg: SkillTrainConfig, csv_path: str | Path | None = None, progress: bool = True,
 ) -> FitResult:
     """Train ``vae`` on windows starting at ``train_rows`` of the demonstration rows ``obs [M, D]`` /
     ``actions [M, 2]``; validation loss = recon (posterior mean) + beta KL on ``val_rows``."""
@@ -253,7 +253,7 @@ def encode_windows(vae: SkillVAE, obs: np.ndarray, actions: np.ndarray, rows: np
 
 def train_prior(
     prior: ConditionalRealNVP, z_train: np.ndarray, cond_train: np.ndarray, z_val: np.ndarray, cond_val: np.ndarray,
-    cfg: TrainConfig, csv_path: str | Path | None = None, progress: bool = True, desc: str = "prior",
+    cfg: SkillTrainConfig, csv_path: str | Path | None = None, progress: bool = True, desc: str = "prior",
     fit_norm: bool = True,
 ) -> FitResult:
     """Fit ``prior`` by maximum likelihood of latents ``z [N, L]`` given states ``cond [N, D]``; the loss is the

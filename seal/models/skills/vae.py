@@ -17,7 +17,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from seal.core.config_keys import check_keys
+from seal.core.config import check_keys
 
 _MIN_STD = 1e-3
 

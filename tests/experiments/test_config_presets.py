@@ -1,0 +1,50 @@
+"""Every preset of ``experiments/configs/`` resolves to the same effective values as before the typed configs.
+
+``data/resolved_presets.json`` was recorded from the dict-based configs (``DEFAULTS`` + ``resolve_config`` /
+``load_train_config`` at commit ac931ba) for each preset, with and without command-line style overrides; the
+dataclass configs must give the same plain data."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from seal.core.config import to_dict
+from seal.experiments.fitting import goose, objective, skills
+from seal.experiments.training.config import PIPELINES, load_train_config
+
+RECORDED = json.loads((Path(__file__).parent / "data" / "resolved_presets.json").read_text())
+TRAIN_CLI = {"pipeline": "seal", "seed": 3, "dataset": "d", "total_timesteps": 800, "n_envs": 1,
+             "pipelines.seal.kwargs.prior": "p.pt", "hyperparams.td3.learning_starts": 5}
+
+
+def _resolved(key: str) -> dict[str, Any]:
+    kind, preset, *rest = key.split("/")
+    if kind == "train":
+        if rest == ["cli"]:
+            return load_train_config(preset, TRAIN_CLI)
+        return load_train_config(preset, {"pipeline": rest[0], "algo": rest[1]})
+    if kind == "goose":
+        extra = dict(algo="td3", total_steps=10, seed=2, split="s", limit=3, eval_split="e", eval_limit=4)
+        return to_dict(goose.resolve_config(preset, **(extra if rest else {})))
+    if kind == "skills":
+        return to_dict(skills.resolve_config(preset, **(dict(split="s", limit=3, seed=2, workers=1) if rest else {})))
+    extra = dict(prior="p.pt", eval_split="e", eval_limit=3, workers=1, seed=4, split="s", limit=5)
+    return to_dict(objective.resolve_config(preset, **(extra if rest else {"candidates": "lanes"})))
+
+
+def test_every_recorded_case_is_covered() -> None:
+    configs = Path(__file__).resolve().parents[2] / "experiments" / "configs"
+    presets = {p.stem for p in configs.glob("*.yaml")} - {"eval_generators", "eval_seal_ablations", "prior_default"}
+    recorded = {k.split("/")[1] if k.startswith("train/") else f"{k.split('/')[0]}_{k.split('/')[1]}"
+                for k in RECORDED}
+    assert presets == recorded  # a new preset file needs a recorded case
+    assert {k.split("/")[2] for k in RECORDED if k.startswith("train/") and k.count("/") == 3} == set(PIPELINES)
+
+
+@pytest.mark.parametrize("key", sorted(RECORDED))
+def test_preset_resolves_to_recorded_values(key: str) -> None:
+    assert _resolved(key) == RECORDED[key]
