@@ -25,6 +25,7 @@ import numpy as np
 from highway_env.road.road import LaneIndex, RoadNetwork
 from highway_env.vehicle.behavior import IDMVehicle
 
+from seal.core.geometry import wrap_angle_f
 from seal.core.scenario import DT_S
 from seal.envs.network_index import NetworkIndex
 
@@ -112,10 +113,6 @@ def sample_profile(kind: str, rng: np.random.Generator) -> DriverProfile:
         distraction_s=(1.0, 3.0),
         blind_spot_prob=u(0.05, 0.15) if kind == "inattentive" else 0.0,
     )
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2 * math.pi) - math.pi
 
 
 def _not_zero(x: float, eps: float = 1e-2) -> float:
@@ -312,7 +309,7 @@ class Driver(IDMVehicle):
         lane_heading = lane.heading_at(s + v * self.TAU_PURSUIT)
         heading_cmd = math.asin(max(-1.0, min(1.0, -self.KP_LATERAL * r / _not_zero(v))))
         heading_ref = lane_heading + max(-math.pi / 4, min(math.pi / 4, heading_cmd))
-        rate_cmd = self.KP_HEADING * _wrap(heading_ref - self.heading)
+        rate_cmd = self.KP_HEADING * wrap_angle_f(heading_ref - self.heading)
         slip = math.asin(max(-1.0, min(1.0, self.LENGTH / 2 / _not_zero(v) * rate_cmd)))
         steer = math.atan(2 * math.tan(slip))
         return max(-self.MAX_STEERING_ANGLE, min(self.MAX_STEERING_ANGLE, steer))

@@ -8,6 +8,7 @@ import math
 from highway_env.road.lane import AbstractLane, CircularLane, SineLane, StraightLane
 from highway_env.road.road import LaneIndex, RoadNetwork
 
+from seal.core.geometry import wrap_angle_f
 from seal.envs.network_topology import lane_indices, predecessor_map, successor_map
 
 AHEAD_M = 80.0
@@ -89,7 +90,7 @@ class FastCircle:
     def local(self, x: float, y: float) -> tuple[float, float]:
         ex, ey = x - self.cx, y - self.cy
         phi = math.atan2(ey, ex)
-        phi = self.start + ((phi - self.start + math.pi) % (2 * math.pi) - math.pi)
+        phi = self.start + wrap_angle_f(phi - self.start)
         return self.dir * (phi - self.start) * self.radius, self.dir * (self.radius - math.hypot(ex, ey))
 
     def heading_at(self, s: float) -> float:
@@ -117,7 +118,7 @@ def fast_lane(lane: AbstractLane) -> FastLane:
 def _lane_distance(lane: FastLane, x: float, y: float, heading: float) -> float:
     """highway-env `AbstractLane.distance_with_heading` (m + rad)."""
     s, r = lane.local(x, y)
-    angle = abs((heading - lane.heading_at(s) + math.pi) % (2 * math.pi) - math.pi)
+    angle = abs(wrap_angle_f(heading - lane.heading_at(s)))
     return abs(r) + max(s - lane.length, 0.0) + max(-s, 0.0) + angle
 
 

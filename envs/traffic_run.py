@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from highway_env.road.road import LaneIndex, RoadNetwork
 
+from seal.core.geometry import wrap_angle_f
 from seal.core.scenario import DT_S
 from seal.envs.drivers import DRIVER_KINDS, Driver, sample_profile
 from seal.envs.layouts import make_network
@@ -251,7 +252,7 @@ class Simulation:
     def log(self) -> None:
         for v in self.road.vehicles:
             x, y = v.position.tolist()
-            h = (v.heading + math.pi) % (2 * math.pi) - math.pi
+            h = wrap_angle_f(v.heading)
             self.rows[v.vehicle_id].append((x, y, h, max(v.speed, 0.0), v.LENGTH, v.WIDTH))
 
     def run(self, n_steps: int) -> RunLog:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from seal.core.geometry import box_corners, box_gap
+from seal.core.geometry import box_corners, box_gap, wrap_angle
 from seal.core.interaction import in_own_lanes as own_lanes
 from seal.core.scenario import CURRENT_STEP, DT_S, N_STEPS
 from seal.envs.traffic_run import RunLog
@@ -125,9 +125,7 @@ def _conflicts(log: RunLog, i: int, j: int, lo: int, hi: int) -> list[tuple[int,
     pi, pj = log.states[i, steps, :2], log.states[j, steps, :2]
     d = np.linalg.norm(pi[:, None] - pj[None], axis=-1)
     dt = np.abs(steps[:, None] - steps[None]) * DT_S
-    heading_diff = np.abs(
-        (log.states[i, steps, 2][:, None] - log.states[j, steps, 2][None] + np.pi) % (2 * np.pi) - np.pi
-    )
+    heading_diff = np.abs(wrap_angle(log.states[i, steps, 2][:, None] - log.states[j, steps, 2][None]))
     # Following in the same lane is not a crossing: require the headings to differ there.
     hit = (
         (d < CONFLICT_DIST_M)
@@ -162,7 +160,7 @@ def _events(log: RunLog, gaps: dict[tuple[int, int], np.ndarray], pairs: _Pairs)
         if (i, j) in gaps and (gaps[(i, j)] < EVENT_GAP_M).any():
             continue  # already an event pair
         common = np.flatnonzero(np.isfinite(pairs.dist[p]))
-        turn = np.abs((head[i, common] - head[j, common] + np.pi) % (2 * np.pi) - np.pi)
+        turn = np.abs(wrap_angle(head[i, common] - head[j, common]))
         if not (turn > np.radians(15)).any():
             continue
         hits = _conflicts(log, i, j, int(common[0]), int(common[-1]) + 1)
@@ -215,7 +213,7 @@ def find_windows(log: RunLog, rng: np.random.Generator, cap: int, min_t0: int = 
         if g_interaction.min() >= EVENT_GAP_M and not conflict:
             continue
         pair_collision = (i, j) in collided and t0 <= collided[(i, j)] < t0 + N_STEPS
-        turn = np.abs((log.states[i, fut, 2] - log.states[j, fut, 2] + np.pi) % (2 * np.pi) - np.pi)
+        turn = np.abs(wrap_angle(log.states[i, fut, 2] - log.states[j, fut, 2]))
         if np.median(turn) > 2.4 and g_interaction.min() > 1.0 and not conflict:
             continue  # oncoming traffic passing in its own lane is not an interaction
         # Rank: a uniform draw among qualifying interactions, so the pool keeps their natural mix of routine

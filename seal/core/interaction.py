@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from seal.core.geometry import wrap_angle
+
 SIDE_GAP_M = 1.0
 """Parallel (or oncoming) vehicles whose bodies keep at least this lateral gap (m), measured across the first
 vehicle's heading, are in their own lanes."""
@@ -34,7 +36,7 @@ def in_own_lanes(
     """
     d = np.asarray(xy_b, dtype=np.float64) - np.asarray(xy_a, dtype=np.float64)
     lat = -d[..., 0] * np.sin(heading_a) + d[..., 1] * np.cos(heading_a)
-    turn = np.abs((np.asarray(heading_b) - np.asarray(heading_a) + np.pi) % (2 * np.pi) - np.pi)
+    turn = np.abs(wrap_angle(np.asarray(heading_b) - np.asarray(heading_a)))
     parallel = (turn < PARALLEL_RAD) | (turn > np.pi - PARALLEL_RAD)
     own = parallel & (np.abs(lat) - 0.5 * (np.asarray(width_a) + np.asarray(width_b)) >= SIDE_GAP_M)
     if lengths_m is not None:

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from seal.core.geometry import box_corners, box_gap, boxes_overlap
+from seal.core.geometry import box_gap, boxes_overlap, track_corners, wrap_angle
 from seal.core.importers.lane_index import AgentLanes, LaneIndex
 from seal.core.importers.tracks import AgentLog
 from seal.core.interaction import in_own_lanes
@@ -88,10 +88,6 @@ class PairWindow:
 
 
 # ------------------------------------------------------------------------------------------ per-agent helpers
-def _corners(tracks: np.ndarray) -> np.ndarray:
-    return box_corners(tracks[..., X], tracks[..., Y], tracks[..., HEADING], tracks[..., LENGTH], tracks[..., WIDTH])
-
-
 def run_ends(valid: np.ndarray) -> np.ndarray:
     """``[N, T]`` last step of the contiguous valid run holding each step (-1 where invalid)."""
     n, t = valid.shape
@@ -149,7 +145,7 @@ def _crossing(a: np.ndarray, b: np.ndarray) -> bool:
         return False
     d = np.linalg.norm(a[ia, None, :2] - b[None, ib, :2], axis=-1)
     dt = np.abs(ia[:, None] - ib[None, :]) * DT_S
-    dh = np.abs((a[ia, HEADING][:, None] - b[ib, HEADING][None, :] + np.pi) % (2 * np.pi) - np.pi)
+    dh = np.abs(wrap_angle(a[ia, HEADING][:, None] - b[ib, HEADING][None, :]))
     return bool(((d < CONFLICT_DIST_M) & (dt <= CONFLICT_DT_S) & (dh > np.radians(15))).any())
 
 
@@ -204,7 +200,7 @@ def _pair_candidate(
     if require_interaction and dist.min() > NEAR_M:
         return None
     gaps = np.full(n_steps, np.inf)
-    gaps[steps] = box_gap(_corners(tr[i, steps]), _corners(tr[j, steps]))
+    gaps[steps] = box_gap(track_corners(tr[i, steps]), track_corners(tr[j, steps]))
     igaps = np.where(side_by_side(tr[i], tr[j]), np.inf, gaps)
     # Closest approach after the earliest possible current step -> window start placing it at EVENT_AT_STEP.
     later = igaps.copy()
@@ -344,7 +340,7 @@ def _overlap_steps(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     both = (a[:, VALID] > 0.5) & (b[:, VALID] > 0.5)
     out = np.zeros(len(a), dtype=bool)
     if both.any():
-        out[both] = boxes_overlap(_corners(a[both]), _corners(b[both]))
+        out[both] = boxes_overlap(track_corners(a[both]), track_corners(b[both]))
     return out
 
 
@@ -358,7 +354,7 @@ def _any_overlap(tracks: np.ndarray) -> bool:
     a, b, t = np.nonzero(close)
     if a.size == 0:
         return False
-    return bool(boxes_overlap(_corners(tracks[a, t]), _corners(tracks[b, t])).any())
+    return bool(boxes_overlap(track_corners(tracks[a, t]), track_corners(tracks[b, t])).any())
 
 
 def _cut(log: AgentLog, t0: int, rows: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
