@@ -140,7 +140,20 @@ class TrafficRoad(Protocol):
 class Driver(IDMVehicle):
     """An IDM + MOBIL vehicle with a `DriverProfile`, driving on a `TrafficRoad`."""
 
-    road: TrafficRoad  # type: ignore[assignment]  # highway-env types it as its plain Road
+    road: TrafficRoad
+    # highway-env's vehicle state, declared for the type checker (highway-env sets them in its untyped code).
+    timer: float
+    """Seconds since the vehicle was created (s)."""
+    action: dict[str, float]
+    """The last ``steering`` (rad) and ``acceleration`` (m/s^2) command."""
+    speed: float
+    """m/s."""
+    heading: float
+    """rad."""
+    impact: np.ndarray | None
+    """Displacement (m) of a collision to apply at the next step."""
+    target_lane_index: LaneIndex
+    """The lane it is heading for (its own or the one of a lane change)."""
 
     def __init__(
         self,

@@ -68,10 +68,11 @@ def traffic_plan(layout: str, params: dict, network: RoadNetwork, rng: np.random
         )
     if layout == "intersection":
         rate = rng.uniform(0.2, 0.4)
-        srcs, pop = [], []
+        srcs = []
+        pop: list[tuple[LaneIndex, tuple[str, ...]]] = []
         for k in range(4):
             # Destinations: right, straight, left (corner k-1, k+2, k+1).
-            dests = (f"o{(k - 1) % 4}", f"o{(k + 2) % 4}", f"o{(k + 1) % 4}")
+            dests: tuple[str, ...] = (f"o{(k - 1) % 4}", f"o{(k + 2) % 4}", f"o{(k + 1) % 4}")
             srcs.append(Source((f"o{k}", f"ir{k}", 0), rate * rng.uniform(0.7, 1.3), dests, (0.3, 0.4, 0.3)))
             pop.append(((f"o{k}", f"ir{k}", 0), dests))
             pop.append(((f"il{k}", f"o{k}", 0), ()))
