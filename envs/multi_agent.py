@@ -124,8 +124,10 @@ class MultiAgentSim:
         self._routes: list[Route | None] = [None] * n
         self._proj: list[RouteProjection | None] = [None] * n
         self._exempt: list[np.ndarray | None] = [None] * n
-        self._log_s: list[np.ndarray | None] = [None] * n
-        self._log_on_road: list[np.ndarray | None] = [None] * n
+        self._log_s: dict[int, np.ndarray] = {}
+        """Per driven agent that entered: arc length of its valid logged steps along its route (m)."""
+        self._log_on_road: dict[int, np.ndarray] = {}
+        """Per driven agent that entered: its logged box is on the drivable area at those steps."""
         self._start: dict[int, int] = {}
         self._cur = np.zeros((n, 8), dtype=np.float64)
         self.ends: list[AgentEnd] = []
@@ -266,10 +268,10 @@ class MultiAgentSim:
             present = np.flatnonzero(self._cur[:, VALID] > 0.5)
             if present.size and pairwise_overlaps(np.vstack([row[None], self._cur[present]]))[0].any():
                 continue  # the spot is taken (someone drove into it): this agent never enters
-            self._states[i] = AgentState.from_track_row(row)
+            self._states[i] = state = AgentState.from_track_row(row)
             route = Route.from_track(self._log[i], start_step=t)
             self._routes[i] = route
-            self._proj[i] = route.project(self._states[i].x, self._states[i].y, route.start_segment)
+            self._proj[i] = route.project(state.x, state.y, route.start_segment)
             self._log_s[i], self._log_on_road[i] = self._log_road_profile(i)
             if self.config.check_continuous_lines:
                 boxes = self._log[i][self._log[i][:, VALID] > 0.5][:, [0, 1, 2, 5, 6]]

@@ -113,6 +113,21 @@ class ScenarioEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
+    # Episode state, set by `_setup` at every reset (declared here for the type checker).
+    _scen: Scenario
+    """The scenario of the current episode (`scenario` without the None of before the first reset)."""
+    _t: int
+    """Current scenario step."""
+    _ego: AgentState
+    _adv: AgentState | None
+    """None once the adversary's behaviour has removed it."""
+    _adv_route: Route | None
+    """The adversary's route, when its behaviour acts on its own observation."""
+    _out_of_road_step: int | None
+    _success_step: int | None
+    _return: float
+    _done: bool
+
     def __init__(
         self,
         scenarios: Sequence[Scenario] | Scenario | str | Path,
@@ -220,8 +235,8 @@ class ScenarioEnv(gym.Env):
             return None
         from seal.envs.render import FrameRenderer
 
-        if self._renderer is None or self._renderer.road is not self.scenario.road:
-            self._renderer = FrameRenderer(self.scenario.road)
+        if self._renderer is None or self._renderer.road is not self._scen.road:
+            self._renderer = FrameRenderer(self._scen.road)
         return self._renderer.draw_state(
             self._cur, self._ego_idx, self._adv_idx, follow=(self._ego.x, self._ego.y),
             text=f"step {self._t}  speed {self._ego.speed:.1f} m/s",
@@ -229,7 +244,7 @@ class ScenarioEnv(gym.Env):
 
     # ----------------------------------------------------------------------------------------- internals
     def _setup(self, scenario: Scenario, behavior: AdversaryBehavior) -> None:
-        self.scenario = scenario
+        self.scenario = self._scen = scenario
         self._geom: RoadGeometry = get_road_geometry(scenario.road)
         cfg = self.config
         self._road = RoadChecks(
@@ -254,7 +269,7 @@ class ScenarioEnv(gym.Env):
 
         self._behavior = behavior
         behavior.reset(scenario, self.np_random)
-        self._adv_route: Route | None = behavior.make_route(scenario) if behavior.needs_observation else None
+        self._adv_route = behavior.make_route(scenario) if behavior.needs_observation else None
         self._adv_hint: int | None = None
         self._adv_obs: np.ndarray | None = None
         """The adversary's observation of the current step, built with the ego's (`_observe`)."""
@@ -262,7 +277,7 @@ class ScenarioEnv(gym.Env):
         t = CURRENT_STEP
         self._t = t
         self._ego = AgentState.from_track_row(self._log[self._ego_idx, t])
-        self._adv: AgentState | None = AgentState.from_track_row(self._log[self._adv_idx, t])
+        self._adv = AgentState.from_track_row(self._log[self._adv_idx, t])
         self._proj: RouteProjection = self._route.project(self._ego.x, self._ego.y, self._route.start_segment)
         if self._adv_route is not None:
             self._adv_hint = self._adv_route.project(self._adv.x, self._adv.y).segment
@@ -275,8 +290,8 @@ class ScenarioEnv(gym.Env):
         self._others_ego = np.flatnonzero(self._present & self._not_ego)
         self._ego_crashes: list[tuple[int, int]] = []
         self._adv_crashes: list[tuple[int, int]] = []
-        self._out_of_road_step: int | None = None
-        self._success_step: int | None = None
+        self._out_of_road_step = None
+        self._success_step = None
         self._return = 0.0
         self._done = False
 
@@ -351,11 +366,11 @@ class ScenarioEnv(gym.Env):
     def _finish(self, outcome: Outcome) -> Rollout:
         """The `Rollout` of the episode that ends now with ``outcome``."""
         return Rollout(
-            scenario_id=self.scenario.scenario_id,
+            scenario_id=self._scen.scenario_id,
             tracks=self._roll,
             agent_ids=self._agent_ids.copy(),
-            ego_id=self.scenario.ego_id,
-            adv_id=self.scenario.adv_id,
+            ego_id=self._scen.ego_id,
+            adv_id=self._scen.adv_id,
             last_step=self._t,
             outcome=outcome,
             ego_crashes=self._ego_crashes,
@@ -372,12 +387,12 @@ class ScenarioEnv(gym.Env):
         step (not on the ``last`` step of an episode), that one too, in the same pass (`build_many`: the two cost
         about 1.4 builds), kept for `_move_adversary`. ``others_adv``: the present agents other than the ego and
         the adversary, when `step` has found them (None at reset)."""
-        adv, behavior = self._adv, self._behavior
-        if adv is None or not behavior.needs_observation:
+        adv, behavior, adv_route = self._adv, self._behavior, self._adv_route
+        if adv is None or adv_route is None:  # no adversary, or one that does not observe (`_setup`)
             return self._builder.build(self._ego, self._route, self._cur[self._others_ego, :7], self._proj)
         # Project every step (cheap) so the hinted projection keeps up with the adversary even on steps that
         # skip its observation.
-        proj = self._adv_route.project(adv.x, adv.y, self._adv_hint)
+        proj = adv_route.project(adv.x, adv.y, self._adv_hint)
         self._adv_hint = proj.segment
         if last or not behavior.observes(self._t):
             return self._builder.build(self._ego, self._route, self._cur[self._others_ego, :7], self._proj)
@@ -395,7 +410,7 @@ class ScenarioEnv(gym.Env):
                 rows = [r if mask[i] else -1 for r, i in zip(rows, (self._ego_idx, self._adv_idx), strict=True)]
             boxes = self._cur[present, :7]
         both = self._builder.build_many(
-            (self._ego, adv), (self._route, self._adv_route), (self._proj, proj), boxes, rows,
+            (self._ego, adv), (self._route, adv_route), (self._proj, proj), boxes, rows,
         )
         self._adv_obs = both[1]
         return both[0]
@@ -409,6 +424,6 @@ class ScenarioEnv(gym.Env):
             "crash_agent_id": int(events.crash_id),
             "crashed_with_adversary": bool(events.crashed and events.crash_id == int(self._agent_ids[self._adv_idx])),
             "adversary_crashed": bool(events.adv_crashed),
-            "scenario_id": self.scenario.scenario_id,
+            "scenario_id": self._scen.scenario_id,
             "step": int(self._t),
         }

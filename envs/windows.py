@@ -122,7 +122,7 @@ def _conflicts(log: RunLog, i: int, j: int, lo: int, hi: int) -> list[tuple[int,
     return [(int(max(steps[a], steps[b])), float(dt[a, b])) for a, b in zip(*np.nonzero(hit), strict=True)]
 
 
-def _events(log: RunLog, gaps: dict[tuple[int, int], np.ndarray], pairs: _Pairs) -> list[tuple[int, ...]]:
+def _events(log: RunLog, gaps: dict[tuple[int, int], np.ndarray], pairs: _Pairs) -> list[tuple[int, int, int]]:
     """(i, j, event step) for gap minima below `EVENT_GAP_M`, collisions and path conflicts."""
     events: list[tuple[int, int, int]] = []
     for (i, j), g in gaps.items():
