@@ -25,10 +25,10 @@ from seal.core.interaction import (
     CROSSING_TURN_RAD,
     EVENT_GAP_M,
     MAX_PER_AGENT,
-    NEAR_M,
     context_rows,
     crossing_hits,
     is_moving,
+    near_pair_distances,
 )
 from seal.core.interaction import in_own_lanes as own_lanes
 from seal.core.scenario import CURRENT_STEP, N_STEPS
@@ -80,16 +80,8 @@ class _Pairs:
 
 
 def _near_pairs(log: RunLog) -> _Pairs:
-    x = np.where(log.valid, log.states[..., 0], np.nan)
-    y = np.where(log.valid, log.states[..., 1], np.nan)
-    # Coarse pass on every 10th step; vehicles move at most ~2 x 5 steps x 4 m between samples.
-    stride = 10
-    dc = np.hypot(x[:, None, ::stride] - x[None, :, ::stride], y[:, None, ::stride] - y[None, :, ::stride])
-    cand = np.triu(np.nan_to_num(dc, nan=np.inf).min(axis=-1) < NEAR_M + 40.0, 1)
-    ii, jj = np.nonzero(cand)
-    d = np.nan_to_num(np.hypot(x[ii] - x[jj], y[ii] - y[jj]), nan=np.inf)
-    keep = d.min(axis=1) < NEAR_M
-    return _Pairs(ii[keep], jj[keep], d[keep])
+    """`seal.core.interaction.near_pair_distances` of the run (its logs are continuous)."""
+    return _Pairs(*near_pair_distances(log.states[..., :2], log.valid))
 
 
 def _pair_gaps(log: RunLog, pairs: _Pairs) -> dict[tuple[int, int], np.ndarray]:
