@@ -54,9 +54,13 @@ def corners_xy(x: float, y: float, heading: float, length: float, width: float) 
     return x + _SL * (length * c) - _SW * (width * s), y + _SL * (length * s) + _SW * (width * c)
 
 
+_Scalars = np.ndarray | float
+"""Arrays or Python floats (the env's one-box test passes its box as floats)."""
+
+
 def _separated(
-    dx: np.ndarray, dy: np.ndarray, ca: np.ndarray, sa: np.ndarray, cb: np.ndarray, sb: np.ndarray,
-    la: np.ndarray, wa: np.ndarray, lb: np.ndarray, wb: np.ndarray,
+    dx: _Scalars, dy: _Scalars, ca: _Scalars, sa: _Scalars, cb: _Scalars, sb: _Scalars,
+    la: _Scalars, wa: _Scalars, lb: _Scalars, wb: _Scalars,
 ) -> np.ndarray:
     """The centre-form separating-axis kernel: bool ``[...]``, True where boxes a and b are apart.
 
