@@ -25,8 +25,9 @@ from typing import Any
 import numpy as np
 
 from seal.adversaries.base import K_ROLLOUTS
-from seal.core.geometry import box_corners, boxes_overlap
-from seal.core.scenario import CURRENT_STEP, HEADING, LENGTH, VALID, WIDTH, Scenario, X, Y
+from seal.core.geometry import boxes_overlap, track_corners
+from seal.core.outcome import Outcome
+from seal.core.scenario import CURRENT_STEP, VALID, Scenario
 from seal.envs.rollout import Rollout
 
 
@@ -42,7 +43,7 @@ def logged_rollout(scenario: Scenario) -> Rollout:
     valid = tracks[:, :, VALID] > 0.5
     ego_valid = np.flatnonzero(valid[ego_i])
     last_step = int(ego_valid[-1]) if ego_valid.size else CURRENT_STEP
-    corners = box_corners(tracks[..., X], tracks[..., Y], tracks[..., HEADING], tracks[..., LENGTH], tracks[..., WIDTH])
+    corners = track_corners(tracks)
     future = np.arange(tracks.shape[1]) > CURRENT_STEP
 
     def crashes(i: int, skip: tuple[int, ...]) -> list[tuple[int, int]]:
@@ -58,7 +59,7 @@ def logged_rollout(scenario: Scenario) -> Rollout:
         ego_id=scenario.ego_id,
         adv_id=scenario.adv_id,
         last_step=last_step,
-        outcome="timeout",
+        outcome=Outcome.TIMEOUT,
         ego_crashes=crashes(ego_i, (ego_i,)),
         adv_crashes=crashes(adv_i, (adv_i, ego_i)),
         route_completion=1.0,

@@ -17,6 +17,7 @@ import math
 
 import numpy as np
 
+from seal.core.geometry import wrap_angle_f
 from seal.core.road import RoadDescription
 from seal.core.scenario import CURRENT_STEP, DT_S, HEADING, N_FUTURE, VX, VY, Scenario, X, Y
 from seal.models.prior.candidates import Candidates
@@ -146,7 +147,7 @@ def lane_candidates(
     logits: list[np.ndarray] = []
     for i, line in enumerate(table.lines):
         s0, lateral, tangent, beyond = _project(line, table.cum[i], p)
-        gap = abs((tangent - h0 + math.pi) % (2 * math.pi) - math.pi)
+        gap = abs(wrap_angle_f(tangent - h0))
         if abs(lateral) > 1.5 * table.width[i] or gap > MAX_HEADING_GAP_RAD or beyond > 2.0:
             continue
         v_max = max(v0, 1.2 * float(table.limit[i]))

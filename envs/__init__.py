@@ -1,5 +1,6 @@
-"""Gymnasium environments on highway-env roads: ScenarioEnv, observation, behaviours, heuristic driver,
-rendering and base-scenario generation.
+"""Gymnasium environments on highway-env roads: ScenarioEnv (the Gymnasium adapter) and MultiAgentSim on one
+simulation core (`seal.envs.sim_core`), observation, behaviours, heuristic driver, rendering and base-scenario
+generation.
 
 Importing ``envs`` registers ``seal/Scenario-v0`` (entry point ``seal.envs.scenario_env:ScenarioEnv``) with
 Gymnasium; heavy modules load only when used (``seal.envs.ScenarioEnv`` is resolved lazily).
@@ -28,6 +29,8 @@ _LAZY = {
     "HeuristicDriver": "seal.envs.heuristic",
     "ObservationBuilder": "seal.envs.observation",
     "AgentState": "seal.envs.kinematics",
+    "REWARD_TERMS": "seal.envs.sim_core",
+    "MultiAgentSim": "seal.envs.multi_agent",
 }
 
 __all__ = ["ENV_ID", *_LAZY]

@@ -25,6 +25,7 @@ import numpy as np
 from highway_env.road.road import LaneIndex, RoadNetwork
 from highway_env.vehicle.behavior import IDMVehicle
 
+from seal.core.geometry import wrap_angle_f
 from seal.core.scenario import DT_S
 from seal.envs.network_index import NetworkIndex
 
@@ -114,10 +115,6 @@ def sample_profile(kind: str, rng: np.random.Generator) -> DriverProfile:
     )
 
 
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2 * math.pi) - math.pi
-
-
 def _not_zero(x: float, eps: float = 1e-2) -> float:
     if abs(x) > eps:
         return x
@@ -143,7 +140,20 @@ class TrafficRoad(Protocol):
 class Driver(IDMVehicle):
     """An IDM + MOBIL vehicle with a `DriverProfile`, driving on a `TrafficRoad`."""
 
-    road: TrafficRoad  # type: ignore[assignment]  # highway-env types it as its plain Road
+    road: TrafficRoad
+    # highway-env's vehicle state, declared for the type checker (highway-env sets them in its untyped code).
+    timer: float
+    """Seconds since the vehicle was created (s)."""
+    action: dict[str, float]
+    """The last ``steering`` (rad) and ``acceleration`` (m/s^2) command."""
+    speed: float
+    """m/s."""
+    heading: float
+    """rad."""
+    impact: np.ndarray | None
+    """Displacement (m) of a collision to apply at the next step."""
+    target_lane_index: LaneIndex
+    """The lane it is heading for (its own or the one of a lane change)."""
 
     def __init__(
         self,
@@ -312,7 +322,7 @@ class Driver(IDMVehicle):
         lane_heading = lane.heading_at(s + v * self.TAU_PURSUIT)
         heading_cmd = math.asin(max(-1.0, min(1.0, -self.KP_LATERAL * r / _not_zero(v))))
         heading_ref = lane_heading + max(-math.pi / 4, min(math.pi / 4, heading_cmd))
-        rate_cmd = self.KP_HEADING * _wrap(heading_ref - self.heading)
+        rate_cmd = self.KP_HEADING * wrap_angle_f(heading_ref - self.heading)
         slip = math.asin(max(-1.0, min(1.0, self.LENGTH / 2 / _not_zero(v) * rate_cmd)))
         steer = math.atan(2 * math.tan(slip))
         return max(-self.MAX_STEERING_ANGLE, min(self.MAX_STEERING_ANGLE, steer))

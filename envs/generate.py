@@ -233,7 +233,28 @@ def generate_dataset(
     }
     builder = DatasetBuilder(out, params, overwrite=overwrite)
     workers = (os.cpu_count() or 1) if workers is None else workers
+    n_chunks = _build_chunks(builder, n, seed, layouts, shares, workers, progress, _stop_after_chunks)
+    provenance = {
+        "generator": "seal.envs.generate.generate_dataset",
+        "source": SOURCE,
+        "seed": seed,
+        "layouts": list(layouts),
+        "inattentive_share": float(inattentive_share),
+        "aggressive_share": float(aggressive_share),
+        "runs": n_chunks * runs_per_chunk(n),
+        "run_steps": RUN_STEPS,
+        "scenarios_per_run_max": SCENARIOS_PER_RUN,
+        "versions": _versions(),
+    }
+    return builder.finalize(n, provenance)
 
+
+def _build_chunks(
+    builder: DatasetBuilder, n: int, seed: int, layouts: tuple[str, ...], shares: tuple[float, float, float],
+    workers: int, progress: bool, stop_after_chunks: int | None,
+) -> int:
+    """Build (or, where ``builder`` already holds them, count) shards until ``n`` scenarios exist; returns the
+    number of chunks. Layouts of each chunk's runs follow the yields so far (`assign_layouts`)."""
     chunk_runs = runs_per_chunk(n)
     counts = dict.fromkeys(layouts, 0)
     runs = dict.fromkeys(layouts, 0)
@@ -251,7 +272,7 @@ def generate_dataset(
                 total += int(builder.shards[chunk]["n_scenarios"])
                 chunk += 1
                 continue
-            if _stop_after_chunks is not None and built >= _stop_after_chunks:
+            if stop_after_chunks is not None and built >= stop_after_chunks:
                 raise GenerationInterrupted(f"stopped after {built} chunks (test hook)")
             if pool is None and workers > 1:
                 pool = _make_pool(workers)
@@ -261,22 +282,11 @@ def generate_dataset(
                 )
             plan = assign_layouts(layouts, counts, runs, chunk_runs)
             tasks = [RunTask(chunk * chunk_runs + k, layout, seed, shares) for k, layout in enumerate(plan)]
-            scenarios: list[Scenario] = []
-            chunk_counts = dict.fromkeys(layouts, 0)
-            for task, result in zip(tasks, _map_runs(tasks, pool), strict=True):
-                scenarios.extend(result)
-                chunk_counts[task.layout] += len(result)
-                bar.update(max(0, min(len(result), n - bar.n)))
-            info = {
-                "runs": [t.run for t in tasks],
-                "runs_per_layout": {x: plan.count(x) for x in layouts},
-                "scenarios_per_layout": chunk_counts,
-            }
-            builder.write_shard(chunk, scenarios, info)
+            chunk_counts = _build_chunk(builder, chunk, tasks, pool, bar, n, layouts)
             for x in layouts:
                 counts[x] += chunk_counts[x]
                 runs[x] += plan.count(x)
-            total += len(scenarios)
+            total += sum(chunk_counts.values())
             chunk += 1
             built += 1
             if chunk >= 50 and total == 0:
@@ -291,16 +301,23 @@ def generate_dataset(
             pool.join()
         if bar is not None:
             bar.close()
-    provenance = {
-        "generator": "seal.envs.generate.generate_dataset",
-        "source": SOURCE,
-        "seed": seed,
-        "layouts": list(layouts),
-        "inattentive_share": float(inattentive_share),
-        "aggressive_share": float(aggressive_share),
-        "runs": chunk * chunk_runs,
-        "run_steps": RUN_STEPS,
-        "scenarios_per_run_max": SCENARIOS_PER_RUN,
-        "versions": _versions(),
+    return chunk
+
+
+def _build_chunk(
+    builder: DatasetBuilder, chunk: int, tasks: list[RunTask], pool: Any, bar: Any, n: int, layouts: tuple[str, ...]
+) -> dict[str, int]:
+    """Simulate the runs of one chunk and write its shard; returns its scenarios per layout."""
+    scenarios: list[Scenario] = []
+    chunk_counts = dict.fromkeys(layouts, 0)
+    for task, result in zip(tasks, _map_runs(tasks, pool), strict=True):
+        scenarios.extend(result)
+        chunk_counts[task.layout] += len(result)
+        bar.update(max(0, min(len(result), n - bar.n)))
+    info = {
+        "runs": [t.run for t in tasks],
+        "runs_per_layout": {x: sum(t.layout == x for t in tasks) for x in layouts},
+        "scenarios_per_layout": chunk_counts,
     }
-    return builder.finalize(n, provenance)
+    builder.write_shard(chunk, scenarios, info)
+    return chunk_counts

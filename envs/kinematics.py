@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from seal.core.geometry import wrap_angle_f
 from seal.core.scenario import DT_S, HEADING, LENGTH, VALID, VX, VY, WIDTH, X, Y
 
 MAX_STEER_RAD = math.pi / 3
@@ -124,7 +125,7 @@ def placement_state(prev: AgentState | None, row: np.ndarray, dt: float = DT_S) 
     new = AgentState.from_track_row(row)
     if prev is None:
         return new
-    dh = (new.heading - prev.heading + math.pi) % (2 * math.pi) - math.pi
+    dh = wrap_angle_f(new.heading - prev.heading)
     steering = 0.0
     if prev.speed > 0.1:
         sin_beta = dh * (prev.length / 2.0) / (prev.speed * dt)
@@ -176,10 +177,10 @@ def recover_actions(track: np.ndarray, start_step: int | None = None, dt: float 
         ahead = dx * math.cos(state.heading) + dy * math.sin(state.heading)
         if state.speed * dt > _AIM_MIN_STEP_M and ahead > 0.5 * state.speed * dt:
             # Aim the direction of motion at the next logged position.
-            beta = (math.atan2(dy, dx) - state.heading + math.pi) % (2 * math.pi) - math.pi
+            beta = wrap_angle_f(math.atan2(dy, dx) - state.heading)
         elif state.speed > 1e-3:
             # Creeping: position errors swamp the step, so match the logged heading instead.
-            dh = (float(track[k + 1, HEADING]) - state.heading + math.pi) % (2 * math.pi) - math.pi
+            dh = wrap_angle_f(float(track[k + 1, HEADING]) - state.heading)
             beta = math.asin(min(1.0, max(-1.0, dh * (state.length / 2.0) / (state.speed * dt))))
         else:
             beta = 0.0

@@ -269,6 +269,15 @@ def _roundabout(p: dict[str, Any]) -> RoadNetwork:
     alpha = 24.0
     w = AbstractLane.DEFAULT_WIDTH  # the access geometry below assumes 4 m lanes (offsets of +-2 m)
     radii = [radius + w * i for i in range(n_lanes)]
+    _roundabout_ring(net, radii, alpha, v)
+    _roundabout_access(net, radii[-1], alpha, float(p["access_length"]), v)
+    return net
+
+
+def _roundabout_ring(net: RoadNetwork, radii: list[float], alpha: float, v: float) -> None:
+    """The ring: 8 arcs per lane between `_RB_NODES` (``radii`` in m, ``alpha`` in degrees, speed limit ``v``)."""
+    n_lanes = len(radii)
+    w = AbstractLane.DEFAULT_WIDTH
     angles = [
         (90 - alpha, alpha),
         (alpha, -alpha),
@@ -289,22 +298,16 @@ def _roundabout(p: dict[str, Any]) -> RoadNetwork:
         else:
             lt = [N, S]
         for i in range(8):
-            net.add_lane(
-                _RB_NODES[i],
-                _RB_NODES[i + 1],
-                CircularLane(
-                    [0.0, 0.0],
-                    radii[lane],
-                    math.radians(angles[i][0]),
-                    math.radians(angles[i][1]),
-                    False,
-                    w,
-                    lt,
-                    speed_limit=v,
-                    priority=1,
-                ),
+            arc = CircularLane(
+                [0.0, 0.0], radii[lane], math.radians(angles[i][0]), math.radians(angles[i][1]), False, w, lt,
+                speed_limit=v, priority=1,
             )
-    r_out = radii[-1]
+            net.add_lane(_RB_NODES[i], _RB_NODES[i + 1], arc)
+
+
+def _roundabout_access(net: RoadNetwork, r_out: float, alpha: float, access_length: float, v: float) -> None:
+    """The 4 two-way access roads (south, east, north, west): a straight and a sine-shaped entry (priority 0) and
+    exit each, meeting the outer ring lane (radius ``r_out`` in m) at ``alpha`` degrees from the axes."""
 
     def pt(deg: float) -> tuple[float, float]:
         return r_out * math.cos(math.radians(deg)), r_out * math.sin(math.radians(deg))
@@ -312,119 +315,49 @@ def _roundabout(p: dict[str, Any]) -> RoadNetwork:
     p_se, p_ex, p_ee, p_nx = pt(90 - alpha), pt(alpha), pt(-alpha), pt(-90 + alpha)
     p_ne, p_wx, p_we, p_sx = pt(-90 - alpha), pt(-180 + alpha), pt(180 - alpha), pt(90 + alpha)
     dev = max(100.0, 2 * r_out + 40.0)
-    access = dev / 2 + float(p["access_length"])
+    access = dev / 2 + access_length
     h = dev / 2
+    phase = -math.pi / 2  # every sine lane starts at a trough
 
-    def add(a: str, b: str, lane: AbstractLane) -> None:
+    def add(a: str, b: str, lane: AbstractLane, entry: bool = False) -> None:
         lane.speed_limit = v
+        if entry:
+            lane.priority = 0
         net.add_lane(a, b, lane)
-
-    def entry_prio(lane: AbstractLane) -> AbstractLane:
-        lane.priority = 0
-        return lane
 
     # South
     a = (p_se[0] - 2) / 2
-    add("ser", "ses", entry_prio(StraightLane([2, access], [2, h], line_types=(S, C))))
-    add(
-        "ses",
-        "se",
-        entry_prio(
-            SineLane(
-                [2 + a, h], [2 + a, p_se[1]], a, math.pi / (h - p_se[1]), -math.pi / 2, line_types=(C, C)
-            )
-        ),
-    )
+    add("ser", "ses", StraightLane([2, access], [2, h], line_types=(S, C)), entry=True)
+    add("ses", "se", SineLane([2 + a, h], [2 + a, p_se[1]], a, math.pi / (h - p_se[1]), phase, line_types=(C, C)),
+        entry=True)
     a = (p_sx[0] + 2) / 2
-    add(
-        "sx",
-        "sxs",
-        SineLane(
-            [p_sx[0] - a, p_sx[1]],
-            [p_sx[0] - a, h],
-            a,
-            math.pi / (h - p_sx[1]),
-            -math.pi / 2,
-            line_types=(C, C),
-        ),
-    )
+    add("sx", "sxs", SineLane([p_sx[0] - a, p_sx[1]], [p_sx[0] - a, h], a, math.pi / (h - p_sx[1]), phase,
+                              line_types=(C, C)))
     add("sxs", "sxr", StraightLane([-2, h], [-2, access], line_types=(N, C)))
     # East
     a = (-2 - p_ee[1]) / 2
-    add("eer", "ees", entry_prio(StraightLane([access, -2], [h, -2], line_types=(S, C))))
-    add(
-        "ees",
-        "ee",
-        entry_prio(
-            SineLane(
-                [h, -2 - a], [p_ee[0], -2 - a], a, math.pi / (h - p_ee[0]), -math.pi / 2, line_types=(C, C)
-            )
-        ),
-    )
+    add("eer", "ees", StraightLane([access, -2], [h, -2], line_types=(S, C)), entry=True)
+    add("ees", "ee", SineLane([h, -2 - a], [p_ee[0], -2 - a], a, math.pi / (h - p_ee[0]), phase,
+                              line_types=(C, C)), entry=True)
     a = (2 - p_ex[1]) / 2
-    add(
-        "ex",
-        "exs",
-        SineLane(
-            [p_ex[0], p_ex[1] + a],
-            [h, p_ex[1] + a],
-            a,
-            math.pi / (h - p_ex[0]),
-            -math.pi / 2,
-            line_types=(C, C),
-        ),
-    )
+    add("ex", "exs", SineLane([p_ex[0], p_ex[1] + a], [h, p_ex[1] + a], a, math.pi / (h - p_ex[0]), phase,
+                              line_types=(C, C)))
     add("exs", "exr", StraightLane([h, 2], [access, 2], line_types=(N, C)))
     # North
     a = (-2 - p_ne[0]) / 2
-    add("ner", "nes", entry_prio(StraightLane([-2, -access], [-2, -h], line_types=(S, C))))
-    add(
-        "nes",
-        "ne",
-        entry_prio(
-            SineLane(
-                [-2 - a, -h], [-2 - a, p_ne[1]], a, math.pi / (p_ne[1] + h), -math.pi / 2, line_types=(C, C)
-            )
-        ),
-    )
+    add("ner", "nes", StraightLane([-2, -access], [-2, -h], line_types=(S, C)), entry=True)
+    add("nes", "ne", SineLane([-2 - a, -h], [-2 - a, p_ne[1]], a, math.pi / (p_ne[1] + h), phase,
+                              line_types=(C, C)), entry=True)
     a = (2 - p_nx[0]) / 2
-    add(
-        "nx",
-        "nxs",
-        SineLane(
-            [p_nx[0] + a, p_nx[1]],
-            [p_nx[0] + a, -h],
-            a,
-            math.pi / (p_nx[1] + h),
-            -math.pi / 2,
-            line_types=(C, C),
-        ),
-    )
+    add("nx", "nxs", SineLane([p_nx[0] + a, p_nx[1]], [p_nx[0] + a, -h], a, math.pi / (p_nx[1] + h), phase,
+                              line_types=(C, C)))
     add("nxs", "nxr", StraightLane([2, -h], [2, -access], line_types=(N, C)))
     # West
     a = (p_we[1] - 2) / 2
-    add("wer", "wes", entry_prio(StraightLane([-access, 2], [-h, 2], line_types=(S, C))))
-    add(
-        "wes",
-        "we",
-        entry_prio(
-            SineLane(
-                [-h, 2 + a], [p_we[0], 2 + a], a, math.pi / (p_we[0] + h), -math.pi / 2, line_types=(C, C)
-            )
-        ),
-    )
+    add("wer", "wes", StraightLane([-access, 2], [-h, 2], line_types=(S, C)), entry=True)
+    add("wes", "we", SineLane([-h, 2 + a], [p_we[0], 2 + a], a, math.pi / (p_we[0] + h), phase,
+                              line_types=(C, C)), entry=True)
     a = (p_wx[1] + 2) / 2
-    add(
-        "wx",
-        "wxs",
-        SineLane(
-            [p_wx[0], p_wx[1] - a],
-            [-h, p_wx[1] - a],
-            a,
-            math.pi / (p_wx[0] + h),
-            -math.pi / 2,
-            line_types=(C, C),
-        ),
-    )
+    add("wx", "wxs", SineLane([p_wx[0], p_wx[1] - a], [-h, p_wx[1] - a], a, math.pi / (p_wx[0] + h), phase,
+                              line_types=(C, C)))
     add("wxs", "wxr", StraightLane([-h, -2], [-access, -2], line_types=(N, C)))
-    return net

@@ -3,7 +3,8 @@ demonstrations: thesis 6.3.3, "all agents in the scenario follow the IDM policy"
 
 `ScenarioEnv` drives one ego and one adversary; here every ``vehicle`` agent is driven, with the same pieces:
 the bicycle model (`seal.envs.kinematics`), the observation builder (`seal.envs.observation`, from each agent's own
-viewpoint on a route = its logged track) and the road checks of `ScenarioEnv`. Agents of other types replay
+viewpoint on a route = its logged track) and the simulation core of `ScenarioEnv` (`seal.envs.sim_core`: placement,
+the box-overlap test, the road checks). Agents of other types replay
 their log.
 
 Step semantics (as in the env): at scenario step ``t`` `observe` gives the observation of every driven agent,
@@ -29,28 +30,24 @@ driven from then on. At ``end_step`` the remaining agents end with ``horizon``.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 import shapely
 
+from seal.core.geometry import pairwise_overlaps, track_corners
 from seal.core.scenario import N_STEPS, VALID, Scenario
 from seal.envs.kinematics import AgentState, bicycle_step
 from seal.envs.observation import OBS_DIM, ObservationBuilder
 from seal.envs.road_geometry import RoadGeometry, get_road_geometry
 from seal.envs.route import Route, RouteProjection
+from seal.envs.sim_core import RoadChecks, logged_rows, state_row
 
 END_REASONS = ("horizon", "finished", "collision", "out_of_road")
 """Why an agent's segment ended (the stored code is the index)."""
 HORIZON, FINISHED, COLLISION, OUT_OF_ROAD = range(len(END_REASONS))
 
-__all__ = ["COLLISION", "END_REASONS", "FINISHED", "HORIZON", "OUT_OF_ROAD", "AgentEnd", "MultiAgentSim", "SimConfig",
-           "box_overlaps"]
-
-_SL = np.array([0.5, 0.5, -0.5, -0.5])
-_SW = np.array([0.5, -0.5, -0.5, 0.5])
-
+__all__ = ["COLLISION", "END_REASONS", "FINISHED", "HORIZON", "OUT_OF_ROAD", "AgentEnd", "MultiAgentSim", "SimConfig"]
 
 @dataclass(frozen=True)
 class SimConfig:
@@ -94,31 +91,6 @@ class AgentEnd:
     """Index into `END_REASONS`."""
 
 
-def box_overlaps(boxes: np.ndarray) -> np.ndarray:
-    """Pairwise separating-axis overlap of oriented boxes ``[N, >=7]`` (track layout) -> bool ``[N, N]``
-    (False on the diagonal). A box's projection radius on a unit axis is ``l/2 |cos| + w/2 |sin|`` of the
-    angle between the axis and the box heading."""
-    n = boxes.shape[0]
-    if n < 2:
-        return np.zeros((n, n), dtype=bool)
-    x, y, h = boxes[:, 0], boxes[:, 1], boxes[:, 2]
-    hl, hw = 0.5 * boxes[:, 5], 0.5 * boxes[:, 6]
-    c, s = np.cos(h), np.sin(h)
-    dx = x[None, :] - x[:, None]  # [i, j]: j relative to i
-    dy = y[None, :] - y[:, None]
-    cosd = np.abs(c[:, None] * c[None, :] + s[:, None] * s[None, :])
-    sind = np.abs(c[:, None] * s[None, :] - s[:, None] * c[None, :])
-    hli, hwi, hlj, hwj = hl[:, None], hw[:, None], hl[None, :], hw[None, :]
-    ci, si, cj, sj = c[:, None], s[:, None], c[None, :], s[None, :]
-    sep = np.abs(dx * ci + dy * si) > hli + hlj * cosd + hwj * sind
-    sep |= np.abs(dy * ci - dx * si) > hwi + hlj * sind + hwj * cosd
-    sep |= np.abs(dx * cj + dy * sj) > hlj + hli * cosd + hwi * sind
-    sep |= np.abs(dy * cj - dx * sj) > hwj + hli * sind + hwi * cosd
-    hit = ~sep
-    np.fill_diagonal(hit, False)
-    return hit
-
-
 class MultiAgentSim:
     """Every vehicle of ``scenario`` driven by actions given per step (see the module docstring).
 
@@ -135,6 +107,7 @@ class MultiAgentSim:
         self.scenario = scenario
         self.config = cfg = config or SimConfig()
         self.geometry: RoadGeometry = get_road_geometry(scenario.road)
+        self.road = RoadChecks(self.geometry, cfg.max_lateral_m, cfg.offroad_tolerance_m, cfg.check_continuous_lines)
         self._builder = ObservationBuilder(self.geometry)
         self._log = scenario.tracks.astype(np.float64)
         n = scenario.n_agents
@@ -151,8 +124,10 @@ class MultiAgentSim:
         self._routes: list[Route | None] = [None] * n
         self._proj: list[RouteProjection | None] = [None] * n
         self._exempt: list[np.ndarray | None] = [None] * n
-        self._log_s: list[np.ndarray | None] = [None] * n
-        self._log_on_road: list[np.ndarray | None] = [None] * n
+        self._log_s: dict[int, np.ndarray] = {}
+        """Per driven agent that entered: arc length of its valid logged steps along its route (m)."""
+        self._log_on_road: dict[int, np.ndarray] = {}
+        """Per driven agent that entered: its logged box is on the drivable area at those steps."""
         self._start: dict[int, int] = {}
         self._cur = np.zeros((n, 8), dtype=np.float64)
         self.ends: list[AgentEnd] = []
@@ -206,8 +181,7 @@ class MultiAgentSim:
         t = self.t
         self._place_replayed(t)
         for i in idx.tolist():
-            s = self._states[i]
-            self._cur[i] = (s.x, s.y, s.heading, s.vx, s.vy, s.length, s.width, 1.0)
+            self._cur[i] = state_row(self._states[i])
         ended = self._check(idx)
         self._enter(t)
         if t >= self.config.end_step:
@@ -217,12 +191,12 @@ class MultiAgentSim:
         return ended
 
     def _check(self, idx: np.ndarray) -> list[AgentEnd]:
-        cfg, geom = self.config, self.geometry
+        cfg, road = self.config, self.road
         cur = self._cur
         present = np.flatnonzero(cur[:, VALID] > 0.5)
         reason: dict[int, int] = {}
         if present.size > 1:
-            hit = box_overlaps(cur[present])
+            hit = pairwise_overlaps(cur[present])
             for k in np.flatnonzero(hit.any(axis=1)).tolist():
                 i = int(present[k])
                 if i in self._start:
@@ -235,13 +209,8 @@ class MultiAgentSim:
                 continue
             off_road = (
                 self._off_road(i, state, proj.s)
-                or abs(proj.lateral) > cfg.max_lateral_m
-                or (
-                    cfg.check_continuous_lines
-                    and geom.crosses_continuous(
-                        state.x, state.y, state.heading, state.length, state.width, self._exempt[i]
-                    )
-                )
+                or road.too_far(proj.lateral)
+                or road.crosses_solid(state, self._exempt[i])
             )
             if proj.s >= route.length - cfg.finish_margin_m and (self._last[i] < N_STEPS - 1 or off_road):
                 reason[i] = FINISHED
@@ -251,10 +220,7 @@ class MultiAgentSim:
 
     def _off_road(self, i: int, state: AgentState, s: float) -> bool:
         """A box corner is off the drivable area at a place where the agent's logged box was on it."""
-        c, sn = math.cos(state.heading), math.sin(state.heading)
-        xs = state.x + _SL * (state.length * c) - _SW * (state.width * sn)
-        ys = state.y + _SL * (state.length * sn) + _SW * (state.width * c)
-        if self.geometry.on_road(xs, ys, self.config.offroad_tolerance_m):
+        if self.road.corners_on_road(state):
             return False
         log_s, log_on = self._log_s[i], self._log_on_road[i]
         k = int(np.searchsorted(log_s, s))
@@ -269,7 +235,7 @@ class MultiAgentSim:
 
     def _place_replayed(self, t: int) -> None:
         """Log rows at step ``t`` for the agents that are not driven (and empty rows for pending ones)."""
-        rows = self._log[:, t] if t < N_STEPS else np.zeros_like(self._cur)
+        rows = logged_rows(self._log, t)
         for i in range(self.scenario.n_agents):
             if not self._driven[i]:
                 self._cur[i] = rows[i]
@@ -282,9 +248,8 @@ class MultiAgentSim:
         track = self._log[i][self._log[i][:, VALID] > 0.5]
         step = np.hypot(np.diff(track[:, 0]), np.diff(track[:, 1]))
         log_s = np.concatenate([[0.0], np.cumsum(step)])
-        c, sn = np.cos(track[:, 2])[:, None], np.sin(track[:, 2])[:, None]
-        xs = track[:, 0:1] + _SL * (track[:, 5:6] * c) - _SW * (track[:, 6:7] * sn)
-        ys = track[:, 1:2] + _SL * (track[:, 5:6] * sn) + _SW * (track[:, 6:7] * c)
+        corners = track_corners(track)  # [V, 4, 2]
+        xs, ys = corners[..., 0], corners[..., 1]
         tol = self.config.offroad_tolerance_m
         # The grown area is cached per road by `RoadGeometry` (the same one `on_road` tests against).
         area = self.geometry._grown(tol) if tol > 0 else self.geometry.drivable
@@ -301,12 +266,12 @@ class MultiAgentSim:
                 continue  # its log ended before it could enter
             row = self._log[i, t]
             present = np.flatnonzero(self._cur[:, VALID] > 0.5)
-            if present.size and box_overlaps(np.vstack([row[None], self._cur[present]]))[0].any():
+            if present.size and pairwise_overlaps(np.vstack([row[None], self._cur[present]]))[0].any():
                 continue  # the spot is taken (someone drove into it): this agent never enters
-            self._states[i] = AgentState.from_track_row(row)
+            self._states[i] = state = AgentState.from_track_row(row)
             route = Route.from_track(self._log[i], start_step=t)
             self._routes[i] = route
-            self._proj[i] = route.project(self._states[i].x, self._states[i].y, route.start_segment)
+            self._proj[i] = route.project(state.x, state.y, route.start_segment)
             self._log_s[i], self._log_on_road[i] = self._log_road_profile(i)
             if self.config.check_continuous_lines:
                 boxes = self._log[i][self._log[i][:, VALID] > 0.5][:, [0, 1, 2, 5, 6]]

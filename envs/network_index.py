@@ -8,6 +8,7 @@ import math
 from highway_env.road.lane import AbstractLane, CircularLane, SineLane, StraightLane
 from highway_env.road.road import LaneIndex, RoadNetwork
 
+from seal.core.geometry import wrap_angle_f
 from seal.envs.network_topology import lane_indices, predecessor_map, successor_map
 
 AHEAD_M = 80.0
@@ -16,25 +17,52 @@ BEHIND_M = 40.0
 """Followers are searched along the lane and its predecessors up to this distance (m)."""
 
 # ------------------------------------------------------------------------------------------ lane geometry
-def _copy_lane_attributes(fast: FastStraight | FastCircle, lane: AbstractLane) -> None:
-    """The attributes every fast lane copies from its highway-env lane, as plain Python scalars."""
-    fast.length = float(lane.length)
-    fast.width = float(lane.width)
-    fast.speed_limit = float(lane.speed_limit)
-    fast.priority = int(lane.priority)
-    fast.forbidden = bool(lane.forbidden)
+class FastLane:
+    """Base of the scalar-maths twins of highway-env lanes: the attributes every fast lane copies from its
+    highway-env lane, as plain Python scalars, and the lane interface (local coordinates, heading, positions)."""
+
+    __slots__ = ("length", "width", "speed_limit", "priority", "forbidden")
+    length: float
+    """Arc length (m)."""
+    width: float
+    """Lane width (m)."""
+    speed_limit: float
+    """m/s."""
+    priority: int
+    """Right-of-way priority (higher goes first)."""
+    forbidden: bool
+    """Lane changes onto it are forbidden."""
+
+    def __init__(self, lane: AbstractLane) -> None:
+        self.length = float(lane.length)
+        self.width = float(lane.width)
+        self.speed_limit = float(lane.speed_limit)
+        self.priority = int(lane.priority)
+        self.forbidden = bool(lane.forbidden)
+
+    def local(self, x: float, y: float) -> tuple[float, float]:
+        """(longitudinal s, lateral r) in m of the point (x, y)."""
+        raise NotImplementedError
+
+    def heading_at(self, s: float) -> float:
+        """Lane heading (rad) at arc length ``s``."""
+        raise NotImplementedError
+
+    def position(self, s: float, r: float) -> tuple[float, float]:
+        """World position (m) of local coordinates (s, r)."""
+        raise NotImplementedError
 
 
-class FastStraight:
+class FastStraight(FastLane):
     """Scalar-maths twin of a highway-env `StraightLane` (same local coordinates, heading and positions)."""
 
-    __slots__ = ("sx", "sy", "dx", "dy", "length", "width", "heading", "speed_limit", "priority", "forbidden")
+    __slots__ = ("sx", "sy", "dx", "dy", "heading")
 
     def __init__(self, lane: StraightLane) -> None:
         self.sx, self.sy = (float(v) for v in lane.start)
         self.dx, self.dy = (float(v) for v in lane.direction)
         self.heading = float(lane.heading)
-        _copy_lane_attributes(self, lane)
+        super().__init__(lane)
 
     def local(self, x: float, y: float) -> tuple[float, float]:
         ex, ey = x - self.sx, y - self.sy
@@ -48,6 +76,8 @@ class FastStraight:
 
 
 class FastSine(FastStraight):
+    """Scalar-maths twin of a highway-env `SineLane`."""
+
     __slots__ = ("amp", "puls", "phase")
 
     def __init__(self, lane: SineLane) -> None:
@@ -65,31 +95,22 @@ class FastSine(FastStraight):
         return FastStraight.position(self, s, r + self.amp * math.sin(self.puls * s + self.phase))
 
 
-class FastCircle:
-    __slots__ = (
-        "cx",
-        "cy",
-        "radius",
-        "start",
-        "dir",
-        "length",
-        "width",
-        "speed_limit",
-        "priority",
-        "forbidden",
-    )
+class FastCircle(FastLane):
+    """Scalar-maths twin of a highway-env `CircularLane`."""
+
+    __slots__ = ("cx", "cy", "radius", "start", "dir")
 
     def __init__(self, lane: CircularLane) -> None:
         self.cx, self.cy = (float(v) for v in lane.center)
         self.radius = float(lane.radius)
         self.start = float(lane.start_phase)
         self.dir = float(lane.direction)
-        _copy_lane_attributes(self, lane)
+        super().__init__(lane)
 
     def local(self, x: float, y: float) -> tuple[float, float]:
         ex, ey = x - self.cx, y - self.cy
         phi = math.atan2(ey, ex)
-        phi = self.start + ((phi - self.start + math.pi) % (2 * math.pi) - math.pi)
+        phi = self.start + wrap_angle_f(phi - self.start)
         return self.dir * (phi - self.start) * self.radius, self.dir * (self.radius - math.hypot(ex, ey))
 
     def heading_at(self, s: float) -> float:
@@ -99,9 +120,6 @@ class FastCircle:
         phi = self.dir * s / self.radius + self.start
         rad = self.radius - r * self.dir
         return self.cx + rad * math.cos(phi), self.cy + rad * math.sin(phi)
-
-
-FastLane = FastStraight | FastCircle
 
 
 def fast_lane(lane: AbstractLane) -> FastLane:
@@ -117,7 +135,7 @@ def fast_lane(lane: AbstractLane) -> FastLane:
 def _lane_distance(lane: FastLane, x: float, y: float, heading: float) -> float:
     """highway-env `AbstractLane.distance_with_heading` (m + rad)."""
     s, r = lane.local(x, y)
-    angle = abs((heading - lane.heading_at(s) + math.pi) % (2 * math.pi) - math.pi)
+    angle = abs(wrap_angle_f(heading - lane.heading_at(s)))
     return abs(r) + max(s - lane.length, 0.0) + max(-s, 0.0) + angle
 
 

@@ -171,10 +171,10 @@ class _RoadCache:
             k0 = keys[0]
             if all(k == k0 for k in keys):
                 edges, lines = self._cell(k0)
-                hit = (tuple(edges), tuple(lines))
+                hit = (_rows(edges), _rows(lines))
             else:
                 cells = [self._cell(k) for k in keys]
-                hit = tuple(_padded_stack([c[kind] for c in cells]) for kind in (0, 1))
+                hit = (_padded_stack([c[0] for c in cells]), _padded_stack([c[1] for c in cells]))
             if len(self._stacks) > 4096:  # bounded: tuples of moving viewers' cells keep coming
                 self._stacks.clear()
             self._stacks[keys] = hit
@@ -186,7 +186,12 @@ def _padded_stack(cells: list[np.ndarray]) -> SegmentArrays:
     stack = np.full((4, len(cells), 1, max(c.shape[1] for c in cells)), np.nan)
     for v, c in enumerate(cells):
         stack[:, v, 0, : c.shape[1]] = c
-    return tuple(stack)
+    return _rows(stack)
+
+
+def _rows(segments: np.ndarray) -> SegmentArrays:
+    """The 4 rows ``(ax, ay, ex, ey)`` of a ``[4, ...]`` segment array (views)."""
+    return segments[0], segments[1], segments[2], segments[3]
 
 
 _ROAD_CACHE: weakref.WeakKeyDictionary[RoadGeometry, _RoadCache] = weakref.WeakKeyDictionary()

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 
@@ -137,11 +138,14 @@ class FrameRenderer:
                 # Re-centre a background three windows wide on the point (redrawn rarely).
                 self._make_background(cx, cy, (self.size[0] * 3, self.size[1] * 3))
                 bx0, by_top = self._bg_origin
+            bg = self._bg
+            assert bg is not None  # drawn just above when missing
             frame = pygame.Surface(self.size)
-            frame.blit(self._bg, (0, 0), pygame.Rect(int((x0 - bx0) * self.scale), int((by_top - y_top) * self.scale),
+            frame.blit(bg, (0, 0), pygame.Rect(int((x0 - bx0) * self.scale), int((by_top - y_top) * self.scale),
                                                      *self.size))
         else:
             x0, y_top = self._bg_origin
+            assert self._bg is not None  # a fixed view draws its background in __init__
             frame = self._bg.copy()
 
         if route is not None and len(route) > 1:
@@ -232,11 +236,12 @@ def write_video(frames: list[np.ndarray], out_path: str | Path, fps: int = 10) -
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)
     if out.suffix.lower() == ".gif":
-        imageio.mimsave(out, frames, duration=1000.0 / fps, loop=0)
+        imageio.mimsave(out, cast("list[Any]", frames), duration=1000.0 / fps, loop=0)  # its stubs want list[ArrayLike]
     elif out.suffix.lower() == ".mp4":
         with imageio.get_writer(out, fps=fps, codec="libx264", macro_block_size=16, quality=7) as writer:
             for f in frames:
-                writer.append_data(f)
+                # imageio's stubs type get_writer as its base reader/writer; the writer it returns has append_data.
+                writer.append_data(f)  # type: ignore[attr-defined]
     else:
         raise ValueError(f"unsupported video format {out.suffix!r}: use .mp4 or .gif")
     return out

@@ -176,10 +176,9 @@ class RoadGeometry:
         self.boundary_polylines = boundary
         self.continuous_polylines = continuous
         self.painted_polylines = [_simplify(b) for b, _ in painted]
-        painted = self.painted_polylines
 
         self.edges = SegmentGrid(_segments(continuous + boundary), reach=ray_range_m)
-        self.lines = SegmentGrid(_segments(painted), reach=line_range_m)
+        self.lines = SegmentGrid(_segments(self.painted_polylines), reach=line_range_m)
         # Tagged with their global index so callers can mask individual segments.
         cont = _segments(continuous)
         self.continuous_segments = Segments(cont.ax, cont.ay, cont.ex, cont.ey, np.arange(cont.size))
@@ -244,7 +243,7 @@ class RoadGeometry:
             return np.zeros(s.size, dtype=bool)
         b = track_xyhlw[:, :, None]
         hit = box_segment_hits(b[:, 0], b[:, 1], b[:, 2], b[:, 3], b[:, 4], s.ax, s.ay, s.ex, s.ey)
-        return hit.any(axis=0)
+        return np.asarray(hit.any(axis=0))
 
     def speed_limit_at(self, x: float, y: float, default: float = 30.0) -> float:
         """Speed limit (m/s) of the lane whose centre line is closest to (x, y)."""

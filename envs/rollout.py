@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from seal.core.outcome import Outcome
 from seal.core.scenario import CURRENT_STEP, VALID
 
 
@@ -21,8 +22,9 @@ class Rollout:
         agent_ids: ``[A]`` int64, same order as the scenario.
         ego_id, adv_id: the ego and adversary ids.
         last_step: the last executed scenario step (``CURRENT_STEP + number of env steps``).
-        outcome: ``"success"``, ``"crash"``, ``"out_of_road"`` or ``"timeout"`` (the reason the episode ended;
-            a crash in an episode that continued past it is still in `ego_crashes`).
+        outcome: the reason the episode ended, a `seal.core.outcome.Outcome` (a `str`: ``"success"``, ``"crash"``,
+            ``"out_of_road"``, ``"timeout"``; loaded roll-outs hold the plain string); a crash in an episode that
+            continued past it is still in `ego_crashes`.
         ego_crashes: ``(step, other_agent_id)`` for every step where the ego overlapped another agent.
         adv_crashes: ``(step, other_agent_id)`` where the adversary overlapped an agent other than the ego.
         out_of_road_step: step where the ego left the road, else None.
@@ -38,7 +40,7 @@ class Rollout:
     ego_id: int
     adv_id: int
     last_step: int = CURRENT_STEP
-    outcome: str = "timeout"
+    outcome: str = Outcome.TIMEOUT
     ego_crashes: list[tuple[int, int]] = field(default_factory=list)
     adv_crashes: list[tuple[int, int]] = field(default_factory=list)
     out_of_road_step: int | None = None

@@ -14,9 +14,10 @@ scenario time by one 10 Hz step:
 Route: the logged ego track (all valid steps) as a polyline. ``route_completion`` = arc-length progress from the
 ego's start position (step 10) divided by the distance from there to the end of the logged track.
 
-Reward (CAT / MetaDrive defaults): ``progress_reward`` (1) per metre of progress along the route (negative when
-going back); on a step where something happens it is replaced by, in this priority, ``-out_of_road_penalty``
-(-10), ``-crash_penalty`` (-1, on every step the ego overlaps another agent), ``+success_reward`` (+10).
+Reward (CAT / MetaDrive defaults, computed by `seal.envs.sim_core.reward_terms`): ``progress_reward`` (1) per metre
+of progress along the route (negative when going back); on a step where something happens it is replaced by, in
+this priority, ``-out_of_road_penalty`` (-10), ``-crash_penalty`` (-1, on every step the ego overlaps another agent),
+``+success_reward`` (+10). The terms are reported by name in ``info["reward_terms"]``; the reward is their sum.
 
 Termination (``terminated``): success when ``route_completion > success_completion`` (0.95) on a step without
 crash or out-of-road; out of road when an ego box corner leaves the drivable area (union of lane polygons) by
@@ -31,13 +32,16 @@ are gone by then).
 
 ``info`` on every step: ``is_success``, ``crashed``, ``out_of_road``, ``route_completion``, ``crash_agent_id``
 (id of an agent the ego overlaps, -1 if none), ``crashed_with_adversary``, ``adversary_crashed`` (the adversary
-overlaps a third agent), ``scenario_id``, ``step`` (scenario step). On the last step also ``rollout``
-(`seal.envs.rollout.Rollout`) and ``outcome``.
+overlaps a third agent), ``scenario_id``, ``step`` (scenario step); after a step also ``reward_terms``
+(`seal.envs.sim_core.REWARD_TERMS` -> value). On the last step also ``rollout`` (`seal.envs.rollout.Rollout`) and
+``outcome`` (a `seal.core.outcome.Outcome`).
+
+This module is the Gymnasium adapter; placement, collisions, road checks, reward terms and outcomes are the
+simulation core's (`seal.envs.sim_core`), shared with `seal.envs.multi_agent.MultiAgentSim`.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -46,13 +50,25 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from seal.core.scenario import CURRENT_STEP, N_STEPS, VALID, Scenario
+from seal.core.outcome import Outcome
+from seal.core.scenario import CURRENT_STEP, VALID, Scenario
 from seal.envs.behaviors import AdversaryBehavior, BehaviorOutput, ReplayBehavior
 from seal.envs.kinematics import AgentState, bicycle_step
 from seal.envs.observation import ObservationBuilder, observation_space
 from seal.envs.road_geometry import RoadGeometry, get_road_geometry
 from seal.envs.rollout import Rollout
 from seal.envs.route import Route, RouteProjection
+from seal.envs.sim_core import (
+    RewardConfig,
+    RoadChecks,
+    StepEvents,
+    box_hits,
+    episode_outcome,
+    logged_rows,
+    reward_terms,
+    state_row,
+    total_reward,
+)
 
 DEFAULT_CONFIG: dict[str, Any] = {
     "horizon_steps": 90,
@@ -83,35 +99,6 @@ AdversarySpec = AdversaryBehavior | Callable[[Scenario, np.random.Generator], Ad
 """An adversary for every episode: a behaviour (reset each episode), a factory ``(scenario, rng) -> behaviour``
 called at each reset (e.g. a generator with a curriculum), or None for `ReplayBehavior` of the log."""
 
-_SL = np.array([0.5, 0.5, -0.5, -0.5])
-_SW = np.array([0.5, -0.5, -0.5, 0.5])
-
-
-def _corners(x: float, y: float, h: float, length: float, width: float) -> tuple[np.ndarray, np.ndarray]:
-    c, s = math.cos(h), math.sin(h)
-    return x + _SL * (length * c) - _SW * (width * s), y + _SL * (length * s) + _SW * (width * c)
-
-
-def _overlaps(state: AgentState, boxes: np.ndarray) -> np.ndarray:
-    """Separating-axis overlap of one box with ``[N, >=7]`` track-layout boxes -> bool ``[N]``.
-
-    Axes: both boxes' headings and normals; a box's projection radius on a unit axis u is
-    ``l/2 |u.heading| + w/2 |u.normal|``, written with the relative angle to avoid recomputing dot products.
-    """
-    c, s = math.cos(state.heading), math.sin(state.heading)
-    co, so = np.cos(boxes[:, 2]), np.sin(boxes[:, 2])
-    dx, dy = boxes[:, 0] - state.x, boxes[:, 1] - state.y
-    hl, hw = state.length / 2, state.width / 2
-    ol, ow = boxes[:, 5] / 2, boxes[:, 6] / 2
-    cosd = np.abs(c * co + s * so)
-    sind = np.abs(c * so - s * co)
-    sep = np.abs(dx * c + dy * s) > hl + ol * cosd + ow * sind
-    sep |= np.abs(dy * c - dx * s) > hw + ol * sind + ow * cosd
-    sep |= np.abs(dx * co + dy * so) > ol + hl * cosd + hw * sind
-    sep |= np.abs(dy * co - dx * so) > ow + hl * sind + hw * cosd
-    return ~sep
-
-
 class ScenarioEnv(gym.Env):
     """Gymnasium env over a set of scenarios (see the module docstring).
 
@@ -125,6 +112,21 @@ class ScenarioEnv(gym.Env):
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    # Episode state, set by `_setup` at every reset (declared here for the type checker).
+    _scen: Scenario
+    """The scenario of the current episode (`scenario` without the None of before the first reset)."""
+    _t: int
+    """Current scenario step."""
+    _ego: AgentState
+    _adv: AgentState | None
+    """None once the adversary's behaviour has removed it."""
+    _adv_route: Route | None
+    """The adversary's route, when its behaviour acts on its own observation."""
+    _out_of_road_step: int | None
+    _success_step: int | None
+    _return: float
+    _done: bool
 
     def __init__(
         self,
@@ -192,114 +194,49 @@ class ScenarioEnv(gym.Env):
                 adversary = spec(scenario, self.np_random)
         self._setup(scenario, adversary)
         obs = self._observe()
-        return obs, self._info(crashed=False, crash_id=-1, adv_crashed=False, out_of_road=False, success=False)
+        return obs, self._info(StepEvents())
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if self._done:
             raise RuntimeError("step() called on a finished episode; call reset()")
         cfg = self.config
         a = np.asarray(action, dtype=np.float64).reshape(-1)
-        t = self._t
         ego = bicycle_step(self._ego, float(a[0]), float(a[1]))
-        adv = self._move_adversary(t)
-        t += 1
-        self._t = t
+        adv = self._move_adversary(self._t)
+        self._t = t = self._t + 1
         self._ego, self._adv = ego, adv
         self._place_agents(t)
-
-        # Collisions (centre-distance pre-filter, then exact box overlap).
-        cur, present = self._cur, self._present
-        crash_id, crashed = -1, False
-        others = self._others_ego
-        cand = self._near(ego, others)
-        if cand.size:
-            hits = cand[_overlaps(ego, cur[cand])]
-            if hits.size:
-                crashed = True
-                ids = self._agent_ids[hits]
-                adv_hit = np.flatnonzero(hits == self._adv_idx)
-                crash_id = int(self._agent_ids[self._adv_idx]) if adv_hit.size else int(ids[0])
-                self._ego_crashes.extend((t, int(i)) for i in ids)
-        adv_crashed = False
-        others_adv = None
-        if adv is not None:
-            others_adv = np.flatnonzero(present & self._not_ego_adv)
-            cand = self._near(adv, others_adv)
-            if cand.size:
-                hits = cand[_overlaps(adv, cur[cand])]
-                if hits.size:
-                    adv_crashed = True
-                    self._adv_crashes.extend((t, int(i)) for i in self._agent_ids[hits])
-
-        # Route progress and road checks.
-        proj = self._route.project(ego.x, ego.y, self._proj.segment)
-        progress = proj.s - self._proj.s
-        self._proj = proj
-        completion = self._route.completion(proj.s)
-        cx, cy = _corners(ego.x, ego.y, ego.heading, ego.length, ego.width)
-        out_of_road = (
-            abs(proj.lateral) > cfg["max_lateral_m"]
-            or not self._geom.on_road(cx, cy, cfg["offroad_tolerance_m"])
-            or (
-                cfg["check_continuous_lines"]
-                and self._geom.crosses_continuous(ego.x, ego.y, ego.heading, ego.length, ego.width, self._exempt)
-            )
-        )
-        success = completion > cfg["success_completion"] and not crashed and not out_of_road
-
+        crashed, crash_id = self._ego_collisions(t, ego)
+        adv_crashed, others_adv = self._adv_collisions(t, adv)
+        progress, out_of_road = self._road_progress(ego)
+        success = self._route.completion(self._proj.s) > cfg["success_completion"] and not crashed and not out_of_road
+        events = StepEvents(crashed, crash_id, adv_crashed, out_of_road, success)
+        terms = reward_terms(self._weights, progress, events)
+        reward = total_reward(terms)
         if out_of_road:
-            reward = -cfg["out_of_road_penalty"]
             self._out_of_road_step = t
-        elif crashed:
-            reward = -cfg["crash_penalty"]
         elif success:
-            reward = cfg["success_reward"]
             self._success_step = t
-        else:
-            reward = cfg["progress_reward"] * progress
         terminated = bool(out_of_road or success or (crashed and cfg["terminate_on_crash"]))
         truncated = bool(not terminated and t - CURRENT_STEP >= cfg["horizon_steps"])
         self._return += reward
 
         obs = self._observe(last=terminated or truncated, others_adv=others_adv)
-        info = self._info(crashed, crash_id, adv_crashed, out_of_road, success)
+        info = self._info(events)
+        info["reward_terms"] = terms
         if terminated or truncated:
             self._done = True
-            if out_of_road:
-                outcome = "out_of_road"
-            elif crashed:
-                outcome = "crash"
-            elif success:
-                outcome = "success"
-            else:
-                outcome = "timeout"
-            self.rollout = Rollout(
-                scenario_id=self.scenario.scenario_id,
-                tracks=self._roll,
-                agent_ids=self._agent_ids.copy(),
-                ego_id=self.scenario.ego_id,
-                adv_id=self.scenario.adv_id,
-                last_step=t,
-                outcome=outcome,
-                ego_crashes=self._ego_crashes,
-                adv_crashes=self._adv_crashes,
-                out_of_road_step=self._out_of_road_step,
-                success_step=self._success_step,
-                route_completion=float(completion),
-                episode_return=float(self._return),
-                adversary=self._behavior.name,
-            )
-            info["rollout"] = self.rollout
-            info["outcome"] = outcome
-        return obs, float(reward), terminated, truncated, info
+            info["rollout"] = self.rollout = self._finish(episode_outcome(events))
+            info["outcome"] = self.rollout.outcome
+        return obs, reward, terminated, truncated, info
 
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":
             return None
         from seal.envs.render import FrameRenderer
 
-        if self._renderer is None or self._renderer.road is not self.scenario.road:
-            self._renderer = FrameRenderer(self.scenario.road)
+        if self._renderer is None or self._renderer.road is not self._scen.road:
+            self._renderer = FrameRenderer(self._scen.road)
         return self._renderer.draw_state(
             self._cur, self._ego_idx, self._adv_idx, follow=(self._ego.x, self._ego.y),
             text=f"step {self._t}  speed {self._ego.speed:.1f} m/s",
@@ -307,8 +244,15 @@ class ScenarioEnv(gym.Env):
 
     # ----------------------------------------------------------------------------------------- internals
     def _setup(self, scenario: Scenario, behavior: AdversaryBehavior) -> None:
-        self.scenario = scenario
+        self.scenario = self._scen = scenario
         self._geom: RoadGeometry = get_road_geometry(scenario.road)
+        cfg = self.config
+        self._road = RoadChecks(
+            self._geom, cfg["max_lateral_m"], cfg["offroad_tolerance_m"], bool(cfg["check_continuous_lines"])
+        )
+        self._weights = RewardConfig(
+            cfg["progress_reward"], cfg["success_reward"], cfg["out_of_road_penalty"], cfg["crash_penalty"]
+        )
         self._builder = ObservationBuilder(self._geom)
         self._log = scenario.tracks.astype(np.float64)
         n_agents = scenario.n_agents
@@ -325,7 +269,7 @@ class ScenarioEnv(gym.Env):
 
         self._behavior = behavior
         behavior.reset(scenario, self.np_random)
-        self._adv_route: Route | None = behavior.make_route(scenario) if behavior.needs_observation else None
+        self._adv_route = behavior.make_route(scenario) if behavior.needs_observation else None
         self._adv_hint: int | None = None
         self._adv_obs: np.ndarray | None = None
         """The adversary's observation of the current step, built with the ego's (`_observe`)."""
@@ -333,7 +277,7 @@ class ScenarioEnv(gym.Env):
         t = CURRENT_STEP
         self._t = t
         self._ego = AgentState.from_track_row(self._log[self._ego_idx, t])
-        self._adv: AgentState | None = AgentState.from_track_row(self._log[self._adv_idx, t])
+        self._adv = AgentState.from_track_row(self._log[self._adv_idx, t])
         self._proj: RouteProjection = self._route.project(self._ego.x, self._ego.y, self._route.start_segment)
         if self._adv_route is not None:
             self._adv_hint = self._adv_route.project(self._adv.x, self._adv.y).segment
@@ -346,8 +290,8 @@ class ScenarioEnv(gym.Env):
         self._others_ego = np.flatnonzero(self._present & self._not_ego)
         self._ego_crashes: list[tuple[int, int]] = []
         self._adv_crashes: list[tuple[int, int]] = []
-        self._out_of_road_step: int | None = None
-        self._success_step: int | None = None
+        self._out_of_road_step = None
+        self._success_step = None
         self._return = 0.0
         self._done = False
 
@@ -377,37 +321,78 @@ class ScenarioEnv(gym.Env):
         return out.state
 
     def _place_agents(self, t: int) -> None:
-        cur = self._log[:, t].copy() if t < N_STEPS else np.zeros((self._log.shape[0], 8))
-        e = self._ego
-        cur[self._ego_idx] = (e.x, e.y, e.heading, e.vx, e.vy, e.length, e.width, 1.0)
-        a = self._adv
-        cur[self._adv_idx] = (a.x, a.y, a.heading, a.vx, a.vy, a.length, a.width, 1.0) if a is not None else 0.0
+        cur = logged_rows(self._log, t)
+        cur[self._ego_idx] = state_row(self._ego)
+        cur[self._adv_idx] = state_row(self._adv) if self._adv is not None else 0.0
         self._cur = cur
         self._present = cur[:, VALID] > 0.5
         self._others_ego = np.flatnonzero(self._present & self._not_ego)
         if t < self._roll.shape[1]:
             self._roll[:, t] = cur
 
-    def _near(self, state: AgentState, idx: np.ndarray) -> np.ndarray:
-        """Indices in ``idx`` whose centre is close enough to ``state`` for their boxes to touch."""
-        if idx.size == 0:
-            return idx
-        b = self._cur[idx]
-        reach = 0.5 * (math.hypot(state.length, state.width) + np.hypot(b[:, 5], b[:, 6]))
-        d2 = (b[:, 0] - state.x) ** 2 + (b[:, 1] - state.y) ** 2
-        return idx[d2 < reach * reach]
+    def _ego_collisions(self, t: int, ego: AgentState) -> tuple[bool, int]:
+        """(crashed, crash id: the adversary's when among the agents hit, else the first one's); logs the hits."""
+        hits = box_hits(ego, self._cur, self._others_ego)
+        if not hits.size:
+            return False, -1
+        ids = self._agent_ids[hits]
+        adv_hit = np.flatnonzero(hits == self._adv_idx)
+        crash_id = int(self._agent_ids[self._adv_idx]) if adv_hit.size else int(ids[0])
+        self._ego_crashes.extend((t, int(i)) for i in ids)
+        return True, crash_id
+
+    def _adv_collisions(self, t: int, adv: AgentState | None) -> tuple[bool, np.ndarray | None]:
+        """(the adversary hit a third agent, the present agents other than the ego and the adversary: None
+        without an adversary); logs the hits."""
+        if adv is None:
+            return False, None
+        others_adv = np.flatnonzero(self._present & self._not_ego_adv)
+        hits = box_hits(adv, self._cur, others_adv)
+        if hits.size:
+            self._adv_crashes.extend((t, int(i)) for i in self._agent_ids[hits])
+        return bool(hits.size), others_adv
+
+    def _road_progress(self, ego: AgentState) -> tuple[float, bool]:
+        """(route progress of this step in m, out of road); advances the ego's route projection."""
+        proj = self._route.project(ego.x, ego.y, self._proj.segment)
+        progress = proj.s - self._proj.s
+        self._proj = proj
+        road = self._road
+        out_of_road = (
+            road.too_far(proj.lateral) or not road.corners_on_road(ego) or road.crosses_solid(ego, self._exempt)
+        )
+        return progress, out_of_road
+
+    def _finish(self, outcome: Outcome) -> Rollout:
+        """The `Rollout` of the episode that ends now with ``outcome``."""
+        return Rollout(
+            scenario_id=self._scen.scenario_id,
+            tracks=self._roll,
+            agent_ids=self._agent_ids.copy(),
+            ego_id=self._scen.ego_id,
+            adv_id=self._scen.adv_id,
+            last_step=self._t,
+            outcome=outcome,
+            ego_crashes=self._ego_crashes,
+            adv_crashes=self._adv_crashes,
+            out_of_road_step=self._out_of_road_step,
+            success_step=self._success_step,
+            route_completion=float(self._route.completion(self._proj.s)),
+            episode_return=float(self._return),
+            adversary=self._behavior.name,
+        )
 
     def _observe(self, last: bool = False, others_adv: np.ndarray | None = None) -> np.ndarray:
         """The ego's observation of the current step; when the adversary will act on its own observation this
         step (not on the ``last`` step of an episode), that one too, in the same pass (`build_many`: the two cost
         about 1.4 builds), kept for `_move_adversary`. ``others_adv``: the present agents other than the ego and
         the adversary, when `step` has found them (None at reset)."""
-        adv, behavior = self._adv, self._behavior
-        if adv is None or not behavior.needs_observation:
+        adv, behavior, adv_route = self._adv, self._behavior, self._adv_route
+        if adv is None or adv_route is None:  # no adversary, or one that does not observe (`_setup`)
             return self._builder.build(self._ego, self._route, self._cur[self._others_ego, :7], self._proj)
         # Project every step (cheap) so the hinted projection keeps up with the adversary even on steps that
         # skip its observation.
-        proj = self._adv_route.project(adv.x, adv.y, self._adv_hint)
+        proj = adv_route.project(adv.x, adv.y, self._adv_hint)
         self._adv_hint = proj.segment
         if last or not behavior.observes(self._t):
             return self._builder.build(self._ego, self._route, self._cur[self._others_ego, :7], self._proj)
@@ -425,22 +410,20 @@ class ScenarioEnv(gym.Env):
                 rows = [r if mask[i] else -1 for r, i in zip(rows, (self._ego_idx, self._adv_idx), strict=True)]
             boxes = self._cur[present, :7]
         both = self._builder.build_many(
-            (self._ego, adv), (self._route, self._adv_route), (self._proj, proj), boxes, rows,
+            (self._ego, adv), (self._route, adv_route), (self._proj, proj), boxes, rows,
         )
         self._adv_obs = both[1]
         return both[0]
 
-    def _info(
-        self, crashed: bool, crash_id: int, adv_crashed: bool, out_of_road: bool, success: bool
-    ) -> dict[str, Any]:
+    def _info(self, events: StepEvents) -> dict[str, Any]:
         return {
-            "is_success": bool(success),
-            "crashed": bool(crashed),
-            "out_of_road": bool(out_of_road),
+            "is_success": bool(events.success),
+            "crashed": bool(events.crashed),
+            "out_of_road": bool(events.out_of_road),
             "route_completion": float(self._route.completion(self._proj.s)),
-            "crash_agent_id": int(crash_id),
-            "crashed_with_adversary": bool(crashed and crash_id == int(self._agent_ids[self._adv_idx])),
-            "adversary_crashed": bool(adv_crashed),
-            "scenario_id": self.scenario.scenario_id,
+            "crash_agent_id": int(events.crash_id),
+            "crashed_with_adversary": bool(events.crashed and events.crash_id == int(self._agent_ids[self._adv_idx])),
+            "adversary_crashed": bool(events.adv_crashed),
+            "scenario_id": self._scen.scenario_id,
             "step": int(self._t),
         }

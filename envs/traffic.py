@@ -48,6 +48,10 @@ def _separation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.maximum(pb.min(-1) - pa.max(-1), pa.min(-1) - pb.max(-1)).max(-1)
 
 
+_RuleRow = tuple[Driver, float, bool]
+"""(vehicle, predicted speed in m/s, inside the junction) of one road-rule prediction."""
+
+
 # ------------------------------------------------------------------------------------------ road
 class TrafficRoad(Road):
     """A highway-env `Road` with bucketed neighbour search, prefiltered collisions and optional road rules."""
@@ -254,7 +258,27 @@ class TrafficRoad(Road):
             v.yield_distance = None
         if len(self.vehicles) < 2:
             return
-        rows: list[tuple[Driver, float, bool]] = []  # (vehicle, predicted speed, inside the junction)
+        rows = self._rule_rows()
+        times = np.arange(0.25, 3.0, 0.25)
+        found = self._close_pairs(rows, times)
+        if found is None:
+            return
+        ii, jj, close, corners = found
+        entry: dict[int, float | None] = {}
+        for p in np.flatnonzero(close.any(axis=(1, 2))):
+            i, j = int(ii[p]), int(jj[p])
+            ka, kb = np.nonzero(close[p])
+            overlap = boxes_overlap(corners[i][ka], corners[j][kb])
+            if not overlap.any():
+                continue
+            # When each one first enters the conflict.
+            t_a, t_b = float(times[ka[overlap].min()]), float(times[kb[overlap].min()])
+            self._resolve(rows[i], rows[j], t_a, t_b, entry)
+
+    def _rule_rows(self) -> list[_RuleRow]:
+        """(vehicle, predicted speed, inside the junction) per prediction: wrecks standing, slow vehicles twice
+        (standing and driving off at `GO_SPEED`), others at their speed (at least `GO_SPEED`)."""
+        rows: list[_RuleRow] = []
         for v in self.vehicles:
             inside = v.lane_index[0] in self.junction_nodes
             if v.crashed:
@@ -263,7 +287,14 @@ class TrafficRoad(Road):
             rows.append((v, max(v.speed, GO_SPEED), inside))
             if v.speed < GO_SPEED:
                 rows.append((v, v.speed, inside))
-        times = np.arange(0.25, 3.0, 0.25)
+        return rows
+
+    def _close_pairs(
+        self, rows: list[_RuleRow], times: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+        """Predicted paths of ``rows`` at ``times`` (s) and the pairs that may conflict: ``(ii [P], jj [P], close
+        [P, K, K] (samples close enough in space and within `CONFLICT_MARGIN_S`), corners [n, K, 4, 2] of the
+        enlarged boxes)``; None when no pair may."""
         preds = [
             self._predict_wreck(v, times) if v.crashed else self._predict(v, times, sp) for v, sp, _ in rows
         ]
@@ -286,72 +317,74 @@ class TrafficRoad(Road):
             if self._may_conflict(rows[i][0], rows[j][0])
         ]
         if not keep:
-            return
+            return None
         ii, jj = ii[keep], jj[keep]
         d2 = ((pos[ii][:, :, None] - pos[jj][:, None]) ** 2).sum(-1)  # [P, K, K]
         reach = (lengths[ii] + lengths[jj]) * 0.75 + 1.0
         close = (d2 < (reach**2)[:, None, None]) & window
         corners = box_corners(pos[..., 0], pos[..., 1], head, 1.5 * lengths[:, None], 0.9 * widths[:, None])
-        entry: dict[int, float | None] = {}
-        for p in np.flatnonzero(close.any(axis=(1, 2))):
-            i, j = int(ii[p]), int(jj[p])
-            (a, sa, ina), (b, sb, inb) = rows[i], rows[j]
-            ka, kb = np.nonzero(close[p])
-            overlap = boxes_overlap(corners[i][ka], corners[j][kb])
-            if not overlap.any():
-                continue
-            ka, kb = ka[overlap], kb[overlap]
-            la, lb = a.lane_index, b.lane_index
-            static_a, static_b = sa < 0.5 or a.crashed, sb < 0.5 or b.crashed
-            if static_a and static_b:
-                continue
-            if static_a or static_b:
-                n = (
-                    1 if static_a else 0
-                )  # a standing vehicle (or wreck) is an obstacle: the moving one yields
-            elif ina != inb:
-                n = 1 if ina else 0
-            else:
-                pa, pb = self.index.lanes[la].priority, self.index.lanes[lb].priority
-                if pa != pb:
-                    n = 0 if pa < pb else 1
-                else:  # the vehicle behind yields
-                    n = (
-                        0
-                        if a.direction.dot(b.position - a.position) > b.direction.dot(a.position - b.position)
-                        else 1
-                    )
-            pair = (a, b)
-            # Each one's distance to where it first enters the conflict.
-            t_a, t_b = float(times[ka.min()]), float(times[kb.min()])
-            dist = (sa * t_a - 0.75 * a.LENGTH, sb * t_b - 0.75 * b.LENGTH)
-            # A standing vehicle can always stay where it is.
-            can_stop = [
-                not v.crashed and (v.speed < 0.5 or dist[m] >= v.speed**2 / (2 * v.p.max_brake))
-                for m, v in enumerate(pair)
-            ]
-            if not (static_a or static_b) and not can_stop[n] and can_stop[1 - n]:
-                n = 1 - n  # (if neither can stop any more, the one without right of way brakes hard)
-            y, other = pair[n], pair[1 - n]
-            if y.crashed:
-                continue
-            if not (static_a or static_b) and y.p.yield_prob < 1.0 and self.rng.random() >= y.p.yield_prob:
-                continue  # an aggressive driver takes the right of way (but never drives into a standing car)
-            if (
-                y.wait_s > MAX_WAIT_S
-                and other.speed < 0.5
-                and not other.crashed
-                and (y.wait_s, -y.vehicle_id) > (other.wait_s, -other.vehicle_id)
-            ):
-                continue  # two standing vehicles waiting for each other: the one waiting longest goes
-            stop = dist[n]
-            if y.vehicle_id not in entry:
-                entry[y.vehicle_id] = self._entry_distance(y)
-            line = entry[y.vehicle_id]
-            if line is not None and 0.0 <= line <= stop + 1e-9 and line >= y.speed**2 / (2 * y.p.dec):
-                stop = line - 1.0  # wait at the junction entry rather than inside it
-            if y.yield_distance is None or stop < y.yield_distance:
-                y.yield_distance = max(0.0, stop)
+        return ii, jj, close, corners
+
+    @staticmethod
+    def _right_of_way(a: Driver, ina: bool, b: Driver, inb: bool, static_a: bool, static_b: bool) -> int:
+        """Which of ``(a, b)`` should yield (0 or 1): the moving one if the other stands, else the one outside the
+        junction if the other is inside, else the one on the lower-priority lane, else the one behind."""
+        if static_a or static_b:
+            return 1 if static_a else 0  # a standing vehicle (or wreck) is an obstacle: the moving one yields
+        if ina != inb:
+            return 1 if ina else 0
+        return -1
+
+    def _resolve(
+        self, row_a: _RuleRow, row_b: _RuleRow, t_a: float, t_b: float, entry: dict[int, float | None]
+    ) -> None:
+        """Make one of a conflicting pair yield (see `enforce_road_rules`); ``t_a``, ``t_b``: when each one first
+        enters the conflict (s); ``entry``: junction-entry distances found so far, by vehicle id."""
+        (a, sa, ina), (b, sb, inb) = row_a, row_b
+        static_a, static_b = sa < 0.5 or a.crashed, sb < 0.5 or b.crashed
+        if static_a and static_b:
+            return
+        n = self._right_of_way(a, ina, b, inb, static_a, static_b)
+        if n < 0:
+            pa, pb = self.index.lanes[a.lane_index].priority, self.index.lanes[b.lane_index].priority
+            if pa != pb:
+                n = 0 if pa < pb else 1
+            else:  # the vehicle behind yields
+                n = 0 if a.direction.dot(b.position - a.position) > b.direction.dot(a.position - b.position) else 1
+        pair = (a, b)
+        # Each one's distance to where it first enters the conflict.
+        dist = (sa * t_a - 0.75 * a.LENGTH, sb * t_b - 0.75 * b.LENGTH)
+        # A standing vehicle can always stay where it is.
+        can_stop = [
+            not v.crashed and (v.speed < 0.5 or dist[m] >= v.speed**2 / (2 * v.p.max_brake))
+            for m, v in enumerate(pair)
+        ]
+        if not (static_a or static_b) and not can_stop[n] and can_stop[1 - n]:
+            n = 1 - n  # (if neither can stop any more, the one without right of way brakes hard)
+        y, other = pair[n], pair[1 - n]
+        if y.crashed:
+            return
+        if not (static_a or static_b) and y.p.yield_prob < 1.0 and self.rng.random() >= y.p.yield_prob:
+            return  # an aggressive driver takes the right of way (but never drives into a standing car)
+        if (
+            y.wait_s > MAX_WAIT_S
+            and other.speed < 0.5
+            and not other.crashed
+            and (y.wait_s, -y.vehicle_id) > (other.wait_s, -other.vehicle_id)
+        ):
+            return  # two standing vehicles waiting for each other: the one waiting longest goes
+        self._yield_before(y, dist[n], entry)
+
+    def _yield_before(self, y: Driver, stop: float, entry: dict[int, float | None]) -> None:
+        """Have ``y`` stop ``stop`` m ahead, or at its junction entry when that comes first and it can still
+        brake for it (``entry``: a cache of `_entry_distance` by vehicle id)."""
+        if y.vehicle_id not in entry:
+            entry[y.vehicle_id] = self._entry_distance(y)
+        line = entry[y.vehicle_id]
+        if line is not None and 0.0 <= line <= stop + 1e-9 and line >= y.speed**2 / (2 * y.p.dec):
+            stop = line - 1.0  # wait at the junction entry rather than inside it
+        if y.yield_distance is None or stop < y.yield_distance:
+            y.yield_distance = max(0.0, stop)
 
 
 # ------------------------------------------------------------------------------------------ traffic plans

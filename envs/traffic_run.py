@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from highway_env.road.road import LaneIndex, RoadNetwork
 
+from seal.core.geometry import wrap_angle_f
 from seal.core.scenario import DT_S
 from seal.envs.drivers import DRIVER_KINDS, Driver, sample_profile
 from seal.envs.layouts import make_network
@@ -67,10 +68,11 @@ def traffic_plan(layout: str, params: dict, network: RoadNetwork, rng: np.random
         )
     if layout == "intersection":
         rate = rng.uniform(0.2, 0.4)
-        srcs, pop = [], []
+        srcs = []
+        pop: list[tuple[LaneIndex, tuple[str, ...]]] = []
         for k in range(4):
             # Destinations: right, straight, left (corner k-1, k+2, k+1).
-            dests = (f"o{(k - 1) % 4}", f"o{(k + 2) % 4}", f"o{(k + 1) % 4}")
+            dests: tuple[str, ...] = (f"o{(k - 1) % 4}", f"o{(k + 2) % 4}", f"o{(k + 1) % 4}")
             srcs.append(Source((f"o{k}", f"ir{k}", 0), rate * rng.uniform(0.7, 1.3), dests, (0.3, 0.4, 0.3)))
             pop.append(((f"o{k}", f"ir{k}", 0), dests))
             pop.append(((f"il{k}", f"o{k}", 0), ()))
@@ -251,7 +253,7 @@ class Simulation:
     def log(self) -> None:
         for v in self.road.vehicles:
             x, y = v.position.tolist()
-            h = (v.heading + math.pi) % (2 * math.pi) - math.pi
+            h = wrap_angle_f(v.heading)
             self.rows[v.vehicle_id].append((x, y, h, max(v.speed, 0.0), v.LENGTH, v.WIDTH))
 
     def run(self, n_steps: int) -> RunLog:

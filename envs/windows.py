@@ -20,24 +20,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from seal.core.geometry import box_corners, box_gap
+from seal.core.geometry import box_corners, box_gap, wrap_angle
+from seal.core.interaction import (
+    CROSSING_TURN_RAD,
+    EVENT_GAP_M,
+    MAX_PER_AGENT,
+    context_rows,
+    crossing_hits,
+    is_moving,
+    near_pair_distances,
+)
 from seal.core.interaction import in_own_lanes as own_lanes
-from seal.core.scenario import CURRENT_STEP, DT_S, N_STEPS
+from seal.core.scenario import CURRENT_STEP, N_STEPS
 from seal.envs.traffic_run import RunLog
 
-EVENT_GAP_M = 5.0
-"""Bodies closer than this (m) interact."""
-CONFLICT_DIST_M = 1.5
-"""Paths cross where they pass within this distance (m) of each other."""
-CONFLICT_DT_S = 2.5
-"""A crossing is a conflict when both pass it within this many seconds."""
-CONTEXT_M = 80.0
-"""Other vehicles within this distance (m) of the ego or the adversary are part of the scenario."""
 EVENT_STEPS = (25, 75)
 """Preferred window steps for the closest approach / conflict."""
-MIN_MEAN_SPEED = 2.0
-MIN_DISPLACEMENT_M = 10.0
-MAX_PER_VEHICLE = 2
 
 
 @dataclass(frozen=True)
@@ -53,7 +51,7 @@ class Window:
     any_collision: bool
 
 
-def _corners(log: RunLog, row: int, steps: slice | np.ndarray) -> np.ndarray:
+def _run_corners(log: RunLog, row: int, steps: slice | np.ndarray) -> np.ndarray:
     """Box corners ``[K, 4, 2]`` of vehicle ``row`` at ``steps``."""
     s = log.states[row, steps]
     return box_corners(s[..., 0], s[..., 1], s[..., 2], s[..., 4], s[..., 5])
@@ -67,12 +65,8 @@ def in_own_lanes(log: RunLog, i: int, j: int, steps: np.ndarray) -> np.ndarray:
 
 def interaction_gap(log: RunLog, i: int, j: int, steps: np.ndarray) -> np.ndarray:
     """``[K]`` box gap (m) of ``i`` and ``j`` at ``steps``, inf where they keep to their own lanes."""
-    g = box_gap(_corners(log, i, steps), _corners(log, j, steps))
+    g = box_gap(_run_corners(log, i, steps), _run_corners(log, j, steps))
     return np.where(in_own_lanes(log, i, j, steps), np.inf, g)
-
-
-NEAR_M = 30.0
-"""Pairs farther apart than this (m) all the time cannot interact."""
 
 
 @dataclass(frozen=True)
@@ -86,16 +80,8 @@ class _Pairs:
 
 
 def _near_pairs(log: RunLog) -> _Pairs:
-    x = np.where(log.valid, log.states[..., 0], np.nan)
-    y = np.where(log.valid, log.states[..., 1], np.nan)
-    # Coarse pass on every 10th step; vehicles move at most ~2 x 5 steps x 4 m between samples.
-    stride = 10
-    dc = np.hypot(x[:, None, ::stride] - x[None, :, ::stride], y[:, None, ::stride] - y[None, :, ::stride])
-    cand = np.triu(np.nan_to_num(dc, nan=np.inf).min(axis=-1) < NEAR_M + 40.0, 1)
-    ii, jj = np.nonzero(cand)
-    d = np.nan_to_num(np.hypot(x[ii] - x[jj], y[ii] - y[jj]), nan=np.inf)
-    keep = d.min(axis=1) < NEAR_M
-    return _Pairs(ii[keep], jj[keep], d[keep])
+    """`seal.core.interaction.near_pair_distances` of the run (its logs are continuous)."""
+    return _Pairs(*near_pair_distances(log.states[..., :2], log.valid))
 
 
 def _pair_gaps(log: RunLog, pairs: _Pairs) -> dict[tuple[int, int], np.ndarray]:
@@ -122,27 +108,13 @@ def _conflicts(log: RunLog, i: int, j: int, lo: int, hi: int) -> list[tuple[int,
     vi, vj = log.valid[i, steps], log.valid[j, steps]
     if not vi.any() or not vj.any():
         return []
-    pi, pj = log.states[i, steps, :2], log.states[j, steps, :2]
-    d = np.linalg.norm(pi[:, None] - pj[None], axis=-1)
-    dt = np.abs(steps[:, None] - steps[None]) * DT_S
-    heading_diff = np.abs(
-        (log.states[i, steps, 2][:, None] - log.states[j, steps, 2][None] + np.pi) % (2 * np.pi) - np.pi
-    )
-    # Following in the same lane is not a crossing: require the headings to differ there.
-    hit = (
-        (d < CONFLICT_DIST_M)
-        & (dt <= CONFLICT_DT_S)
-        & (heading_diff > np.radians(15))
-        & vi[:, None]
-        & vj[None]
-    )
-    out = []
-    for a, b in zip(*np.nonzero(hit), strict=True):
-        out.append((int(max(steps[a], steps[b])), float(dt[a, b])))
-    return out
+    si, sj = log.states[i, steps], log.states[j, steps]
+    hit, dt = crossing_hits(si[:, :2], steps, si[:, 2], sj[:, :2], steps, sj[:, 2])
+    hit &= vi[:, None] & vj[None]
+    return [(int(max(steps[a], steps[b])), float(dt[a, b])) for a, b in zip(*np.nonzero(hit), strict=True)]
 
 
-def _events(log: RunLog, gaps: dict[tuple[int, int], np.ndarray], pairs: _Pairs) -> list[tuple[int, ...]]:
+def _events(log: RunLog, gaps: dict[tuple[int, int], np.ndarray], pairs: _Pairs) -> list[tuple[int, int, int]]:
     """(i, j, event step) for gap minima below `EVENT_GAP_M`, collisions and path conflicts."""
     events: list[tuple[int, int, int]] = []
     for (i, j), g in gaps.items():
@@ -162,8 +134,8 @@ def _events(log: RunLog, gaps: dict[tuple[int, int], np.ndarray], pairs: _Pairs)
         if (i, j) in gaps and (gaps[(i, j)] < EVENT_GAP_M).any():
             continue  # already an event pair
         common = np.flatnonzero(np.isfinite(pairs.dist[p]))
-        turn = np.abs((head[i, common] - head[j, common] + np.pi) % (2 * np.pi) - np.pi)
-        if not (turn > np.radians(15)).any():
+        turn = np.abs(wrap_angle(head[i, common] - head[j, common]))
+        if not (turn > CROSSING_TURN_RAD).any():
             continue
         hits = _conflicts(log, i, j, int(common[0]), int(common[-1]) + 1)
         if hits:
@@ -172,11 +144,9 @@ def _events(log: RunLog, gaps: dict[tuple[int, int], np.ndarray], pairs: _Pairs)
 
 
 def _moving(log: RunLog, row: int, t0: int) -> bool:
+    """`seal.core.interaction.is_moving` over the window starting at ``t0``."""
     s = log.states[row, t0 : t0 + N_STEPS]
-    return (
-        float(s[:, 3].mean()) > MIN_MEAN_SPEED
-        and float(np.hypot(*(s[-1, :2] - s[0, :2]))) > MIN_DISPLACEMENT_M
-    )
+    return is_moving(s[:, 3], s[:, :2])
 
 
 def _span(valid: np.ndarray) -> tuple[int, int]:
@@ -207,7 +177,7 @@ def find_windows(log: RunLog, rng: np.random.Generator, cap: int, min_t0: int = 
             continue
         seen.add((i, j, t0))
         fut = slice(t0 + CURRENT_STEP, t0 + N_STEPS)
-        g = box_gap(_corners(log, i, fut), _corners(log, j, fut))
+        g = box_gap(_run_corners(log, i, fut), _run_corners(log, j, fut))
         min_gap = float(g.min())
         g_interaction = np.where(in_own_lanes(log, i, j, np.arange(fut.start, fut.stop)), np.inf, g)
         t_min = int(np.argmin(g_interaction)) + CURRENT_STEP
@@ -215,7 +185,7 @@ def find_windows(log: RunLog, rng: np.random.Generator, cap: int, min_t0: int = 
         if g_interaction.min() >= EVENT_GAP_M and not conflict:
             continue
         pair_collision = (i, j) in collided and t0 <= collided[(i, j)] < t0 + N_STEPS
-        turn = np.abs((log.states[i, fut, 2] - log.states[j, fut, 2] + np.pi) % (2 * np.pi) - np.pi)
+        turn = np.abs(wrap_angle(log.states[i, fut, 2] - log.states[j, fut, 2]))
         if np.median(turn) > 2.4 and g_interaction.min() > 1.0 and not conflict:
             continue  # oncoming traffic passing in its own lane is not an interaction
         # Rank: a uniform draw among qualifying interactions, so the pool keeps their natural mix of routine
@@ -233,7 +203,7 @@ def find_windows(log: RunLog, rng: np.random.Generator, cap: int, min_t0: int = 
     for _, i, j, t0, min_gap, pair_collision, _ in candidates:
         if len(chosen) >= cap:
             break
-        if (i, j) in used_pairs or uses.get(i, 0) >= MAX_PER_VEHICLE or uses.get(j, 0) >= MAX_PER_VEHICLE:
+        if (i, j) in used_pairs or uses.get(i, 0) >= MAX_PER_AGENT or uses.get(j, 0) >= MAX_PER_AGENT:
             continue
         used_pairs.add((i, j))
         uses[i] = uses.get(i, 0) + 1
@@ -249,16 +219,10 @@ def find_windows(log: RunLog, rng: np.random.Generator, cap: int, min_t0: int = 
 
 
 def _context(log: RunLog, ego: int, adv: int, t0: int) -> list[int]:
-    """Rows valid in the window that come within `CONTEXT_M` of the ego or the adversary."""
+    """Rows valid in the window that come within `CONTEXT_M` of the ego or the adversary
+    (`seal.core.interaction.context_rows`)."""
     win = slice(t0, t0 + N_STEPS)
-    valid = log.valid[:, win]
-    pos = log.states[:, win, :2]
-    near = np.zeros(valid.shape[0], dtype=bool)
-    for focal in (ego, adv):
-        d = np.linalg.norm(pos - pos[focal][None], axis=-1)
-        near |= (valid & (d < CONTEXT_M)).any(axis=1)
-    near[[ego, adv]] = False
-    return [int(r) for r in np.flatnonzero(near)]
+    return list(context_rows(log.states[:, win, :2], log.valid[:, win], ego, adv))
 
 
 def window_tracks(log: RunLog, w: Window) -> tuple[np.ndarray, np.ndarray]:

@@ -11,20 +11,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from seal.core.geometry import box_corners, box_gap, boxes_overlap
-from seal.core.scenario import CURRENT_STEP, HEADING, LENGTH, VALID, WIDTH, Scenario, X, Y
-
-
-def _corners(tracks: np.ndarray) -> np.ndarray:
-    """``[..., T, 4, 2]`` box corners of ``[..., T, 8]`` tracks."""
-    return box_corners(tracks[..., X], tracks[..., Y], tracks[..., HEADING], tracks[..., LENGTH], tracks[..., WIDTH])
+from seal.core.geometry import box_gap, boxes_overlap, track_corners
+from seal.core.scenario import CURRENT_STEP, LENGTH, VALID, WIDTH, Scenario, X, Y
 
 
 def pair_gaps(scenario: Scenario, agent_a: int, agent_b: int) -> np.ndarray:
     """``[T]`` body gap in metres between two agents (by id); NaN where either is invalid."""
     ta, tb = scenario.track(agent_a), scenario.track(agent_b)
     both = (ta[:, VALID] > 0.5) & (tb[:, VALID] > 0.5)
-    gaps = box_gap(_corners(ta), _corners(tb))
+    gaps = box_gap(track_corners(ta), track_corners(tb))
     return np.where(both, gaps, np.nan)
 
 
@@ -59,7 +54,7 @@ def any_collision(scenario: Scenario, within_m: float = 30.0) -> bool:
     a, b, t = np.nonzero(close)
     if a.size == 0:
         return False
-    corners = _corners(tr)
+    corners = track_corners(tr)
     return bool(boxes_overlap(corners[a, t], corners[b, t]).any())
 
 

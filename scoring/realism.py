@@ -20,8 +20,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from seal.core.geometry import box_corners, boxes_overlap, wrap_angle
-from seal.core.scenario import DT_S, HEADING, LENGTH, VALID, VX, VY, WIDTH, X, Y
+from seal.core.geometry import boxes_overlap, track_corners, wrap_angle
+from seal.core.scenario import DT_S, HEADING, VALID, VX, VY, X, Y
 
 YAW_RATE_BINS = np.linspace(-1.5, 1.5, 61)
 ACC_BINS = np.linspace(-10.0, 10.0, 81)
@@ -93,10 +93,6 @@ def realism_wd(
 
 
 # ------------------------------------------------------------------------------------------------ collisions
-def _corners(t: np.ndarray) -> np.ndarray:
-    return box_corners(t[..., X], t[..., Y], t[..., HEADING], t[..., LENGTH], t[..., WIDTH])
-
-
 def contact_normal(corners_a: np.ndarray, corners_b: np.ndarray) -> np.ndarray:
     """Unit contact normal ``[..., 2]`` of overlapping boxes ``[..., 4, 2]``: the box edge normal with the least
     penetration depth, pointing from a to b."""
@@ -115,7 +111,7 @@ def contact_normal(corners_a: np.ndarray, corners_b: np.ndarray) -> np.ndarray:
 def first_collision_step(ego: np.ndarray, adv: np.ndarray) -> int:
     """First step (index) where the two ``[T, 8]`` tracks' boxes overlap while both are valid, -1 if none."""
     both = (ego[:, VALID] > 0.5) & (adv[:, VALID] > 0.5)
-    hit = boxes_overlap(_corners(ego), _corners(adv)) & both
+    hit = boxes_overlap(track_corners(ego), track_corners(adv)) & both
     return int(np.argmax(hit)) if hit.any() else -1
 
 
@@ -130,7 +126,7 @@ def collision_metrics(ego: TrackBatch, adv: TrackBatch) -> dict[str, float]:
         k = first_collision_step(e, a)
         if k < 0:
             continue
-        n = contact_normal(_corners(e[k]), _corners(a[k]))
+        n = contact_normal(track_corners(e[k]), track_corners(a[k]))
         rel_v = np.array([a[k, VX] - e[k, VX], a[k, VY] - e[k, VY]])
         speeds.append(abs(float(rel_v @ n)))
         opposite = abs(float(wrap_angle(a[k, HEADING] - e[k, HEADING]))) > HEAD_ON_ANGLE_RAD

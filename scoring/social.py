@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from seal.core.geometry import box_corners, boxes_overlap
+from seal.core.geometry import box_corners, boxes_overlap, wrap_angle
 from seal.scoring.frenet import RoadIndex
 from seal.scoring.neighbours import close_pairs
 from seal.scoring.primitives import Primitives, agent_windows, pair_anomaly
@@ -209,7 +209,7 @@ def _following(a, b, I, J, pi, pj, si, sj, dist, mask, index: RoadIndex):
         return out
     ok, pi, pj, si, sj, dist = ok[rows], pi[rows], pj[rows], si[rows], sj[rows], dist[rows]
     hi, hj = a.heading[I[rows]], b.heading[J[rows]]
-    ok &= np.abs((hi - hj + np.pi) % (2 * np.pi) - np.pi) < HEADING_MAX_RAD
+    ok &= np.abs(wrap_angle(hi - hj)) < HEADING_MAX_RAD
     rel_x, rel_y = pj[..., 0] - pi[..., 0], pj[..., 1] - pi[..., 1]
     j_leads = rel_x * np.cos(hi) + rel_y * np.sin(hi) > 0
     v_f = np.where(j_leads, si, sj)

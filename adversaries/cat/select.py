@@ -7,7 +7,7 @@
   the ego's length / width and the heading of the smoothed polyline (the chord over +-`HALF_WINDOW` steps).
 * Walking forward, an uncertainty factor is multiplied by ``decay`` (0.99) per sample; the first sample ``k``
   where the boxes intersect gives ``P3 = decay ** (k + 1)``, no intersection gives 0.
-* The box test is `seal.adversaries.boxes.obb_overlap` on ``[C, K, S]`` at once (32 x 5 x 16 pairs: ~0.3 ms).
+* The box test is `seal.core.geometry.obb_overlap` on ``[C, K, S]`` at once (32 x 5 x 16 pairs: ~0.3 ms).
 * ``score_j = sum_i P1_j P3_ij`` over the K roll-outs; the argmax wins. When nothing collides the candidate with
   the smallest centre distance (over sub-sampled times and roll-outs) is taken.
 """
@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from seal.adversaries.boxes import obb_overlap
+from seal.core.geometry import obb_overlap
 from seal.core.scenario import CURRENT_STEP
 
 STRIDE_STEPS = 5
@@ -162,15 +162,7 @@ def cat_select(
     gap = c_xy[:, None] - e_xy[None]  # [C, K, S, 2]
     dist = np.where(ego_ok[None], np.hypot(gap[..., 0], gap[..., 1]), np.inf)
     min_dist = dist.min(axis=(1, 2))
-    if any_hit.any():
-        # A colliding candidate whose P1 underflowed to 0 still beats every non-colliding one.
-        index = int(np.argmax(scores)) if scores.max() > 0 else int(np.argmax(p3.sum(-1)))
-        k = int(first_hit[index][any_hit[index]].min())
-        collided = True
-    else:
-        index = int(np.argmin(min_dist))
-        k = int(np.unravel_index(np.argmin(dist[index]), dist[index].shape)[1])
-        collided = False
+    index, k, collided = _choose(scores, p3, first_hit, any_hit, dist, min_dist)
     return CATSelection(
         index=index,
         collided=collided,
@@ -182,3 +174,18 @@ def cat_select(
         min_distance_m=min_dist,
         sample_steps=steps,
     )
+
+
+def _choose(
+    scores: np.ndarray, p3: np.ndarray, first_hit: np.ndarray, any_hit: np.ndarray, dist: np.ndarray,
+    min_dist: np.ndarray,
+) -> tuple[int, int, bool]:
+    """(chosen candidate, its predicted sample, collided): the best-scoring colliding candidate at its first hit,
+    or, when none collides, the one coming closest at its closest sample. Shapes as in `cat_select`
+    (``scores [C]``, ``p3 / any_hit [C, K]``, ``first_hit [C, K]``, ``dist [C, K, S]``, ``min_dist [C]``)."""
+    if any_hit.any():
+        # A colliding candidate whose P1 underflowed to 0 still beats every non-colliding one.
+        index = int(np.argmax(scores)) if scores.max() > 0 else int(np.argmax(p3.sum(-1)))
+        return index, int(first_hit[index][any_hit[index]].min()), True
+    index = int(np.argmin(min_dist))
+    return index, int(np.unravel_index(np.argmin(dist[index]), dist[index].shape)[1]), False

@@ -3,7 +3,7 @@
 
 Every step of the candidate is tested (not CAT's 0.5 s samples: the switch step should not be off by up to 4
 steps): oriented boxes with the adversary's and the ego's length / width and the heading of the smoothed polyline
-(`seal.adversaries.cat.select.smoothed_heading`, as CAT), `seal.adversaries.boxes.obb_overlap` on ``[K, T]`` at once.
+(`seal.adversaries.cat.select.smoothed_heading`, as CAT), `seal.core.geometry.obb_overlap` on ``[K, T]`` at once.
 The
 earliest step at which the boxes intersect in any roll-out is the predicted collision step; without any
 intersection, the step of the smallest centre distance over the roll-outs is the closest approach.
@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from seal.adversaries.boxes import obb_overlap
 from seal.adversaries.cat.select import _fill_invalid, smoothed_heading
+from seal.core.geometry import obb_overlap
 from seal.core.scenario import CURRENT_STEP
 
 

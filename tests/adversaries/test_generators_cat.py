@@ -9,11 +9,10 @@ import scenario_factory as sf
 import shapely
 
 from seal.adversaries.base import make_generator
-from seal.adversaries.boxes import obb_overlap
 from seal.adversaries.cat.generator import CATGenerator
 from seal.adversaries.cat.select import _fill_invalid, cat_select, flattened_prior, smoothed_heading
 from seal.adversaries.history import RolloutHistory
-from seal.core.geometry import box_corners, boxes_overlap
+from seal.core.geometry import box_corners, boxes_overlap, obb_overlap
 from seal.core.scenario import CURRENT_STEP, DT_S, N_FUTURE, N_STEPS, X, Y
 from seal.envs.behaviors import ReplayBehavior, TrackingBehavior
 from seal.envs.scenario_env import ScenarioEnv

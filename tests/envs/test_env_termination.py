@@ -7,11 +7,13 @@ import pytest
 import scenario_factory as sf
 
 from seal.core.geometry import box_corners
+from seal.core.outcome import Outcome
 from seal.core.road import LaneSpec, RoadDescription
 from seal.core.scenario import CURRENT_STEP, DT_S, N_STEPS, Scenario, Y
 from seal.envs.behaviors import ReplayBehavior
 from seal.envs.kinematics import recover_actions
 from seal.envs.scenario_env import ScenarioEnv
+from seal.envs.sim_core import REWARD_TERMS
 
 
 def _episode(env: ScenarioEnv, policy, **reset_options) -> tuple[list[float], list[dict], bool, bool]:
@@ -149,3 +151,20 @@ def test_time_limit(stopped_adv: Scenario) -> None:
     )
     assert truncated and not terminated and len(rewards) == 40 and infos[-1]["outcome"] == "timeout"
     assert rewards[-1] == 0.0  # standing still: no progress
+
+
+def test_reward_terms_name_every_step_reward(stopped_adv: Scenario) -> None:
+    """``info["reward_terms"]`` sums to the step reward, with the event's term replacing progress."""
+    env = ScenarioEnv([stopped_adv], adversary=_parked_adversary(stopped_adv, 30.0),
+                      config={"terminate_on_crash": False})
+    rewards, infos, _, _ = _episode(env, lambda t, o: np.zeros(2))
+    for r, info in zip(rewards, infos, strict=True):
+        terms = info["reward_terms"]
+        assert tuple(terms) == REWARD_TERMS and sum(terms.values()) == r
+        expected = "out_of_road" if info["out_of_road"] else "crash" if info["crashed"] else (
+            "arrival" if info["is_success"] else "progress")
+        assert all(v == 0.0 for k, v in terms.items() if k != expected)
+    crash_steps = [i["reward_terms"]["crash"] for i in infos if i["crashed"]]
+    assert crash_steps and all(v == -1.0 for v in crash_steps)
+    assert infos[-1]["reward_terms"]["arrival"] == 10.0 and infos[-1]["outcome"] is Outcome.SUCCESS
+    assert sum(i["reward_terms"]["progress"] for i in infos) > 0.0

@@ -12,11 +12,11 @@ from shapely.geometry import LineString
 import seal.envs.generate as gen
 from seal.core.dataset import Dataset, DatasetError
 from seal.core.geometry import box_corners, box_gap
+from seal.core.interaction import CONTEXT_M, EVENT_GAP_M
 from seal.core.scenario import CURRENT_STEP, N_STEPS, Scenario
 from seal.envs.generate import GenerationInterrupted, RunTask, assign_layouts, generate_dataset, simulate_run
 from seal.envs.layouts import LAYOUTS, make_network
 from seal.envs.network_topology import describe_network
-from seal.envs.windows import CONTEXT_M, EVENT_GAP_M
 
 SHARES = (0.7, 0.15, 0.15)
 META_KEYS = {

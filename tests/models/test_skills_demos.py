@@ -9,14 +9,14 @@ import pytest
 import scenario_factory as sf
 
 import seal.models.skills.demonstrations as demo_mod
+from seal.core.geometry import overlaps_one, pairwise_overlaps
 from seal.core.scenario import DT_S, N_STEPS
 from seal.envs.heuristic import HeuristicDriver
 from seal.envs.kinematics import AgentState
-from seal.envs.multi_agent import COLLISION, FINISHED, HORIZON, OUT_OF_ROAD, MultiAgentSim, SimConfig, box_overlaps
+from seal.envs.multi_agent import COLLISION, FINISHED, HORIZON, OUT_OF_ROAD, MultiAgentSim, SimConfig
 from seal.envs.observation import ObservationBuilder
 from seal.envs.road_geometry import get_road_geometry
 from seal.envs.route import Route
-from seal.envs.scenario_env import _overlaps
 from seal.models.skills.demonstrations import DemoConfig, build_demonstrations, parts_dir, roll_out_demonstrations
 from seal.models.skills.demos import (
     ADVERSARIAL,
@@ -76,11 +76,10 @@ def test_box_overlaps_matches_the_env_test() -> None:
     boxes[:, 2] = rng.uniform(-np.pi, np.pi, 40)
     boxes[:, 5] = rng.uniform(3, 8, 40)
     boxes[:, 6] = rng.uniform(1.5, 2.5, 40)
-    hit = box_overlaps(boxes)
+    hit = pairwise_overlaps(boxes)
     assert hit.any() and not hit.all() and np.array_equal(hit, hit.T) and not hit.diagonal().any()
     for i in range(40):
-        s = AgentState(boxes[i, 0], boxes[i, 1], boxes[i, 2], 0.0, boxes[i, 5], boxes[i, 6])
-        expected = _overlaps(s, boxes)
+        expected = overlaps_one(boxes[i, 0], boxes[i, 1], boxes[i, 2], boxes[i, 5], boxes[i, 6], boxes)
         expected[i] = False
         assert np.array_equal(hit[i], expected)
 

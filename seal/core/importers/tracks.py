@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from seal.core.geometry import wrap_angle
 from seal.core.scenario import AGENT_TYPES, DT_S, HEADING, LENGTH, TRACK_FIELDS, VALID, VX, VY, WIDTH, X, Y
 
 _GRID_EPS_S = 1e-6
@@ -108,7 +109,7 @@ def resample_states(
     for field, c in zip((X, Y, HEADING, VX, VY, LENGTH, WIDTH), cols, strict=True):
         values = np.unwrap(c) if field == HEADING else c
         out[:, field] = np.interp(grid, t, values)
-    out[:, HEADING] = (out[:, HEADING] + np.pi) % (2 * np.pi) - np.pi
+    out[:, HEADING] = wrap_angle(out[:, HEADING])
     out[:, VALID] = 1.0
     return GridTrack(first, out)
 

@@ -1,7 +1,7 @@
 """Cut 9.1 s scenario windows around interacting (ego, adversary) pairs out of a recorded `AgentLog`.
 
-Same interaction criteria as the generated pool (`seal.envs.windows`; the own-lanes rule is shared,
-`seal.core.interaction`): two vehicles interact when their bodies come within `EVENT_GAP_M` other than by driving side
+Same interaction criteria as the generated pool (`seal.envs.windows`): both call the rules and thresholds of
+`seal.core.interaction`: two vehicles interact when their bodies come within `EVENT_GAP_M` other than by driving side
 by side in their own lanes (`side_by_side`, which also asks them to be alongside: see `seal.core.interaction`), or
 their paths cross with less than `CONFLICT_DT_S` between their passages of the crossing point.
 Differences for recorded data, and why:
@@ -27,32 +27,28 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from seal.core.geometry import box_corners, box_gap, boxes_overlap
+from seal.core.geometry import box_gap, boxes_overlap, track_corners
 from seal.core.importers.lane_index import AgentLanes, LaneIndex
 from seal.core.importers.tracks import AgentLog
-from seal.core.interaction import in_own_lanes
+from seal.core.interaction import (
+    EVENT_GAP_M,
+    MAX_PER_AGENT,
+    NEAR_M,
+    context_rows,
+    crossing_hits,
+    in_own_lanes,
+    is_moving,
+)
+from seal.core.interaction import near_pairs as _near_pairs
 from seal.core.road import RoadDescription
-from seal.core.scenario import CURRENT_STEP, DT_S, HEADING, LENGTH, N_STEPS, VALID, VX, VY, WIDTH, X, Y
+from seal.core.scenario import CURRENT_STEP, HEADING, LENGTH, N_STEPS, VALID, VX, VY, WIDTH, X, Y
 
-EVENT_GAP_M = 5.0
-"""Bodies closer than this (m) interact."""
-CONFLICT_DIST_M = 1.5
-"""Paths cross where they pass within this distance (m) of each other."""
-CONFLICT_DT_S = 2.5
-"""A crossing is a conflict when both pass it within this many seconds."""
-NEAR_M = 30.0
-"""Pairs whose centres never come closer than this (m) cannot interact."""
-CONTEXT_M = 80.0
-"""Other agents within this distance (m) of the ego or the adversary are part of the scenario."""
 EVENT_AT_STEP = 40
 """Preferred window step of the pair's closest approach (3 s into the future)."""
 EVENT_MIN_STEP = CURRENT_STEP + 5
 """The closest approach should come at least 0.5 s after the current step (time to react)."""
 MIN_FUTURE_STEPS = 20
 """Default minimum number of logged future steps (2 s) of both focal agents."""
-MIN_MEAN_SPEED_MPS = 2.0
-MIN_DISPLACEMENT_M = 10.0
-MAX_PER_AGENT = 2
 FOCAL_TYPES = ("vehicle",)
 """Agent types that can be the ego or the adversary (both are driven by the bicycle model)."""
 
@@ -88,10 +84,6 @@ class PairWindow:
 
 
 # ------------------------------------------------------------------------------------------ per-agent helpers
-def _corners(tracks: np.ndarray) -> np.ndarray:
-    return box_corners(tracks[..., X], tracks[..., Y], tracks[..., HEADING], tracks[..., LENGTH], tracks[..., WIDTH])
-
-
 def run_ends(valid: np.ndarray) -> np.ndarray:
     """``[N, T]`` last step of the contiguous valid run holding each step (-1 where invalid)."""
     n, t = valid.shape
@@ -122,12 +114,11 @@ def keep_one_block(valid: np.ndarray, prefer: int) -> np.ndarray:
 
 
 def _moving(tracks: np.ndarray) -> bool:
-    """Mean speed above `MIN_MEAN_SPEED_MPS` and more than `MIN_DISPLACEMENT_M` travelled (valid rows of ``[K, 8]``)."""
+    """`seal.core.interaction.is_moving` over the valid rows of ``[K, 8]``."""
     v = tracks[tracks[:, VALID] > 0.5]
     if len(v) < 2:
         return False
-    speed = np.hypot(v[:, VX], v[:, VY]).mean()
-    return bool(speed > MIN_MEAN_SPEED_MPS and np.hypot(*(v[-1, [X, Y]] - v[0, [X, Y]])) > MIN_DISPLACEMENT_M)
+    return is_moving(np.hypot(v[:, VX], v[:, VY]), v[:, [X, Y]])
 
 
 def side_by_side(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -147,10 +138,8 @@ def _crossing(a: np.ndarray, b: np.ndarray) -> bool:
     ib = np.flatnonzero(b[:, VALID] > 0.5)[::stride]
     if ia.size == 0 or ib.size == 0:
         return False
-    d = np.linalg.norm(a[ia, None, :2] - b[None, ib, :2], axis=-1)
-    dt = np.abs(ia[:, None] - ib[None, :]) * DT_S
-    dh = np.abs((a[ia, HEADING][:, None] - b[ib, HEADING][None, :] + np.pi) % (2 * np.pi) - np.pi)
-    return bool(((d < CONFLICT_DIST_M) & (dt <= CONFLICT_DT_S) & (dh > np.radians(15))).any())
+    hit, _ = crossing_hits(a[ia, :2], ia, a[ia, HEADING], b[ib, :2], ib, b[ib, HEADING])
+    return bool(hit.any())
 
 
 # ------------------------------------------------------------------------------------------ window search
@@ -168,19 +157,10 @@ class _Candidate:
 
 
 def near_pairs(log: AgentLog, rows: list[int], block: int = 16) -> list[tuple[int, int]]:
-    """Pairs ``(i, j)``, ``i < j`` among ``rows``, whose centres come within `NEAR_M` at a step where both exist
-    (vectorised in blocks of rows, so large recordings stay within memory)."""
+    """Pairs ``(i, j)``, ``i < j`` among ``rows`` (ascending), whose centres come within `NEAR_M` at a step where
+    both exist (`seal.core.interaction.near_pairs`)."""
     r = np.asarray(rows, dtype=np.int64)
-    xy = np.where(log.valid[r][..., None], log.tracks[r][..., :2], np.nan)  # [R, T, 2]
-    out = []
-    for a in range(0, len(r), block):
-        diff = xy[a : a + block, None] - xy[None]  # [block, R, T, 2]
-        with np.errstate(invalid="ignore"):
-            close = (np.nan_to_num(np.hypot(diff[..., 0], diff[..., 1]), nan=np.inf) < NEAR_M).any(axis=-1)
-        for p, q in zip(*np.nonzero(close), strict=True):
-            if a + p < q:
-                out.append((int(r[a + p]), int(r[q])))
-    return out
+    return [(int(r[p]), int(r[q])) for p, q in _near_pairs(log.tracks[r][..., :2], log.valid[r], block)]
 
 
 def _pair_candidate(
@@ -204,7 +184,7 @@ def _pair_candidate(
     if require_interaction and dist.min() > NEAR_M:
         return None
     gaps = np.full(n_steps, np.inf)
-    gaps[steps] = box_gap(_corners(tr[i, steps]), _corners(tr[j, steps]))
+    gaps[steps] = box_gap(track_corners(tr[i, steps]), track_corners(tr[j, steps]))
     igaps = np.where(side_by_side(tr[i], tr[j]), np.inf, gaps)
     # Closest approach after the earliest possible current step -> window start placing it at EVENT_AT_STEP.
     later = igaps.copy()
@@ -321,15 +301,7 @@ def _roles(log: AgentLog, c: _Candidate) -> tuple[int, int]:
 def _window(log: AgentLog, c: _Candidate, ego: int, adv: int) -> PairWindow:
     win = slice(c.t0, c.t0 + N_STEPS)
     logged = min(N_STEPS, log.n_steps - c.t0)
-    valid = log.valid[:, win]
-    pos = log.tracks[:, win, :2]
-    near = np.zeros(log.n_agents, dtype=bool)
-    for focal in (ego, adv):
-        fv = valid[focal]
-        d = np.linalg.norm(pos - pos[focal][None], axis=-1)
-        near |= (valid & fv[None] & (d < CONTEXT_M)).any(axis=1)
-    near[[ego, adv]] = False
-    others = tuple(int(r) for r in np.flatnonzero(near))
+    others = context_rows(log.tracks[:, win, :2], log.valid[:, win], ego, adv)
     tracks, _ = _cut(log, c.t0, (ego, adv, *others))
     pair_collision = bool(_overlap_steps(tracks[0], tracks[1]).any())
     any_collision = pair_collision or _any_overlap(tracks)
@@ -344,7 +316,7 @@ def _overlap_steps(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     both = (a[:, VALID] > 0.5) & (b[:, VALID] > 0.5)
     out = np.zeros(len(a), dtype=bool)
     if both.any():
-        out[both] = boxes_overlap(_corners(a[both]), _corners(b[both]))
+        out[both] = boxes_overlap(track_corners(a[both]), track_corners(b[both]))
     return out
 
 
@@ -358,7 +330,7 @@ def _any_overlap(tracks: np.ndarray) -> bool:
     a, b, t = np.nonzero(close)
     if a.size == 0:
         return False
-    return bool(boxes_overlap(_corners(tracks[a, t]), _corners(tracks[b, t])).any())
+    return bool(boxes_overlap(track_corners(tracks[a, t]), track_corners(tracks[b, t])).any())
 
 
 def _cut(log: AgentLog, t0: int, rows: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
