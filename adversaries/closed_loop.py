@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import Any, SupportsFloat, cast
 
 import gymnasium as gym
 import numpy as np
@@ -48,13 +48,13 @@ class ClosedLoopAdversary:
     def __call__(self, scenario: Scenario, rng: np.random.Generator) -> AdversaryBehavior:
         queue = self.history.queue(scenario)
         digests = [rollout_digest(r) for r in queue]
-        perturb = self.generator is not None and (self.perturb_prob >= 1.0 or rng.random() < self.perturb_prob)
-        if not perturb:
+        generator = self.generator
+        if generator is None or not (self.perturb_prob >= 1.0 or rng.random() < self.perturb_prob):
             self.last = {"generator": "log", "perturbed": False, "history": digests}
             return ReplayBehavior()
-        generation = self.generator.generate(scenario, queue, rng)
+        generation = generator.generate(scenario, queue, rng)
         self.last = {
-            "generator": self.generator.name,
+            "generator": generator.name,
             "perturbed": True,
             "chosen_candidate": generation.chosen_candidate,
             "predicted_step": generation.predicted_step,
@@ -83,6 +83,10 @@ class ClosedLoopEnv(gym.Wrapper):
         self._episode_adversary: dict[str, Any] = {}
         env.set_adversary(self.adversary)
 
+    @property
+    def _scenario_env(self) -> ScenarioEnv:
+        return cast(ScenarioEnv, self.env.unwrapped)
+
     def set_perturb_prob(self, perturb_prob: float) -> None:
         self.adversary.perturb_prob = float(perturb_prob)
 
@@ -92,7 +96,7 @@ class ClosedLoopEnv(gym.Wrapper):
     def warm_up(self) -> int:
         """Build what the first episode of each scenario would otherwise build (its road geometry, its queue of
         logged roll-outs), so timings see the steady state of a long run; returns the number of scenarios."""
-        scenarios = self.env.unwrapped.scenarios
+        scenarios = self._scenario_env.scenarios
         reserve_road_cache(len({id(s.road) for s in scenarios}))
         for scenario in scenarios:
             get_road_geometry(scenario.road)
@@ -120,11 +124,12 @@ class ClosedLoopEnv(gym.Wrapper):
         self._episode_adversary = info["adversary"]
         return obs, info
 
-    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
         rollout = info.get("rollout")
-        if rollout is not None:
-            self.history.append(self.env.unwrapped.scenario, rollout)
+        scenario = self._scenario_env.scenario  # set by every reset, so present whenever an episode ends
+        if rollout is not None and scenario is not None:
+            self.history.append(scenario, rollout)
             info["rollout_digest"] = rollout_digest(rollout)
             info["episode_adversary"] = self._episode_adversary
         return obs, reward, terminated, truncated, info

@@ -43,6 +43,7 @@ from __future__ import annotations
 import math
 import weakref
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
@@ -283,6 +284,8 @@ class ObservationBuilder:
         edges, lines = self._road.segments(keys)
         # [V, 42, 1] world-frame directions of the 30 edge / lidar rays, then the 12 line rays (x: c cos - s sin,
         # y: s cos + c sin; the sign flip is exact); viewer positions broadcast against the segments.
+        x_r: Any  # a float for one viewer (cheapest broadcast), [V, 1, 1] for several
+        y_r: Any
         if n_view == 1:
             x_r, y_r = xs[0], ys[0]
             cos_sin = np.array((cs, ss))[:, :, None, None]  # [2, 1, 1, 1]
@@ -358,7 +361,7 @@ class ObservationBuilder:
             c, s, speed = cs[v], ss[v], states[v].speed
             vx, vy = speed * c, speed * s
             rxv, ryv, dv = rx_l[v], ry_l[v], d_l[v]
-            slots = []
+            slots: list[float] = []
             for i in order[v]:
                 if not dv[i] < _LIDAR_RANGE2:
                     break
