@@ -1,5 +1,5 @@
-"""The closed loop of DESIGN section 4 inside one env process: a generator perturbs episodes from the scenario's
-roll-out queue and every finished ego roll-out goes back into that queue.
+"""The closed loop (ARCHITECTURE.md, Closed loop) inside one env process: a generator perturbs episodes from the
+scenario's roll-out queue and every finished ego roll-out goes back into that queue.
 
 `ClosedLoopEnv` wraps a `ScenarioEnv`; it owns the process's `RolloutHistory`. For several processes (SB3
 ``SubprocVecEnv``) `closed_loop_env_fns` partitions the scenarios across the workers (`partition_scenarios`), so

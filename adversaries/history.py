@@ -1,4 +1,4 @@
-"""The per-scenario queue of the last K ego roll-outs that generators condition on (DESIGN section 4).
+"""The per-scenario queue of the last K ego roll-outs that generators condition on (ARCHITECTURE.md, Closed loop).
 
 Each scenario's queue starts as K copies of the logged ego future (`logged_rollout`) and every finished episode
 of that scenario is appended, dropping the oldest, so it always holds exactly K roll-outs, oldest first.

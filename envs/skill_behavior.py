@@ -1,5 +1,5 @@
-"""`SkillSwitchBehavior`: the SEAL adversary (thesis 6.3.2, DESIGN section 7): it follows a given track (the
-top-ranked candidate) and, from a switch step on - 10 steps (1 s) before the predicted collision / closest
+"""`SkillSwitchBehavior`: the SEAL adversary (thesis 6.3.2; ARCHITECTURE.md, methods table): it follows a given
+track (the top-ranked candidate) and, from a switch step on - 10 steps (1 s) before the predicted collision / closest
 approach by default, see `switch_step_for` - is driven by a `SkillPolicy` that sees its own observation every
 step and so reacts to the ego.
 
