@@ -42,22 +42,12 @@ class TrafficPlan:
 
 def traffic_plan(layout: str, params: dict, network: RoadNetwork, rng: np.random.Generator) -> TrafficPlan:
     """Sources, initially populated lanes and density of one run (rates in vehicles/s per entry lane)."""
-    if layout == "highway":
-        rate = rng.uniform(0.35, 0.7)
-        lanes = int(params["lanes"])
-        return TrafficPlan(
-            sources=[Source(("a", "b", i), rate * rng.uniform(0.8, 1.2), ("d",)) for i in range(lanes)],
-            populate=[(i, ("d",)) for i in lane_indices(network)],
-            sinks=(("c", "d"),),
-            regulated=False,
-            trucks=0.08,
-            spacing_s=1.0 / rate,
-        )
-    if layout == "merge":
+    if layout in ("highway", "merge"):
         rate = rng.uniform(0.35, 0.7)
         lanes = int(params["lanes"])
         srcs = [Source(("a", "b", i), rate * rng.uniform(0.8, 1.2), ("d",)) for i in range(lanes)]
-        srcs.append(Source(("j", "k", 0), rng.uniform(0.25, 0.5), ("d",)))
+        if layout == "merge":  # the on-ramp feeds in at its own rate
+            srcs.append(Source(("j", "k", 0), rng.uniform(0.25, 0.5), ("d",)))
         return TrafficPlan(
             sources=srcs,
             populate=[(i, ("d",)) for i in lane_indices(network)],

@@ -25,8 +25,9 @@ PIPELINES = pipeline_names()
 
 
 @dataclass(frozen=True)
-class TD3Hyperparams:
-    """SB3 TD3 settings (off-policy: ``train_freq`` in vec-env steps, each ``n_envs`` env steps)."""
+class OffPolicyHyperparams:
+    """SB3 settings shared by the off-policy algorithms (``train_freq`` in vec-env steps, each ``n_envs`` env
+    steps)."""
 
     learning_rate: float = 3e-4
     """Adam learning rate."""
@@ -46,6 +47,12 @@ class TD3Hyperparams:
     """Vec-env steps between training calls."""
     gradient_steps: int = -1
     """Gradient steps per training call (-1: as many as env steps collected, one per env step as in CAT)."""
+
+
+@dataclass(frozen=True)
+class TD3Hyperparams(OffPolicyHyperparams):
+    """SB3 TD3 settings."""
+
     policy_delay: int = 2
     """Critic updates per actor update."""
     action_noise_std: float = 0.1
@@ -53,27 +60,9 @@ class TD3Hyperparams:
 
 
 @dataclass(frozen=True)
-class SACHyperparams:
-    """SB3 SAC settings (see `TD3Hyperparams` for the shared ones)."""
+class SACHyperparams(OffPolicyHyperparams):
+    """SB3 SAC settings."""
 
-    learning_rate: float = 3e-4
-    """Adam learning rate."""
-    gamma: float = 0.99
-    """Discount factor."""
-    tau: float = 0.005
-    """Polyak averaging coefficient of the target networks."""
-    batch_size: int = 256
-    """Transitions per gradient step."""
-    learning_starts: int = 10_000
-    """Env steps of random actions before learning."""
-    buffer_size: int = 1_000_000
-    """Replay buffer capacity (transitions)."""
-    net_arch: tuple[int, ...] = (256, 256)
-    """Hidden layer widths of actor and critics."""
-    train_freq: int = 1
-    """Vec-env steps between training calls."""
-    gradient_steps: int = -1
-    """Gradient steps per training call (-1: one per env step collected)."""
     ent_coef: str | float = "auto"
     """Entropy coefficient (``"auto"``: learned)."""
 
