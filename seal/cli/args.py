@@ -122,6 +122,20 @@ def add_set_option(p: argparse.ArgumentParser, example: str) -> None:
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help=SET_HELP.format(example=example))
 
 
+def add_fit_job_options(p: argparse.ArgumentParser, job: str, config_keys: str, set_example: str,
+                        json_what: str) -> None:
+    """The options every preset-driven fitting job shares: DATASET, ``--preset`` (quick | standard, the YAML file
+    ``experiments/configs/<job>_<preset>.yaml``), ``--config``, ``--seed``, ``--set``, ``--no-progress``, ``--json``."""
+    p.add_argument("dataset", help="dataset directory with splits (seal data split)")
+    p.add_argument("--preset", choices=("quick", "standard"), default="standard",
+                   help=f"YAML preset experiments/configs/{job}_<preset>.yaml (default standard)")
+    p.add_argument("--config", default=None, help=f"YAML config overriding the preset (keys: {config_keys})")
+    p.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
+    add_set_option(p, set_example)
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument("--json", action="store_true", help=f"print the {json_what} as JSON")
+
+
 def set_torch_threads(threads: int) -> None:
     """Torch's CPU threads for this process (entry points only: library code leaves the setting alone)."""
     import torch

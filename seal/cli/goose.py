@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from seal.cli.args import add_set_option, positive_int, set_torch_threads
+from seal.cli.args import add_fit_job_options, positive_int, set_torch_threads
 from seal.cli.tree import CommandTree
 
 
@@ -36,12 +36,9 @@ def register(tree: CommandTree) -> None:
         "--out (use it as `goose` generator model=FILE) and a run folder (config.yaml, progress.csv, success.csv, "
         "eval.json, summary.json); then reports held-out goal success against zero / random / untrained policies.",
     )
-    p.add_argument("dataset", help="dataset directory with splits (seal data split)")
+    add_fit_job_options(p, "goose", "seal.experiments.fitting.goose.GooseFitConfig",
+                        "spec.max_updates=3 or net_arch=[64,64]", "summary")
     p.add_argument("--out", required=True, help="agent file to write (.zip)")
-    p.add_argument("--preset", choices=("quick", "standard"), default="standard",
-                   help="YAML preset from experiments/configs/goose_<preset>.yaml (default standard)")
-    p.add_argument("--config", default=None,
-                   help="YAML config overriding the preset (keys: seal.experiments.fitting.goose.GooseFitConfig)")
     p.add_argument("--algo", choices=("sac", "td3"), default=None, help="RL algorithm (default from the preset: sac)")
     p.add_argument("--steps", type=positive_int("--steps"), default=None, help="training roll-outs (env steps)")
     p.add_argument("--split", default=None, help="training split (default train)")
@@ -52,8 +49,4 @@ def register(tree: CommandTree) -> None:
                    help="held-out scenarios to check (default: preset)")
     p.add_argument("--no-eval", action="store_true", help="skip the held-out check")
     p.add_argument("--run-dir", default=None, help="run folder (default: OUT without suffix + '_run')")
-    p.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
-    add_set_option(p, "spec.max_updates=3 or net_arch=[64,64]")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=cmd_fit_goose)

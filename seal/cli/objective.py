@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from seal.cli.args import add_set_option, positive_int, set_torch_threads
+from seal.cli.args import add_fit_job_options, positive_int, set_torch_threads
 from seal.cli.tree import CommandTree
 
 if TYPE_CHECKING:
@@ -49,12 +49,8 @@ def cmd_eval_objective(args: argparse.Namespace) -> int:
 
 
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("dataset", help="dataset directory with splits (seal data split)")
-    p.add_argument("--preset", choices=("quick", "standard"), default="standard",
-                   help="YAML preset experiments/configs/objective_<preset>.yaml (default standard)")
-    p.add_argument("--config", default=None,
-                   help="YAML config overriding the preset (keys: "
-                   "seal.experiments.fitting.objective.ObjectiveFitConfig)")
+    add_fit_job_options(p, "objective", "seal.experiments.fitting.objective.ObjectiveFitConfig",
+                        "train.max_epochs=4 or model.hidden=32", "report")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--prior", default=None, help="trajectory prior file (seal fit prior) giving the candidates")
     src.add_argument("--candidates", default=None, choices=("lanes", "constant_velocity"),
@@ -64,10 +60,6 @@ def _common(p: argparse.ArgumentParser) -> None:
                    help="use only the first N held-out scenarios")
     p.add_argument("--workers", type=positive_int("--workers"), default=None,
                    help="processes simulating the labels (default 2)")
-    p.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
-    add_set_option(p, "train.max_epochs=4 or model.hidden=32")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    p.add_argument("--json", action="store_true", help="print the report as JSON")
 
 
 def register(tree: CommandTree) -> None:

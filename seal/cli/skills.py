@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from seal.cli.args import add_set_option, positive_int, set_torch_threads
+from seal.cli.args import add_fit_job_options, positive_int, set_torch_threads
 from seal.cli.tree import CommandTree
 
 
@@ -33,20 +33,13 @@ def register(tree: CommandTree) -> None:
         "class incl. cross terms), embedding.png (both priors' samples over held-out states, PCA), config.yaml "
         "and CSV training logs to --out.",
     )
-    p.add_argument("dataset", help="dataset directory with splits (seal data split)")
+    add_fit_job_options(p, "skills", "seal.experiments.fitting.skills.SkillsFitConfig", "vae_train.max_epochs=5",
+                        "metrics")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--preset", choices=("quick", "standard"), default="standard",
-                   help="YAML preset experiments/configs/skills_<preset>.yaml (default standard)")
-    p.add_argument("--config", default=None,
-                   help="YAML config overriding the preset (keys: seal.experiments.fitting.skills.SkillsFitConfig)")
     p.add_argument("--split", default=None, help="split to learn from (default train)")
     p.add_argument("--limit", type=positive_int("--limit"), default=None, help="use only the first N scenarios")
     p.add_argument("--demos", default=None,
                    help="demonstrations file to build or reuse (default OUT/demos.npz)")
     p.add_argument("--workers", type=positive_int("--workers"), default=None,
                    help="processes for the demonstrations (default 2)")
-    p.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
-    add_set_option(p, "vae_train.max_epochs=5")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    p.add_argument("--json", action="store_true", help="print the metrics as JSON")
     p.set_defaults(func=cmd_fit_skills)
