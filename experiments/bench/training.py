@@ -60,7 +60,8 @@ def run_training_bench(config: dict[str, Any], steps: int = 3000, progress: bool
     from stable_baselines3.common.callbacks import BaseCallback
     from tqdm import tqdm
 
-    from seal.experiments.training.train import build_model, build_vec_env, load_split, resolve_n_envs
+    from seal.core.dataset import load_split
+    from seal.experiments.training.train import build_model, build_vec_env, resolve_n_envs
 
     torch.set_num_threads(int(config["torch_threads"]))
     n_envs = resolve_n_envs(config)

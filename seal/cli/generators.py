@@ -37,11 +37,12 @@ def cmd_eval_generators(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_generators(args: argparse.Namespace) -> int:
+    from seal.core.dataset import load_split
     from seal.experiments.bench.generators import bench_generators, format_bench
-    from seal.experiments.evaluation.generators import build_generator, load_eval_scenarios
+    from seal.experiments.evaluation.protocol import build_generator
 
     config, shared = _generator_options(args)
-    scenarios = load_eval_scenarios(args.dataset, config["split"], config["limit"] or args.n)
+    scenarios = load_split(args.dataset, config["split"], config["limit"] or args.n)
     generators = {name: build_generator(name, kw, shared) for name, kw in config["generators"].items()}
     result = bench_generators(scenarios, generators, seed=config["seed"])
     if args.json:
