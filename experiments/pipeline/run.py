@@ -46,6 +46,7 @@ import re
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -318,7 +319,7 @@ def _fit_steps(run: _Run, dataset: str, data_params: Mapping[str, Any]) -> dict[
         models[name] = str(run.out / "models" / FIT_OUTPUTS.get(name, name))
         job = {"name": f"fit-{name}", "task": "fit", "model": name, "dataset": dataset, "out": models[name],
                "options": substitute(spec, models)}  # e.g. the objective's candidates: "${fit.prior}"
-        run.steps.run(f"fit-{name}", [data_params, job], lambda job=job: run.task(job))
+        run.steps.run(f"fit-{name}", [data_params, job], partial(run.task, job))
     return models
 
 
@@ -350,7 +351,8 @@ def _eval_step(run: _Run, dataset: str, generators: Mapping[str, Any], trained: 
 
     ev = dict(run.config.get("eval") or {})
     store = str(run.out / "results.sqlite")
-    eval_config = resolve_eval_config(**{k: ev.get(k) for k in ("k", "limit", "seed", "prior", "candidates", "env")})
+    eval_config = resolve_eval_config(k=ev.get("k"), limit=ev.get("limit"), seed=ev.get("seed"), prior=ev.get("prior"),
+                                      candidates=ev.get("candidates"), env=ev.get("env"))
     eval_config["generators"] = generators
     settings = parse_settings(ev.get("settings") or ["normal", "hard"], dataset)
     egos = [*trained, *(["replay"] if ev.get("replay_ego", True) else [])]

@@ -260,7 +260,7 @@ class RestoreCallback(BaseCallback):
         for i, state in enumerate(self.workers):
             env.env_method("set_state", state, f"checkpoint worker_{i}.npz", indices=[i])
         set_rng_state(self.model, self.rng_json, self.rng_arrays)
-        self.model._last_obs = env.reset()
+        self.model._last_obs = env.reset()  # type: ignore[assignment]  # SB3 types reset()'s tuple case too
         self.model._last_episode_starts = np.ones((env.num_envs,), dtype=bool)
 
     def _on_step(self) -> bool:

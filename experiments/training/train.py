@@ -98,8 +98,8 @@ def build_vec_env(config: Mapping[str, Any], scenarios: list[Any], n_envs: int) 
     kwargs = _generator_kwargs(config) if gen["name"] else {}
     fns = closed_loop_env_fns(scenarios, n_envs, gen["name"], kwargs, env_config=config["env"], k=int(config["k"]),
                               perturb_prob=0.0)
-    fns = [_worker(fn, 1) for fn in fns]
-    venv = SubprocVecEnv(fns) if n_envs > 1 else DummyVecEnv(fns)
+    workers: list[Callable[[], Any]] = [_worker(fn, 1) for fn in fns]
+    venv = SubprocVecEnv(workers) if n_envs > 1 else DummyVecEnv(workers)
     return VecMonitor(venv)
 
 

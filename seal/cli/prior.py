@@ -24,7 +24,7 @@ def load_split(dataset: str, split: str, limit: int | None = None) -> tuple[list
     try:
         scenarios = load(dataset, split, limit, allow_empty=True)
     except ValueError as exc:
-        raise CliError(f"--split {split}: {exc}") from None
+        raise CliError(f"--split {split!r}: {exc}") from None
     info = {"dataset": str(Path(dataset).resolve()), "split": split, "scenarios": len(scenarios)}
     return scenarios, info
 
