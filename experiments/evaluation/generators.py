@@ -3,7 +3,9 @@
 For every scenario of the split: one normal episode (logged adversary), then for each generator K sequential
 perturbation passes against the same ego, each pass's roll-out appended to that generator's queue for the
 scenario (queues start as K copies of the logged ego future, then the normal episode is appended); the last pass
-is scored. The normal episode is played once and shared by the generators (egos are deterministic). Output in
+is scored. The normal episode is played once and shared by the generators (egos are deterministic). Seeds and
+rng streams are `seal.experiments.evaluation.protocol`'s, so a (scenario, ego, generator, seed) plays the same
+episode here as in ``seal eval runs`` and the report's videos. Output in
 ``out``: ``config.yaml`` (the resolved config), ``generators.csv`` / ``generators.md`` / ``generators.json``
 (one row per generator, `seal.experiments.evaluation.generator_metrics`) and ``episodes.csv`` (one row per scenario and
 generator).
