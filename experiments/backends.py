@@ -13,7 +13,9 @@ job order; a failing job is reported in its result (with the error text) instead
 
 from __future__ import annotations
 
+import logging
 import os
+import sys
 import traceback
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -46,11 +48,25 @@ class Backend(Protocol):
 
 
 def _call(fn: JobFn, job: Job) -> JobResult:
+    """``fn(job)`` as a `JobResult` (a failure too)."""
     try:
         return JobResult(job, fn(job))
     except Exception as exc:  # a job's failure is its result; the other jobs go on
         tail = "".join(traceback.format_exception(exc)[-3:]).strip()
         return JobResult(job, error=f"{type(exc).__name__}: {exc}\n{tail}")
+
+
+def _worker_call(fn: JobFn, job: Job) -> JobResult:
+    """A worker process's entry: the ``seal.*`` loggers get the CLI's stderr handler (INFO, plain message) when
+    they have none, so the job's log lines show as in the driver; then `_call`."""
+    root = logging.getLogger("seal")
+    if not root.handlers:  # a fresh worker (a reused one is set up already)
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(message)s"))
+        root.addHandler(handler)
+        root.setLevel(logging.INFO)
+        root.propagate = False
+    return _call(fn, job)
 
 
 class InlineBackend:
@@ -80,7 +96,7 @@ class LocalBackend:
             return []
         results: list[JobResult | None] = [None] * len(jobs)
         with ProcessPoolExecutor(min(self.workers, len(jobs)), mp_context=mp.get_context("spawn")) as pool:
-            futures = {pool.submit(_call, fn, job): i for i, job in enumerate(jobs)}
+            futures = {pool.submit(_worker_call, fn, job): i for i, job in enumerate(jobs)}
             for fut in tqdm(as_completed(futures), total=len(jobs), desc=desc, unit="job"):
                 i = futures[fut]
                 try:
@@ -130,7 +146,7 @@ class RayBackend:
 
         if not jobs:
             return []
-        task = self._ray.remote(num_cpus=self.cpus_per_job)(_call)
+        task = self._ray.remote(num_cpus=self.cpus_per_job)(_worker_call)
         refs = [task.remote(fn, dict(job)) for job in jobs]
         index = {ref: i for i, ref in enumerate(refs)}
         results: list[JobResult | None] = [None] * len(jobs)

@@ -65,7 +65,8 @@ def bench_scenario_env(
     t0, c0 = time.perf_counter(), time.process_time()
     obs, _ = env.reset(seed=seed)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    episodes, outcomes = 1, {}
+    episodes = 1
+    outcomes: dict[str, int] = {}  # outcome -> episodes
     for _ in range(n_steps):
         action = driver.predict(obs)[0] if policy == "heuristic" else rng.uniform(-1.0, 1.0, 2)
         t0, c0 = time.perf_counter(), time.process_time()

@@ -55,14 +55,11 @@ class _GenerationTime:
 
 
 def run_training_bench(config: dict[str, Any], steps: int = 3000, progress: bool = True) -> dict[str, Any]:
-    """Measure (module docstring) with ``steps`` env steps per measurement; returns a flat result dict."""
-    import torch
-    from stable_baselines3.common.callbacks import BaseCallback
-    from tqdm import tqdm
+    """Measure (module docstring) with ``steps`` env steps per measurement; returns a flat result dict. Torch's
+    thread count is the caller's (``seal bench training`` sets the config's ``torch_threads``)."""
+    from seal.core.dataset import load_split
+    from seal.experiments.training.train import build_vec_env, resolve_n_envs
 
-    from seal.experiments.training.train import build_model, build_vec_env, load_split, resolve_n_envs
-
-    torch.set_num_threads(int(config["torch_threads"]))
     n_envs = resolve_n_envs(config)
     scenarios = load_split(config["dataset"], config["train_split"], config["train_limit"], "train")
     p = mean_perturb_probability(**config["curriculum"]) if config["generator"]["name"] else 0.0
@@ -71,47 +68,8 @@ def run_training_bench(config: dict[str, Any], steps: int = 3000, progress: bool
         venv.env_method("set_perturb_prob", p)
         venv.env_method("warm_up")  # road geometries and logged queues, as in a long run (see the docstring)
         rng = np.random.default_rng(int(config["seed"]))
-        venv.reset()
-        for _ in range(max(1, 100 // n_envs)):  # warm-up: lazy imports, the generator's first (cold) calls
-            venv.step(rng.uniform(-1, 1, (n_envs, 2)).astype(np.float32))
-        gen_env = _GenerationTime()
-        n_vec = max(1, steps // n_envs)
-        start = time.perf_counter()
-        for _ in tqdm(range(n_vec), desc="env only", unit="vec-step", disable=not progress):
-            _, _, dones, infos = venv.step(rng.uniform(-1, 1, (n_envs, 2)).astype(np.float32))
-            gen_env.add(infos, dones)
-        env_s = time.perf_counter() - start
-        env_sps = n_vec * n_envs / env_s
-
-        bench_config = {**config, "hyperparams": dict(config["hyperparams"])}
-        h = bench_config["hyperparams"]
-        if config["algo"] != "ppo":
-            h["learning_starts"] = int(h["batch_size"])
-            h["buffer_size"] = max(int(h["batch_size"]) * 4, min(int(h["buffer_size"]), 4 * steps))
-        model = build_model(bench_config, venv)
-        gen_train = _GenerationTime()
-
-        class Collect(BaseCallback):
-            def _on_step(self) -> bool:
-                gen_train.add(self.locals["infos"], self.locals["dones"])
-                bar.update(self.model.get_env().num_envs)
-                return True
-
-        warmup = int(h.get("learning_starts", 0)) + 2 * n_envs * int(h.get("n_steps", 1))
-        bar = tqdm(total=warmup + steps, desc="training", unit="step", disable=not progress)
-        model.learn(warmup, callback=Collect())  # fills a batch and compiles nothing; excluded from the timing
-        start = time.perf_counter()
-        model.learn(steps, callback=Collect(), reset_num_timesteps=False)
-        train_s = time.perf_counter() - start
-        bar.close()
-        measured = model.num_timesteps - warmup
-        train_sps = measured / train_s
-        grad_ms = float("nan")
-        if config["algo"] != "ppo":
-            n_grad = 50
-            start = time.perf_counter()
-            model.train(gradient_steps=n_grad, batch_size=int(h["batch_size"]))
-            grad_ms = 1e3 * (time.perf_counter() - start) / n_grad
+        env_sps, env_s, gen_env = _env_only(venv, rng, n_envs, steps, progress)
+        measured, train_sps, grad_ms = _with_learning(config, venv, steps, progress)
     finally:
         venv.close()
 
@@ -139,3 +97,59 @@ def run_training_bench(config: dict[str, Any], steps: int = 3000, progress: bool
         "target": "1M steps < 2 h",
         "meets_target": bool(est_1m < TARGET_S),
     }
+
+
+def _env_only(venv: Any, rng: np.random.Generator, n_envs: int, steps: int,
+              progress: bool) -> tuple[float, float, _GenerationTime]:
+    """Random actions after a warm-up; returns env steps/s, the measured seconds and the generation time."""
+    from tqdm import tqdm
+
+    venv.reset()
+    for _ in range(max(1, 100 // n_envs)):  # warm-up: lazy imports, the generator's first (cold) calls
+        venv.step(rng.uniform(-1, 1, (n_envs, 2)).astype(np.float32))
+    gen_env = _GenerationTime()
+    n_vec = max(1, steps // n_envs)
+    start = time.perf_counter()
+    for _ in tqdm(range(n_vec), desc="env only", unit="vec-step", disable=not progress):
+        _, _, dones, infos = venv.step(rng.uniform(-1, 1, (n_envs, 2)).astype(np.float32))
+        gen_env.add(infos, dones)
+    env_s = time.perf_counter() - start
+    return n_vec * n_envs / env_s, env_s, gen_env
+
+
+def _with_learning(config: Mapping[str, Any], venv: Any, steps: int, progress: bool) -> tuple[int, float, float]:
+    """The config's algorithm learning on ``venv`` (learning from the first batch on); returns the measured steps,
+    steps/s and the cost of one gradient step (ms; NaN for PPO)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+    from tqdm import tqdm
+
+    from seal.experiments.training.train import build_model
+
+    bench_config = {**config, "hyperparams": dict(config["hyperparams"])}
+    h = bench_config["hyperparams"]
+    if config["algo"] != "ppo":
+        h["learning_starts"] = int(h["batch_size"])
+        h["buffer_size"] = max(int(h["batch_size"]) * 4, min(int(h["buffer_size"]), 4 * steps))
+    model = build_model(bench_config, venv)
+    n_envs = venv.num_envs
+    warmup = int(h.get("learning_starts", 0)) + 2 * n_envs * int(h.get("n_steps", 1))
+    bar = tqdm(total=warmup + steps, desc="training", unit="step", disable=not progress)
+
+    class Collect(BaseCallback):
+        def _on_step(self) -> bool:
+            bar.update(n_envs)
+            return True
+
+    model.learn(warmup, callback=Collect())  # fills a batch and compiles nothing; excluded from the timing
+    start = time.perf_counter()
+    model.learn(steps, callback=Collect(), reset_num_timesteps=False)
+    train_s = time.perf_counter() - start
+    bar.close()
+    measured = int(model.num_timesteps - warmup)
+    grad_ms = float("nan")
+    if config["algo"] != "ppo":
+        n_grad = 50
+        start = time.perf_counter()
+        model.train(gradient_steps=n_grad, batch_size=int(h["batch_size"]))
+        grad_ms = 1e3 * (time.perf_counter() - start) / n_grad
+    return measured, measured / train_s, grad_ms

@@ -7,9 +7,8 @@ Each ego (a trained run folder, plus the Replay ego by default) is evaluated on 
 * ``<generator>`` (``cat``, ``goose``, ``seal``, ``rule``, ... any registered generator): "X-Gen", the Normal
   eval scenarios perturbed by that generator. Per scenario one normal episode, then K sequential perturbation
   passes against the same ego, each roll-out appended to the scenario's queue; the last pass is scored
-  (DESIGN section 4, `seal.experiments.evaluation.episodes`). The normal episode is shared with the ``normal`` setting
-  and
-  every generator setting (egos are deterministic).
+  (`seal.experiments.evaluation.protocol`, the same episodes as ``seal eval generators`` and the report's videos).
+  The normal episode is shared with the ``normal`` setting and every generator setting (egos are deterministic).
 * ``real:DIR``: an imported dataset (``seal data import ...``): its ``eval`` split if it has one, else every
   scenario; replayed adversary.
 
@@ -20,13 +19,11 @@ scenario are written in one transaction. Generators are rebuilt for every ego (s
 
 from __future__ import annotations
 
-import zlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import yaml
 
 from seal.adversaries.base import K_ROLLOUTS, available_generators
@@ -176,33 +173,6 @@ def read_run(run: str | Path) -> EgoSpec:
     return EgoSpec(str(path), str(cfg.get("pipeline") or "unknown"), int(cfg.get("seed") or 0), str(path), cfg)
 
 
-# ----------------------------------------------------------------------------------------------- protocol
-def _generator_stream(name: str) -> int:
-    """A stable rng stream id per generator name (independent of the order of --settings)."""
-    return zlib.crc32(name.encode())
-
-
-def episode_seed_of(seed: int, index: int) -> int:
-    """Env seed of the normal episode of the ``index``-th scenario of a split (passes use the next seeds)."""
-    return seed * 1_000_003 + 1000 * index
-
-
-def scored_pass(
-    env: Any, scenario: Any, index: int, policy: Any, generator: Any, k: int, seed: int, normal: Any
-) -> tuple[Any, list[float]]:
-    """The X-Gen protocol after the ``normal`` episode of the ``index``-th scenario of its split: K sequential
-    perturbation passes of ``generator`` against ``policy``; returns the last (scored) roll-out and the
-    generation times (s) of all passes. Deterministic for (seed, index, generator name)."""
-    from seal.adversaries.history import RolloutHistory
-    from seal.experiments.evaluation.episodes import perturbation_passes
-
-    history = RolloutHistory(k)
-    history.append(scenario, normal)
-    rng = np.random.default_rng([seed, index, _generator_stream(generator.name)])
-    passes = perturbation_passes(env, scenario, policy, generator, history, rng, k, seed=episode_seed_of(seed, index))
-    return passes[-1].rollout, [p.generation.generation_time_s for p in passes]
-
-
 def _base_row(ego: EgoSpec, setting: Setting, scenario_id: str, k: int) -> dict[str, Any]:
     return {
         "run": ego.run, "dataset": setting.dataset, "setting": setting.name, "scenario_id": scenario_id,
@@ -218,10 +188,10 @@ def evaluate_ego(
     the number of episode rows written per setting."""
     from tqdm import tqdm
 
+    from seal.core.dataset import load_split
     from seal.envs.scenario_env import ScenarioEnv
-    from seal.experiments.evaluation.episodes import run_episode
+    from seal.experiments.evaluation import protocol
     from seal.experiments.evaluation.generator_metrics import LoggedAdversary
-    from seal.experiments.evaluation.generators import build_generator, load_eval_scenarios
     from seal.experiments.evaluation.metrics import episode_metrics
     from seal.experiments.training.egos import make_ego
 
@@ -239,7 +209,7 @@ def evaluate_ego(
         groups.setdefault((s.dataset, s.split), []).append(s)
     todo = []
     for (dataset, split), members in groups.items():
-        scenarios = load_eval_scenarios(dataset, split, config.get("limit"))
+        scenarios = load_split(dataset, split, config.get("limit"))
         done = {s.name: store.done_scenarios(ego.run, s.dataset, s.name) for s in members}
         for i, sc in enumerate(scenarios):
             missing = [s for s in members if sc.scenario_id not in done[s.name]]
@@ -252,7 +222,7 @@ def evaluate_ego(
 
     policy = make_ego(ego.ego)
     generators = {
-        s.generator: build_generator(s.generator, config["generators"].get(s.generator, {}), shared)
+        s.generator: protocol.build_generator(s.generator, config["generators"].get(s.generator, {}), shared)
         for s in settings if s.generator
     }
     envs: dict[tuple[str, str | None], Any] = {}  # one env per (dataset, split)
@@ -262,14 +232,15 @@ def evaluate_ego(
             envs[key] = ScenarioEnv(list(scenarios), config=dict(config.get("env") or {}))
         env, scenario = envs[key], scenarios[i]
         logged = LoggedAdversary.of(scenario)
-        normal = run_episode(env, scenario, policy, seed=episode_seed_of(seed, i))
+        normal = protocol.normal_episode(env, scenario, i, policy, seed)
         rows = []
         for s in missing:
             row = _base_row(ego, s, scenario.scenario_id, k if s.generator else 0)
             if s.generator is None:
                 row.update(episode_metrics(scenario, normal, (), logged))
             else:
-                rollout, times = scored_pass(env, scenario, i, policy, generators[s.generator], k, seed, normal)
+                generator = generators[s.generator]
+                rollout, times = protocol.scored_pass(env, scenario, i, policy, generator, k, seed, normal)
                 row.update(episode_metrics(scenario, rollout, times, logged))
             rows.append(row)
             written[s.name] += 1
@@ -352,7 +323,7 @@ def evaluate_runs(
 
 def _check_generator_config(name: str, config: Mapping[str, Any]) -> None:
     """Build the generator once up front, so a missing model file fails before any episode runs."""
-    from seal.experiments.evaluation.generators import build_generator
+    from seal.experiments.evaluation.protocol import build_generator
 
     shared = {"prior": config.get("prior"), "candidates": config.get("candidates")}
     try:

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from seal.core.geometry import box_corners, box_gap
+from seal.core.outcome import OUTCOMES
 from seal.core.scenario import CURRENT_STEP, HEADING, LENGTH, VALID, WIDTH, Scenario, X, Y
 from seal.envs.road_geometry import get_road_geometry
 from seal.envs.rollout import Rollout
@@ -22,7 +23,6 @@ from seal.scoring.realism import collision_metrics, realism_wd
 
 OFFROAD_TOLERANCE_M = 0.5
 """A box corner may stick out of the drivable area this far (as in `ScenarioEnv`)."""
-OUTCOMES = ("success", "crash", "out_of_road", "timeout")
 CLOSE_CALL_M = 2.0
 """An episode is a close call when the ego and the adversary touch or their boxes come within this gap (m)."""
 

@@ -3,7 +3,9 @@
 For every scenario of the split: one normal episode (logged adversary), then for each generator K sequential
 perturbation passes against the same ego, each pass's roll-out appended to that generator's queue for the
 scenario (queues start as K copies of the logged ego future, then the normal episode is appended); the last pass
-is scored. The normal episode is played once and shared by the generators (egos are deterministic). Output in
+is scored. The normal episode is played once and shared by the generators (egos are deterministic). Seeds and
+rng streams are `seal.experiments.evaluation.protocol`'s, so a (scenario, ego, generator, seed) plays the same
+episode here as in ``seal eval runs`` and the report's videos. Output in
 ``out``: ``config.yaml`` (the resolved config), ``generators.csv`` / ``generators.md`` / ``generators.json``
 (one row per generator, `seal.experiments.evaluation.generator_metrics`) and ``episodes.csv`` (one row per scenario and
 generator).
@@ -12,7 +14,6 @@ generator).
 from __future__ import annotations
 
 import csv
-import inspect
 import io
 import math
 from collections.abc import Mapping, Sequence
@@ -22,13 +23,13 @@ from typing import Any
 import numpy as np
 import yaml
 
-from seal.adversaries.base import K_ROLLOUTS, AdversaryGenerator, available_generators, generator_class
-from seal.adversaries.history import RolloutHistory
+from seal.adversaries.base import K_ROLLOUTS, AdversaryGenerator, available_generators
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
+from seal.core.dataset import load_split
 from seal.core.scenario import Scenario
 from seal.envs.scenario_env import ScenarioEnv
-from seal.experiments.evaluation.episodes import perturbation_passes, run_episode
 from seal.experiments.evaluation.generator_metrics import EpisodeRecord, LoggedAdversary, markdown_table, summarize
+from seal.experiments.evaluation.protocol import build_generator, generator_name, generator_passes, normal_episode
 from seal.experiments.training.egos import make_ego
 
 DEFAULTS: dict[str, Any] = {
@@ -76,11 +77,6 @@ def parse_generators(spec: str | Sequence[str] | Mapping[str, Any]) -> dict[str,
     return parsed
 
 
-def generator_name(label: str, kwargs: Mapping[str, Any]) -> str:
-    """The registered generator behind a ``generators`` entry: its ``generator`` key, else the label itself."""
-    return str(kwargs.get("generator", label))
-
-
 def apply_generator_options(generators: dict[str, dict[str, Any]], options: Sequence[str]) -> None:
     """Apply ``NAME.KEY=VALUE`` options (VALUE read as YAML: numbers, booleans, strings) to ``generators``."""
     for option in options:
@@ -116,32 +112,6 @@ def resolve_config(
     return config
 
 
-def build_generator(name: str, kwargs: Mapping[str, Any], shared: Mapping[str, Any]) -> AdversaryGenerator:
-    """Instantiate entry ``name`` (a generator name, or a label whose ``kwargs`` name the generator, see
-    `parse_generators`) with ``kwargs`` plus each shared option its constructor accepts."""
-    cls = generator_class(generator_name(name, kwargs))
-    kwargs = {k: v for k, v in kwargs.items() if k != "generator"}
-    params = inspect.signature(cls).parameters
-    merged = {k: v for k, v in shared.items() if v is not None and k in params and k not in kwargs}
-    return cls(**merged, **kwargs)
-
-
-def load_eval_scenarios(dataset: str | Path, split: str | None, limit: int | None) -> list[Scenario]:
-    """Scenarios of ``split`` (None = all), at most ``limit``."""
-    from seal.core.dataset import Dataset
-
-    ds = Dataset.open(dataset)
-    if split is not None and split not in ds.splits:
-        raise ValueError(
-            f"dataset {dataset} has no split {split!r}; splits: {sorted(ds.splits) or 'none'} "
-            "(--all-scenarios ignores splits)"
-        )
-    scenarios = ds.load(split=split, limit=limit)
-    if not scenarios:
-        raise ValueError(f"dataset {dataset}: no scenarios in split {split!r}")
-    return scenarios
-
-
 def evaluate_generators(
     scenarios: Sequence[Scenario], generators: Mapping[str, AdversaryGenerator], ego_spec: str, k: int = K_ROLLOUTS,
     seed: int = 0, env_config: Mapping[str, Any] | None = None, progress: bool = True,
@@ -154,14 +124,10 @@ def evaluate_generators(
     records: dict[str, list[EpisodeRecord]] = {name: [] for name in generators}
     logged: list[LoggedAdversary] = []
     for i, scenario in enumerate(tqdm(scenarios, desc="scenarios", unit="scenario", disable=not progress)):
-        episode_seed = seed * 1_000_003 + 1000 * i
-        normal = run_episode(env, scenario, ego, seed=episode_seed)
+        normal = normal_episode(env, scenario, i, ego, seed)
         logged.append(LoggedAdversary.of(scenario))
-        for g, (name, generator) in enumerate(generators.items()):
-            history = RolloutHistory(k)
-            history.append(scenario, normal)
-            rng = np.random.default_rng([seed, i, g])
-            passes = perturbation_passes(env, scenario, ego, generator, history, rng, k, seed=episode_seed)
+        for name, generator in generators.items():
+            passes = generator_passes(env, scenario, i, ego, generator, k, seed, normal)
             last = passes[-1]
             records[name].append(
                 EpisodeRecord.from_rollout(
@@ -202,7 +168,7 @@ def run_eval_generators(
 ) -> list[dict[str, Any]]:
     """Evaluate the configured generators on ``dataset`` and write the results into ``out``; returns the rows."""
     out = Path(out)
-    scenarios = load_eval_scenarios(dataset, config["split"], config["limit"])
+    scenarios = load_split(dataset, config["split"], config["limit"])
     shared = {key: config.get(key) for key in SHARED_OPTIONS}
     generators = {name: build_generator(name, kw, shared) for name, kw in config["generators"].items()}
     resolved = {**config, "dataset": str(dataset), "scenarios": len(scenarios)}

@@ -34,7 +34,8 @@ def run_episode(env: GooseEnv, scenario_id: str, act: Actor) -> dict[str, Any]:
     obs, info = env.reset(options={"scenario_id": scenario_id})
     if info["solved_at_start"]:
         return {"scenario_id": scenario_id, "solved_at_start": True, "success": True, "updates": 0,
-                "achieved_goal": obs["achieved_goal"].tolist(), "outcome": env.last_rollout.outcome}
+                "achieved_goal": obs["achieved_goal"].tolist(),
+                "outcome": env.last_rollout.outcome if env.last_rollout is not None else None}
     done, updates = False, 0
     while not done:
         obs, _, terminated, truncated, info = env.step(act(obs))

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from seal.core.geometry import box_corners, box_gap
+from seal.core.outcome import Outcome
 from seal.core.scenario import CURRENT_STEP, HEADING, LENGTH, VALID, WIDTH, Scenario, X, Y
 from seal.envs.rollout import Rollout
 from seal.experiments.evaluation.generator_metrics import LoggedAdversary, offroad_flags
@@ -108,10 +109,10 @@ def episode_metrics(
     times_ms = 1e3 * np.asarray(generation_times_s, dtype=np.float64)
     return {
         "outcome": rollout.outcome,
-        "success": rollout.outcome == "success",
-        "crash": rollout.outcome == "crash",
-        "out_of_road": rollout.outcome == "out_of_road",
-        "timeout": rollout.outcome == "timeout",
+        "success": rollout.outcome == Outcome.SUCCESS,
+        "crash": rollout.outcome == Outcome.CRASH,
+        "out_of_road": rollout.outcome == Outcome.OUT_OF_ROAD,
+        "timeout": rollout.outcome == Outcome.TIMEOUT,
         "route_completion": float(rollout.route_completion),
         "episode_return": float(rollout.episode_return),
         "adv_collision": adv_collision,

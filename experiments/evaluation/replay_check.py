@@ -36,6 +36,7 @@ from tqdm import tqdm
 
 from seal.core.atomic import atomic_write_json
 from seal.core.geometry import box_corners, boxes_overlap
+from seal.core.outcome import Outcome
 from seal.core.scenario import CURRENT_STEP, HEADING, LENGTH, N_STEPS, VALID, WIDTH, Scenario, X, Y
 from seal.envs.kinematics import recover_actions
 from seal.envs.road_geometry import get_road_geometry
@@ -92,9 +93,9 @@ def replay_one(env: ScenarioEnv, scenario: Scenario) -> dict[str, Any]:
         "route_completion": round(float(ro.route_completion), 3),
         "max_tracking_error_m": round(float(err.max()), 3) if err.size else None,
     }
-    if ro.outcome == "out_of_road":
+    if ro.outcome == Outcome.OUT_OF_ROAD:
         row.update(_off_road_reason(scenario, ro.ego_track[ro.last_step], ro.last_step))
-    elif ro.outcome == "crash":
+    elif ro.outcome == Outcome.CRASH:
         step, other = ro.ego_crashes[0]
         logged = None
         if step < N_STEPS:
@@ -114,11 +115,11 @@ def replay_check(scenarios: Sequence[Scenario], progress: bool = True) -> dict[s
     n = len(rows)
     reasons = Counter(
         f"{r['outcome']}:{r.get('reason', 'logged overlap' if r.get('logged_boxes_overlap') else '')}".rstrip(":")
-        for r in rows if r["outcome"] != "success"
+        for r in rows if r["outcome"] != Outcome.SUCCESS
     )
     return {
         "scenarios": n,
-        "success_rate": outcomes["success"] / n if n else math.nan,
+        "success_rate": outcomes[Outcome.SUCCESS] / n if n else math.nan,
         "outcomes": dict(sorted(outcomes.items())),
         "failure_reasons": dict(sorted(reasons.items())),
         "seconds": round(time.perf_counter() - start, 2),
@@ -149,7 +150,7 @@ def run(dataset: str | Path, out: str | Path | None, limit: int | None, progress
     summary = {k: v for k, v in result.items() if k != "rows"}
     print(json.dumps(summary, indent=2))
     for r in result["rows"]:
-        if r["outcome"] != "success":
+        if r["outcome"] != Outcome.SUCCESS:
             print(json.dumps(r))
     if out is not None:
         atomic_write_json(out, {"dataset": str(dataset), **result})

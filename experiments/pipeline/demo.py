@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import io
+import logging
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
@@ -31,6 +32,8 @@ from seal.scoring.proximity import pair_proximity
 OUTCOME_FIELDS = (
     "scenario_id", "layout", "outcome", "route_completion", "steps", "return", "logged_pair_min_gap_m",
 )
+
+logger = logging.getLogger(__name__)
 
 
 def pick_spread(scenarios: list[Scenario], n: int) -> list[Scenario]:
@@ -103,14 +106,14 @@ def run_demo(out: Path, n_scenarios: int = 40, n_rollouts: int = 12, seed: int =
 
     data_dir = out / "data"
     if (data_dir / MANIFEST).exists() and not overwrite:
-        print(f"[1/3] dataset {data_dir} exists, reusing it")
+        logger.info(f"[1/3] dataset {data_dir} exists, reusing it")
         ds = Dataset.open(data_dir)
     else:
-        print(f"[1/3] generating {n_scenarios} base scenarios into {data_dir}")
+        logger.info(f"[1/3] generating {n_scenarios} base scenarios into {data_dir}")
         ds = generate_dataset(data_dir, n=n_scenarios, seed=seed, overwrite=overwrite)
     scenarios = ds.load()
 
-    print(f"[2/3] rolling out {min(n_rollouts, len(scenarios))} scenarios (heuristic ego vs replayed adversary)")
+    logger.info(f"[2/3] rolling out {min(n_rollouts, len(scenarios))} scenarios (heuristic ego vs replayed adversary)")
     picked = pick_spread(scenarios, n_rollouts)
     env = ScenarioEnv(picked)
     rows = [roll_out(env, s, seed + i) for i, s in enumerate(tqdm(picked, desc="roll-outs", unit="episode"))]
@@ -134,7 +137,7 @@ def run_demo(out: Path, n_scenarios: int = 40, n_rollouts: int = 12, seed: int =
     )
     atomic_write_bytes(out / "summary.md", markdown.encode())
 
-    print("[3/3] rendering one video per layout")
+    logger.info("[3/3] rendering one video per layout")
     videos = out / "videos"
     videos.mkdir(exist_ok=True)
     seen: set[str] = set()

@@ -2,25 +2,28 @@
 
 Read top to bottom, the steps are:
 
-1. data     ``seal data generate`` / ``score`` / ``split`` into OUT/data (or use ``data.path`` as is)
-2. fit      ``seal fit prior | goose | skills | objective`` into OUT/models, only the models that the generators
-            in use reference (``"${fit.NAME}"`` in ``generators``), or the file given as ``fit.NAME.path``
+1. data     generate / score / split (as ``seal data generate | score | split``) into OUT/data (or use
+            ``data.path`` as is)
+2. fit      the prior / goose / skills / objective (as ``seal fit NAME``) into OUT/models, only the models that the
+            generators in use reference (``"${fit.NAME}"`` in ``generators``), or the file given as ``fit.NAME.path``
 3. train    one job per pipeline x seed (`seal.experiments.training.train.train_run`) into OUT/runs/<pipeline>-s<seed>
 4. eval     one job per trained ego, plus the Replay ego (`seal.experiments.evaluation.evaluate.evaluate_job`) into
             OUT/results.sqlite
 5. report   `seal.experiments.report.write.write_report` into OUT/report
 
 Each step leaves a marker ``OUT/steps/<step>.json`` holding a hash of its parameters; a step whose marker
-matches is skipped, a step whose parameters changed runs again (its command resumes or overwrites as that
-command does). Train jobs count as done when their run folder has ``done.json``; evaluation is incremental
-through the results store. Train and eval jobs go through a backend (`seal.experiments.backends`): local
-processes
-or Ray tasks, all writing to the same run folders and store.
+matches is skipped, a step whose parameters changed runs again (it resumes or overwrites as the matching command
+does). Train jobs count as done when their run folder has ``done.json``; evaluation is incremental through the
+results store. Every step is a Python call (`seal.experiments.pipeline.tasks.run_task`, `train_job`,
+`seal.experiments.evaluation.evaluate.evaluate_job`) run through a backend (`seal.experiments.backends`): data and
+fit steps one at a time in a fresh worker process (as the ``seal`` commands ran before), train and eval jobs in
+local processes or Ray tasks, all writing to the same run folders and store.
 
 The preset's sections (all but ``train`` belong to this module; ``train`` is passed to the trainer):
 
 * ``data``: ``path`` (an existing scored, split dataset) or ``generate`` / ``score`` / ``split`` options
-  (each key becomes the command's ``--key``, e.g. ``split: {n_train: 80}`` -> ``--n-train 80``).
+  (the command's options without dashes, e.g. ``split: {n_train: 80}`` = ``--n-train 80``;
+  `seal.experiments.pipeline.tasks`).
 * ``fit``: per model (``prior``, ``goose``, ``skills``, ``objective``) either ``{path: FILE}`` or command
   options (``{preset: quick, max_minutes: 1}``; ``"${fit.prior}"`` in them = another fitted model, fitted first).
 * ``generators``: generator name -> constructor kwargs for training and evaluation; a value ``"${fit.prior}"``
@@ -38,29 +41,29 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import re
-import subprocess
-import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import yaml
 
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
-from seal.experiments.backends import Backend, Job, JobResult, make_backend
+from seal.experiments.backends import Backend, InlineBackend, Job, JobResult, LocalBackend, make_backend
+from seal.experiments.pipeline.tasks import run_task
+
+logger = logging.getLogger(__name__)
 
 SECTIONS = ("data", "fit", "generators", "pipelines", "seeds", "eval", "report", "backend", "train", "preset")
 NO_ADVERSARY = "noadv"
 FIT_OUTPUTS = {"prior": "prior.pt", "goose": "goose.zip", "skills": "skills", "objective": "objective"}
-"""Model name -> file or folder written under OUT/models by ``seal fit NAME DATASET --out ...``."""
-FIT_ARGS = {"prior": ["--split", "all-but-eval"]}
-"""Extra fixed arguments per fit command (the prior must not see the eval split)."""
+"""Model name -> file or folder written under OUT/models by the fit of that model."""
 REF = re.compile(r"^\$\{fit\.(\w+)\}(.*)$")
 """``"${fit.NAME}"`` or ``"${fit.NAME}/file inside it"`` in generator kwargs: a fitted model's path."""
-
-CommandRunner = Callable[[Sequence[str]], None]
 
 
 # ---------------------------------------------------------------------------------------------- config
@@ -78,22 +81,6 @@ def load_run_config(path: str | Path) -> dict[str, Any]:
             raise ValueError(f"{path}: '{key}' must be a non-empty list")
     config.setdefault("preset", path.stem)
     return config
-
-
-def cli_options(options: Mapping[str, Any] | None) -> list[str]:
-    """``{n_train: 80, no_eval: true, layouts: [a, b]}`` -> ``--n-train 80 --no-eval --layouts a b``."""
-    argv: list[str] = []
-    for key, value in (options or {}).items():
-        flag = "--" + str(key).replace("_", "-")
-        if value is True:
-            argv.append(flag)
-        elif value is False or value is None:
-            continue
-        elif isinstance(value, list | tuple):
-            argv += [flag, *map(str, value)]
-        else:
-            argv += [flag, str(value)]
-    return argv
 
 
 def generator_of(pipeline: str) -> str | None:
@@ -159,9 +146,8 @@ def substitute(value: Any, models: Mapping[str, str]) -> Any:
 class Steps:
     """Done-markers under OUT/steps: a step is done when its marker holds the same parameter hash."""
 
-    def __init__(self, out: Path, log: Callable[[str], None] = print) -> None:
+    def __init__(self, out: Path) -> None:
         self.dir = out / "steps"
-        self.log = log
         self.ran: list[str] = []
         self.skipped: list[str] = []
 
@@ -179,10 +165,10 @@ class Steps:
         """Run ``action`` unless ``name`` is done with these ``params``; returns True if it ran. The marker is
         written when ``action`` returns anything but False (False: partly failed, run it again next time)."""
         if self.done(name, params):
-            self.log(f"[seal run] {name}: done, skipped")
+            logger.info(f"[seal run] {name}: done, skipped")
             self.skipped.append(name)
             return False
-        self.log(f"[seal run] {name}: running")
+        logger.info(f"[seal run] {name}: running")
         start = time.perf_counter()
         if action() is False:
             return True
@@ -193,27 +179,20 @@ class Steps:
         return True
 
 
-def run_seal_command(argv: Sequence[str]) -> None:
-    """``python -m seal ARGV`` in a child process (its own progress bars; a failure raises)."""
-    result = subprocess.run([sys.executable, "-m", "seal", *map(str, argv)], check=False)
-    if result.returncode != 0:
-        raise RuntimeError(f"`seal {' '.join(map(str, argv))}` failed with exit status {result.returncode}")
-
-
 # ---------------------------------------------------------------------------------------------- jobs
 def train_job(job: Job) -> dict[str, Any]:
-    """One training run (a picklable backend job): ``seal.experiments.training.train.train_run(job["config"],
-    job["out"],
-    resume=True)``."""
+    """One training run (a picklable backend job, the worker's entry point): ``train_run(job["config"], job["out"])``,
+    resuming an interrupted run; torch threads as the run's ``torch_threads``."""
     import torch
 
-    torch.set_num_threads(1)
     from seal.experiments.training.state import run_status
-    from seal.experiments.training.train import train_run
+    from seal.experiments.training.train import run_torch_threads, train_run
 
     out = Path(job["out"])
     # An interrupted run (config.yaml, no done.json) continues from its last checkpoint.
-    path = train_run(dict(job["config"]), out, resume=run_status(out) == "unfinished", progress=False)
+    resume = run_status(out) == "unfinished"
+    torch.set_num_threads(run_torch_threads(job["config"], out, resume))
+    path = train_run(dict(job["config"]), out, resume=resume, progress=False)
     return {"run": str(path)}
 
 
@@ -231,128 +210,190 @@ def train_config(config: Mapping[str, Any], preset_path: Path, pipeline: str, se
     return load_train_config(preset_path, overrides)
 
 
-def _failures(kind: str, results: Sequence[JobResult], log: Callable[[str], None]) -> list[str]:
+def _failures(kind: str, results: Sequence[JobResult]) -> list[str]:
     errors = []
     for r in results:
         if not r.ok:
             errors.append(f"{kind} {r.job.get('name', '?')}: {r.error}")
-            log(f"[seal run] FAILED {errors[-1]}")
+            logger.error(f"[seal run] FAILED {errors[-1]}")
     return errors
 
 
 # ---------------------------------------------------------------------------------------------- pipeline
+@dataclass
+class _Run:
+    """What the steps of one `run_pipeline` call share."""
+
+    config_path: Path
+    out: Path
+    config: dict[str, Any]
+    backend: Backend
+    step_backend: Backend
+    task_fn: Callable[[Job], Any]
+    train_fn: Callable[[Job], Any]
+    eval_fn: Callable[[Job], Any]
+    train_config_fn: Callable[..., dict[str, Any]]
+    progress: bool
+    steps: Steps
+    errors: list[str] = field(default_factory=list)
+
+    def task(self, job: dict[str, Any]) -> None:
+        """One data / fit step through the step backend; a failure stops the pipeline."""
+        (result,) = self.step_backend.map(self.task_fn, [job], desc=str(job["name"]))
+        if not result.ok:
+            raise RuntimeError(f"step {job['name']} failed: {result.error}")
+
+
 def run_pipeline(
     config_path: str | Path, out: str | Path, backend: Backend | None = None, workers: int | None = None,
-    command: CommandRunner = run_seal_command, train_fn: Callable[[Job], Any] = train_job,
+    task_fn: Callable[[Job], Any] = run_task, train_fn: Callable[[Job], Any] = train_job,
     eval_fn: Callable[[Job], Any] | None = None, train_config_fn: Callable[..., dict[str, Any]] = train_config,
-    progress: bool = True, log: Callable[[str], None] = print,
+    step_backend: Backend | None = None, progress: bool = True,
 ) -> dict[str, Any]:
-    """Run the experiment of ``config_path`` into ``out`` (module docstring). ``command`` runs ``seal``
-    subcommands, ``train_fn`` / ``eval_fn`` are the per-job functions and ``train_config_fn`` builds a run's
+    """Run the experiment of ``config_path`` into ``out`` (module docstring). ``task_fn`` runs the data / fit steps
+    (on ``step_backend``, default: one fresh worker process per step, in this process with an inline
+    ``backend``), ``train_fn`` / ``eval_fn`` are the per-job functions and ``train_config_fn`` builds a run's
     trainer config (injectable for tests). Returns a summary; raises after the report if any job failed."""
-    from seal.experiments.evaluation.evaluate import evaluate_job, parse_settings, resolve_eval_config
+    from seal.experiments.evaluation.evaluate import evaluate_job
 
     config_path, out = Path(config_path).resolve(), Path(out).resolve()
     config = load_run_config(config_path)
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(out / "config.yaml", yaml.safe_dump(config, sort_keys=False).encode())
-    steps = Steps(out, log)
-    eval_fn = eval_fn or evaluate_job
     if backend is None:
         bcfg = config.get("backend") or {}
         backend = make_backend(bcfg.get("name", "local"), workers if workers is not None else bcfg.get("workers"),
                                address=bcfg.get("address"))
+    if step_backend is None:
+        step_backend = InlineBackend() if isinstance(backend, InlineBackend) else LocalBackend(1)
+    run = _Run(config_path, out, config, backend, step_backend, task_fn, train_fn, eval_fn or evaluate_job,
+               train_config_fn, progress, Steps(out))
     started = time.perf_counter()
+    dataset, data_params = _data_steps(run)
+    models = _fit_steps(run, dataset, data_params)
+    generators = {name: substitute(dict((config.get("generators") or {}).get(name) or {}), models)
+                  for name in generators_in_use(config)}
+    n_jobs, trained = _train_step(run, dataset, generators)
+    store = _eval_step(run, dataset, generators, trained)
+    report = _report_step(run, store)
+    summary = {
+        "out": str(out), "dataset": dataset, "models": models, "runs": trained, "store": store,
+        "report": str(report / "report.md"), "steps_ran": run.steps.ran, "steps_skipped": run.steps.skipped,
+        "train_jobs": n_jobs, "seconds": round(time.perf_counter() - started, 1), "errors": run.errors,
+    }
+    atomic_write_json(out / "summary.json", summary)
+    if run.errors:
+        raise RuntimeError(f"{len(run.errors)} job(s) failed (see {out / 'summary.json'}):\n" + "\n".join(run.errors))
+    return summary
 
-    # 1. data ------------------------------------------------------------------------------------------
-    data = config.get("data") or {}
-    data_params = {k: data.get(k) for k in ("path", "generate", "score", "split")}  # fits redo when these change
+
+def _data_steps(run: _Run) -> tuple[str, dict[str, Any]]:
+    """1. data: generate, score and split OUT/data (or take ``data.path``); returns the dataset folder and the
+    data parameters (the fits run again when they change)."""
+    data = run.config.get("data") or {}
+    data_params = {k: data.get(k) for k in ("path", "generate", "score", "split")}
     if data.get("path"):
-        dataset = str(Path(data["path"]).expanduser().resolve())
-    else:
-        dataset = str(out / "data")
-        gen_opts = dict(data.get("generate") or {})
-        steps.run("data", gen_opts, lambda: command(["data", "generate", "--out", dataset, *cli_options(gen_opts)]))
-        score_opts = dict(data.get("score") or {})
-        steps.run("score", [gen_opts, score_opts],
-                  lambda: command(["data", "score", dataset, *cli_options(score_opts)]))
-        split_opts = dict(data.get("split") or {})
-        steps.run("split", [gen_opts, split_opts],
-                  lambda: command(["data", "split", dataset, *cli_options(split_opts)]))
+        return str(Path(data["path"]).expanduser().resolve()), data_params
+    dataset = str(run.out / "data")
+    gen_opts = dict(data.get("generate") or {})
+    run.steps.run("data", gen_opts, lambda: run.task(
+        {"name": "data", "task": "generate", "dataset": dataset, "options": gen_opts}))
+    score_opts = dict(data.get("score") or {})
+    run.steps.run("score", [gen_opts, score_opts], lambda: run.task(
+        {"name": "score", "task": "score", "dataset": dataset, "options": score_opts}))
+    split_opts = dict(data.get("split") or {})
+    run.steps.run("split", [gen_opts, split_opts], lambda: run.task(
+        {"name": "split", "task": "split", "dataset": dataset, "options": split_opts}))
+    return dataset, data_params
 
-    # 2. fit the models the generators in use need -------------------------------------------------------
+
+def _fit_steps(run: _Run, dataset: str, data_params: Mapping[str, Any]) -> dict[str, str]:
+    """2. fit the models the generators in use need, dependencies first; returns model name -> path."""
     models: dict[str, str] = {}
-    for name in fits_needed(config):
-        spec = dict((config.get("fit") or {})[name] or {})
+    for name in fits_needed(run.config):
+        spec = dict((run.config.get("fit") or {})[name] or {})
         if spec.get("path"):
             models[name] = str(Path(spec["path"]).expanduser().resolve())
             continue
-        (out / "models").mkdir(exist_ok=True)
-        models[name] = str(out / "models" / FIT_OUTPUTS.get(name, name))
-        options = cli_options(substitute(spec, models))  # e.g. the objective's candidates: "${fit.prior}"
-        argv = ["fit", name, dataset, "--out", models[name], *FIT_ARGS.get(name, []), *options]
-        steps.run(f"fit-{name}", [data_params, argv], lambda argv=argv: command(argv))
-    generators = {name: substitute(dict((config.get("generators") or {}).get(name) or {}), models)
-                  for name in generators_in_use(config)}
+        (run.out / "models").mkdir(exist_ok=True)
+        models[name] = str(run.out / "models" / FIT_OUTPUTS.get(name, name))
+        job = {"name": f"fit-{name}", "task": "fit", "model": name, "dataset": dataset, "out": models[name],
+               "options": substitute(spec, models)}  # e.g. the objective's candidates: "${fit.prior}"
+        run.steps.run(f"fit-{name}", [data_params, job], partial(run.task, job))
+    return models
 
-    # 3. train: pipelines x seeds ----------------------------------------------------------------------
+
+def _train_step(run: _Run, dataset: str, generators: Mapping[str, Any]) -> tuple[int, list[str]]:
+    """3. train one ego per pipeline x seed (finished run folders skipped); returns the number of train jobs and
+    this preset's finished run folders."""
     jobs = []
-    runs = {out / "runs" / f"{p}-s{seed}": (p, int(seed)) for p in config["pipelines"] for seed in config["seeds"]}
+    runs = {run.out / "runs" / f"{p}-s{seed}": (p, int(seed))
+            for p in run.config["pipelines"] for seed in run.config["seeds"]}
     for run_dir, (pipeline, seed) in runs.items():
         if (run_dir / "done.json").is_file():
-            log(f"[seal run] train {run_dir.name}: done, skipped")
+            logger.info(f"[seal run] train {run_dir.name}: done, skipped")
             continue
-        cfg = train_config_fn(config, config_path, pipeline, seed, dataset, generators)
+        cfg = run.train_config_fn(run.config, run.config_path, pipeline, seed, dataset, generators)
         jobs.append({"name": run_dir.name, "config": cfg, "out": str(run_dir)})
     # Trainers may run several env processes each: backend.train_workers caps concurrent local train jobs.
-    train_workers = (config.get("backend") or {}).get("train_workers")
-    train_backend = make_backend("local", int(train_workers)) if train_workers and backend.name == "local" else backend
+    train_workers = (run.config.get("backend") or {}).get("train_workers")
+    backend = (make_backend("local", int(train_workers)) if train_workers and run.backend.name == "local"
+               else run.backend)
     if jobs:
-        log(f"[seal run] train: {len(jobs)} job(s) on the {train_backend.name} backend")
-    errors = _failures("train", train_backend.map(train_fn, jobs, desc="train"), log)
-    trained = [str(d) for d in runs if (d / "done.json").is_file()]  # this preset's runs that finished
+        logger.info(f"[seal run] train: {len(jobs)} job(s) on the {backend.name} backend")
+    run.errors += _failures("train", backend.map(run.train_fn, jobs, desc="train"))
+    return len(jobs), [str(d) for d in runs if (d / "done.json").is_file()]
 
-    # 4. eval: every trained ego plus the Replay ego, into the store -----------------------------------
-    ev = dict(config.get("eval") or {})
-    store = str(out / "results.sqlite")
-    eval_config = resolve_eval_config(**{k: ev.get(k) for k in ("k", "limit", "seed", "prior", "candidates", "env")})
+
+def _eval_step(run: _Run, dataset: str, generators: Mapping[str, Any], trained: Sequence[str]) -> str:
+    """4. evaluate every trained ego plus the Replay ego into OUT/results.sqlite; returns the store path."""
+    from seal.experiments.evaluation.evaluate import parse_settings, resolve_eval_config
+
+    ev = dict(run.config.get("eval") or {})
+    store = str(run.out / "results.sqlite")
+    eval_config = resolve_eval_config(k=ev.get("k"), limit=ev.get("limit"), seed=ev.get("seed"), prior=ev.get("prior"),
+                                      candidates=ev.get("candidates"), env=ev.get("env"))
     eval_config["generators"] = generators
     settings = parse_settings(ev.get("settings") or ["normal", "hard"], dataset)
-    egos = trained + (["replay"] if ev.get("replay_ego", True) else [])
-    eval_jobs = [
-        {"name": Path(e).name, "store": store, "run": e, "settings": [vars(s) for s in settings],
-         "config": eval_config, "progress": False}
-        for e in egos
-    ]
-    eval_params = [egos, [vars(s) for s in settings], eval_config]
+    egos = [*trained, *(["replay"] if ev.get("replay_ego", True) else [])]
+    jobs = [{"name": Path(e).name, "store": store, "run": e, "settings": [vars(s) for s in settings],
+             "config": eval_config, "progress": False} for e in egos]
 
     def evaluate() -> bool:
-        failed = _failures("eval", backend.map(eval_fn, eval_jobs, desc="eval"), log)
-        errors.extend(failed)  # reported at the end; the report covers what was evaluated
+        failed = _failures("eval", run.backend.map(run.eval_fn, jobs, desc="eval"))
+        run.errors.extend(failed)  # reported at the end; the report covers what was evaluated
         return not failed
 
-    steps.run("eval", eval_params, evaluate)
+    run.steps.run("eval", [egos, [vars(s) for s in settings], eval_config], evaluate)
+    return store
 
-    # 5. report ------------------------------------------------------------------------------------------
-    rep = dict(config.get("report") or {})
-    report_dir = out / "report"
-    if Path(store).is_file():
-        from seal.experiments.evaluation.results_store import ResultsStore
-        from seal.experiments.report.write import write_report
 
-        with ResultsStore(store) as s:
-            n_episodes = s.count()
-        if n_episodes:
-            steps.run("report", [rep, n_episodes], lambda: write_report(
-                store, report_dir, plots=rep.get("plots", True), videos=int(rep.get("videos", 0)),
-                video_format=rep.get("video_format", "mp4"), progress=progress,
-            ))
-    summary = {
-        "out": str(out), "dataset": dataset, "models": models, "runs": trained, "store": store,
-        "report": str(report_dir / "report.md"), "steps_ran": steps.ran, "steps_skipped": steps.skipped,
-        "train_jobs": len(jobs), "seconds": round(time.perf_counter() - started, 1), "errors": errors,
-    }
-    atomic_write_json(out / "summary.json", summary)
-    if errors:
-        raise RuntimeError(f"{len(errors)} job(s) failed (see {out / 'summary.json'}):\n" + "\n".join(errors))
-    return summary
+def _prior_threads() -> None:
+    """Report videos re-simulate prior-based generators in this process: torch threads as the evaluation workers
+    had them (`seal.adversaries.candidate_sources.PRIOR_THREADS`), so the videos show the scored episodes."""
+    import torch
+
+    from seal.adversaries.candidate_sources import PRIOR_THREADS
+
+    torch.set_num_threads(PRIOR_THREADS)
+
+
+def _report_step(run: _Run, store: str) -> Path:
+    """5. the report of what the store holds into OUT/report; returns that folder."""
+    rep = dict(run.config.get("report") or {})
+    report_dir = run.out / "report"
+    if not Path(store).is_file():
+        return report_dir
+    from seal.experiments.evaluation.results_store import ResultsStore
+    from seal.experiments.report.write import write_report
+
+    with ResultsStore(store) as s:
+        n_episodes = s.count()
+    if n_episodes:
+        if int(rep.get("videos", 0)) > 0:
+            _prior_threads()
+        run.steps.run("report", [rep, n_episodes], lambda: write_report(
+            store, report_dir, plots=rep.get("plots", True), videos=int(rep.get("videos", 0)),
+            video_format=rep.get("video_format", "mp4"), progress=run.progress,
+        ))
+    return report_dir

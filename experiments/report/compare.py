@@ -153,7 +153,7 @@ def generator_table(rows: Sequence[Mapping[str, Any]], settings_info: Sequence[M
             "ego_crash": float(np.mean([np.mean([bool(e["crash"]) for e in v]) for v in per_run.values()])),
             "adv_collision_rate": sum(bool(e["adv_collision"]) for e in eps) / n,
             "close_call_rate": sum(bool(e["close_call"]) for e in eps) / n,
-            **pooled_realism(eps),
+            **pooled_realism([dict(e) for e in eps]),
             "collision_speed_mps": float(np.mean(speeds)) if speeds else math.nan,
             "head_on_rate": sum(bool(e["head_on"]) for e in eps) / n,
             "severe_head_on_rate": sum(bool(e["severe_head_on"]) for e in eps) / n,

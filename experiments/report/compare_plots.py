@@ -132,15 +132,14 @@ def render_generator_videos(
     """For every generator setting, ``per_generator`` videos of its scored pass against one ego (the first
     trained run, else the Replay ego, else another built-in ego), preferring scenarios where the ego crashed;
     re-simulated with the same seeds, generator kwargs and K as the evaluation
-    (`seal.experiments.evaluation.evaluate.scored_pass`;
+    (`seal.experiments.evaluation.protocol`;
     `ScenarioEnv` config overrides of the evaluation are not recorded, the default env is used)."""
     from tqdm import tqdm
 
+    from seal.core.dataset import load_split
     from seal.envs.render import render_rollout, write_video
     from seal.envs.scenario_env import ScenarioEnv
-    from seal.experiments.evaluation.episodes import run_episode
-    from seal.experiments.evaluation.evaluate import episode_seed_of, scored_pass
-    from seal.experiments.evaluation.generators import build_generator, load_eval_scenarios
+    from seal.experiments.evaluation.protocol import build_generator, normal_episode, scored_pass
     from seal.experiments.training.egos import make_ego
 
     if fmt not in ("mp4", "gif"):
@@ -159,7 +158,7 @@ def render_generator_videos(
         if not eps:
             continue
         eps.sort(key=lambda r: (not r["crash"], not r["adv_collision"], r["scenario_id"]))
-        scenarios = load_eval_scenarios(s["dataset"], s["split"], None)
+        scenarios = load_split(s["dataset"], s["split"])
         index = {sc.scenario_id: i for i, sc in enumerate(scenarios)}
         generator = build_generator(s["generator"], s["kwargs"], {})
         env = ScenarioEnv(scenarios)
@@ -168,7 +167,7 @@ def render_generator_videos(
             if i is None:
                 continue
             sc = scenarios[i]
-            normal = run_episode(env, sc, policy, seed=episode_seed_of(int(s["seed"]), i))
+            normal = normal_episode(env, sc, i, policy, int(s["seed"]))
             rollout, _ = scored_pass(env, sc, i, policy, generator, int(s["k"]), int(s["seed"]), normal)
             name = f"{s['setting']}_{Path(ego_run['run']).name}_{sc.scenario_id}.{fmt}"
             paths.append(write_video(render_rollout(rollout, sc.road, sc), out / name))

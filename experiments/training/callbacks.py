@@ -16,9 +16,8 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import CSVOutputFormat
 
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
+from seal.core.outcome import OUTCOMES, Outcome
 from seal.core.scenario import Scenario
-
-OUTCOMES = ("success", "crash", "out_of_road", "timeout")
 
 
 class ResumableCSVOutputFormat(CSVOutputFormat):
@@ -72,10 +71,10 @@ class EpisodeStatsCallback(BaseCallback):
             return {}
         gen = [e["generation_s"] for e in r if e["perturbed"]]
         return {
-            "success_rate": float(np.mean([e["outcome"] == "success" for e in r])),
+            "success_rate": float(np.mean([e["outcome"] == Outcome.SUCCESS for e in r])),
             "crash_rate": float(np.mean([e["crashed"] for e in r])),
-            "out_of_road_rate": float(np.mean([e["outcome"] == "out_of_road" for e in r])),
-            "timeout_rate": float(np.mean([e["outcome"] == "timeout" for e in r])),
+            "out_of_road_rate": float(np.mean([e["outcome"] == Outcome.OUT_OF_ROAD for e in r])),
+            "timeout_rate": float(np.mean([e["outcome"] == Outcome.TIMEOUT for e in r])),
             "route_completion": float(np.mean([e["completion"] for e in r])),
             "perturbed_share": float(np.mean([e["perturbed"] for e in r])),
             "generation_ms": 1e3 * float(np.mean(gen)) if gen else 0.0,
@@ -131,9 +130,9 @@ def evaluate_policy_on(model: Any, env: Any, scenarios: Sequence[Scenario]) -> l
 
 def summarize_eval(rows: Sequence[dict[str, Any]]) -> dict[str, float]:
     return {
-        "success_rate": float(np.mean([r["outcome"] == "success" for r in rows])),
+        "success_rate": float(np.mean([r["outcome"] == Outcome.SUCCESS for r in rows])),
         "crash_rate": float(np.mean([r["crashed"] for r in rows])),
-        "out_of_road_rate": float(np.mean([r["outcome"] == "out_of_road" for r in rows])),
+        "out_of_road_rate": float(np.mean([r["outcome"] == Outcome.OUT_OF_ROAD for r in rows])),
         "route_completion": float(np.mean([r["route_completion"] for r in rows])),
         "mean_return": float(np.mean([r["return"] for r in rows])),
     }
@@ -261,7 +260,7 @@ class RestoreCallback(BaseCallback):
         for i, state in enumerate(self.workers):
             env.env_method("set_state", state, f"checkpoint worker_{i}.npz", indices=[i])
         set_rng_state(self.model, self.rng_json, self.rng_arrays)
-        self.model._last_obs = env.reset()
+        self.model._last_obs = env.reset()  # type: ignore[assignment]  # SB3 types reset()'s tuple case too
         self.model._last_episode_starts = np.ones((env.num_envs,), dtype=bool)
 
     def _on_step(self) -> bool:

@@ -28,6 +28,7 @@ import io
 import json
 import random
 import shutil
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -90,8 +91,8 @@ def save_replay_buffer(buffer: Any, path: Path) -> None:
     """The filled part of an SB3 ``ReplayBuffer`` as an ``.npz`` (arrays only; ``pos``, ``full`` and the buffer
     size recorded for the checks of `load_replay_buffer`)."""
     n = buffer.buffer_size if buffer.full else buffer.pos
-    arrays = {name: np.asarray(getattr(buffer, name))[:n] for name in _BUFFER_FIELDS
-              if getattr(buffer, name, None) is not None}
+    arrays: dict[str, Any] = {name: np.asarray(getattr(buffer, name))[:n] for name in _BUFFER_FIELDS
+                              if getattr(buffer, name, None) is not None}
     arrays["meta"] = np.array([buffer.pos, int(buffer.full), buffer.buffer_size, buffer.n_envs], dtype=np.int64)
     atomic_write(path, lambda f: np.savez(f, **arrays))
 
@@ -112,6 +113,12 @@ def load_replay_buffer(buffer: Any, path: Path) -> None:
             data = z[name]
             target[: len(data)] = data
         buffer.pos, buffer.full = pos, bool(full)
+
+
+def _write_npz(path: Path, arrays: Mapping[str, Any], compressed: bool = False) -> None:
+    """``arrays`` as an ``.npz`` at ``path``, atomically."""
+    save: Any = np.savez_compressed if compressed else np.savez
+    atomic_write(path, lambda f: save(f, **arrays))
 
 
 def rng_state(model: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -154,10 +161,10 @@ def write_checkpoint(out: Path, model: Any, worker_states: list[dict[str, np.nda
     model.save(tmp / "model.zip", exclude=SAVE_EXCLUDE)
     if getattr(model, "replay_buffer", None) is not None:
         save_replay_buffer(model.replay_buffer, tmp / "replay_buffer.npz")
-    for i, state in enumerate(worker_states):
-        atomic_write(tmp / f"worker_{i}.npz", lambda f, s=state: np.savez_compressed(f, **s))
+    for i, worker in enumerate(worker_states):
+        _write_npz(tmp / f"worker_{i}.npz", worker, compressed=True)
     rng_json, rng_arrays = rng_state(model)
-    atomic_write(tmp / "rng.npz", lambda f: np.savez(f, **rng_arrays))
+    _write_npz(tmp / "rng.npz", rng_arrays)
     state = {
         "step": step, "n_updates": int(getattr(model, "_n_updates", 0)),
         "episode_num": int(getattr(model, "_episode_num", 0)), "n_workers": len(worker_states),

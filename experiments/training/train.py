@@ -21,6 +21,7 @@ restored: generator-internal memory (GOOSE's per-scenario curve edits restart fr
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import time
 from collections.abc import Callable, Mapping
@@ -30,8 +31,11 @@ from typing import Any
 import numpy as np
 import yaml
 
+from seal.core.dataset import load_split
 from seal.experiments.training import state as ts
 from seal.experiments.training.config import check_resolved, load_train_config
+
+logger = logging.getLogger(__name__)
 
 __all__ = ["build_model", "build_vec_env", "load_train_config", "train_run"]
 
@@ -73,21 +77,6 @@ def _generator_kwargs(config: Mapping[str, Any]) -> dict[str, Any]:
     return kwargs
 
 
-def load_split(dataset: str | Path, split: str | None, limit: int | None, what: str) -> list[Any]:
-    from seal.core.dataset import Dataset
-
-    if dataset is None:
-        raise ValueError("train.dataset is not set: give --dataset DIR or set it in the config's train: section")
-    ds = Dataset.open(dataset)
-    if split is not None and split not in ds.splits:
-        raise ValueError(f"dataset {dataset} has no split {split!r} for the {what} scenarios; splits: "
-                         f"{sorted(ds.splits) or 'none'} (make them with `seal data split`)")
-    scenarios = ds.load(split=split, limit=limit)
-    if not scenarios:
-        raise ValueError(f"dataset {dataset}: no {what} scenarios in split {split!r}")
-    return scenarios
-
-
 def _worker(fn: Callable[[], Any], threads: int) -> Callable[[], Any]:
     def build() -> Any:
         import torch
@@ -109,8 +98,8 @@ def build_vec_env(config: Mapping[str, Any], scenarios: list[Any], n_envs: int) 
     kwargs = _generator_kwargs(config) if gen["name"] else {}
     fns = closed_loop_env_fns(scenarios, n_envs, gen["name"], kwargs, env_config=config["env"], k=int(config["k"]),
                               perturb_prob=0.0)
-    fns = [_worker(fn, 1) for fn in fns]
-    venv = SubprocVecEnv(fns) if n_envs > 1 else DummyVecEnv(fns)
+    workers: list[Callable[[], Any]] = [_worker(fn, 1) for fn in fns]
+    venv = SubprocVecEnv(workers) if n_envs > 1 else DummyVecEnv(workers)
     return VecMonitor(venv)
 
 
@@ -161,8 +150,7 @@ def _write_config(out: Path, config: Mapping[str, Any]) -> None:
     atomic_write_bytes(out / ts.CONFIG, yaml.safe_dump(dict(config), sort_keys=True).encode())
 
 
-def train_run(config: dict[str, Any], out: Path, resume: bool = False, progress: bool = True,
-              log: Callable[[str], None] = print) -> Path:
+def train_run(config: dict[str, Any], out: Path, resume: bool = False, progress: bool = True) -> Path:
     """Train (or, with ``resume``, continue) the run of ``config`` in folder ``out``; returns ``out``.
 
     ``config`` is a resolved config (`load_train_config`). A new run needs an absent or empty ``out``; ``resume``
@@ -171,35 +159,11 @@ def train_run(config: dict[str, Any], out: Path, resume: bool = False, progress:
     ``done.json``: ``steps``, ``wall_s`` (seconds of training behind the final model: each session's time up to
     the checkpoint the next one resumed from, plus the last session), ``resumed_from`` (the step the last session
     started at), ``episodes`` and ``session_totals`` (the last session's episode outcomes and generation time).
+    Torch's thread count is the caller's (entry points set ``config["torch_threads"]``, `run_torch_threads`).
     """
-    import torch
-    from stable_baselines3.common.callbacks import CallbackList
-    from stable_baselines3.common.logger import Logger, TensorBoardOutputFormat
-
-    from seal.envs.scenario_env import ScenarioEnv
-    from seal.experiments.training.callbacks import (
-        CheckpointCallback,
-        EpisodeStatsCallback,
-        EvalCallback,
-        ProgressCallback,
-        RestoreCallback,
-        ResumableCSVOutputFormat,
-        truncate_eval,
-    )
-    from seal.experiments.training.curriculum import CurriculumCallback
-
     out = Path(out)
-    ts.check_out_folder(out, resume)
-    if resume:
-        config = check_resolved(yaml.safe_load((out / ts.CONFIG).read_text()), str(out / ts.CONFIG))
-    else:
-        config = _absolute_paths(dict(config))
-        config["n_envs"] = resolve_n_envs(config)
+    config = _run_config(config, out, resume)
     n_envs = int(config["n_envs"])
-    check_steps(config, n_envs)
-    total = int(config["total_timesteps"])
-    torch.set_num_threads(int(config["torch_threads"]))
-
     train_scenarios = load_split(config["dataset"], config["train_split"], config["train_limit"], "train")
     eval_scenarios = (load_split(config["dataset"], config["eval_split"], int(config["eval_episodes"]), "eval")
                       if int(config["eval_every"]) else [])
@@ -210,20 +174,7 @@ def train_run(config: dict[str, Any], out: Path, resume: bool = False, progress:
     if not resume:
         out.mkdir(parents=True, exist_ok=True)
         _write_config(out, config)
-
-    checkpoint = ts.latest_checkpoint(out) if resume else None
-    start_step = 0
-    restored: dict[str, Any] = {}
-    if checkpoint is not None:
-        restored["state"], restored["rng"], restored["workers"] = ts.read_checkpoint_state(checkpoint)
-        start_step = int(restored["state"]["step"])
-        if int(restored["state"]["n_workers"]) != n_envs:
-            raise ValueError(f"{checkpoint}: written by {restored['state']['n_workers']} env workers, the run "
-                             f"config has n_envs = {n_envs}")
-    if resume:
-        log(f"resuming {out} from step {start_step}" + (f" ({checkpoint.name})" if checkpoint else " (no checkpoint)"))
-        ts.truncate_progress(out / ts.PROGRESS, start_step)
-        truncate_eval(out / "eval", start_step)
+    checkpoint, restored = _restore_point(out, resume, n_envs)
 
     from seal.envs.road_geometry import reserve_road_cache
 
@@ -231,54 +182,128 @@ def train_run(config: dict[str, Any], out: Path, resume: bool = False, progress:
     reserve_road_cache(len({id(s.road) for s in eval_scenarios + (train_scenarios if n_envs == 1 else [])}))
     venv = build_vec_env(config, train_scenarios, n_envs)
     try:
-        model = build_model(config, venv)
-        wall_before = 0.0
-        if checkpoint is not None:
-            ts.load_model_state(model, checkpoint / "model.zip")
-            if getattr(model, "replay_buffer", None) is not None:
-                ts.load_replay_buffer(model.replay_buffer, checkpoint / "replay_buffer.npz")
-            model.num_timesteps = start_step
-            model._n_updates = int(restored["state"]["n_updates"])
-            model._episode_num = int(restored["state"]["episode_num"])
-            wall_before = float(restored["state"].get("wall_s", 0.0))
-        (out / "eval").mkdir(exist_ok=True)
-        model.set_logger(Logger(folder=str(out), output_formats=[
-            ResumableCSVOutputFormat(str(out / ts.PROGRESS)), TensorBoardOutputFormat(str(out / "tb"))]))
-
-        session_start = time.perf_counter()
-
-        def save(m: Any) -> None:
-            states = m.get_env().env_method("get_state")
-            ts.write_checkpoint(out, m, states, {"wall_s": wall_before + time.perf_counter() - session_start})
-
-        curriculum = CurriculumCallback(total, **config["curriculum"])
-        stats = EpisodeStatsCallback()
-        eval_env_config = dict(config["eval_env"])
-        callbacks = [
-            curriculum,  # first: a resumed run's restore resets the envs, whose first episodes then use p(t)
-            RestoreCallback(restored["workers"], restored["state"]["rng"], restored["rng"])
-            if checkpoint is not None else None,
-            stats,
-            CheckpointCallback(int(config["checkpoint_every"]), total, save),
-            EvalCallback(int(config["eval_every"]), out / "eval", lambda: ScenarioEnv(eval_scenarios, eval_env_config),
-                         eval_scenarios) if eval_scenarios else None,
-            ProgressCallback(total, stats, curriculum, enabled=progress),
-        ]
-        model.learn(total_timesteps=total - start_step, callback=CallbackList([c for c in callbacks if c]),
-                    log_interval=_log_interval(config), reset_num_timesteps=False)
-        if model.num_timesteps != total:
-            raise RuntimeError(f"training stopped at {model.num_timesteps} env steps, expected {total}")
-        tmp_model = out / f".tmp_{ts.FINAL_MODEL}"
-        model.save(tmp_model, exclude=ts.SAVE_EXCLUDE)
-        os.replace(tmp_model, out / ts.FINAL_MODEL)
-        wall = wall_before + time.perf_counter() - session_start
-        done = {"steps": int(model.num_timesteps), "wall_s": round(wall, 1), "resumed_from": start_step,
-                "episodes": int(model._episode_num), "session_totals": stats.totals}
-        from seal.core.atomic import atomic_write_json
-
-        atomic_write_json(out / ts.DONE, done)
-        log(f"finished {out}: {done['steps']} steps in {done['wall_s']} s")
+        _learn(config, out, venv, checkpoint, restored, eval_scenarios, progress)
     finally:
         with contextlib.suppress(OSError, EOFError):  # workers already gone (killed with the process group)
             venv.close()
     return out
+
+
+def run_torch_threads(config: Mapping[str, Any], out: Path, resume: bool) -> int:
+    """The torch thread count of the run `train_run` will train (a resumed run's recorded config decides)."""
+    if resume and (Path(out) / ts.CONFIG).is_file():
+        recorded = yaml.safe_load((Path(out) / ts.CONFIG).read_text()) or {}
+        return int(recorded.get("torch_threads", config.get("torch_threads", 1)))
+    return int(config.get("torch_threads", 1))
+
+
+def _run_config(config: dict[str, Any], out: Path, resume: bool) -> dict[str, Any]:
+    """The config the run trains with: the recorded one when resuming, else ``config`` with absolute paths and the
+    resolved env-worker count; steps checked against the worker count."""
+    ts.check_out_folder(out, resume)
+    if resume:
+        config = check_resolved(yaml.safe_load((out / ts.CONFIG).read_text()), str(out / ts.CONFIG))
+    else:
+        config = _absolute_paths(dict(config))
+        config["n_envs"] = resolve_n_envs(config)
+    check_steps(config, int(config["n_envs"]))
+    return config
+
+
+def _restore_point(out: Path, resume: bool, n_envs: int) -> tuple[Path | None, dict[str, Any]]:
+    """The checkpoint a resumed run continues from (None: start at step 0) and its saved state / rng / worker
+    states; the progress and eval logs are cut back to that step."""
+    checkpoint = ts.latest_checkpoint(out) if resume else None
+    restored: dict[str, Any] = {}
+    start_step = 0
+    if checkpoint is not None:
+        restored["state"], restored["rng"], restored["workers"] = ts.read_checkpoint_state(checkpoint)
+        start_step = int(restored["state"]["step"])
+        if int(restored["state"]["n_workers"]) != n_envs:
+            raise ValueError(f"{checkpoint}: written by {restored['state']['n_workers']} env workers, the run "
+                             f"config has n_envs = {n_envs}")
+    if resume:
+        from seal.experiments.training.callbacks import truncate_eval
+
+        logger.info(f"resuming {out} from step {start_step}"
+                    + (f" ({checkpoint.name})" if checkpoint else " (no checkpoint)"))
+        ts.truncate_progress(out / ts.PROGRESS, start_step)
+        truncate_eval(out / "eval", start_step)
+    return checkpoint, restored
+
+
+def _learn(config: Mapping[str, Any], out: Path, venv: Any, checkpoint: Path | None, restored: dict[str, Any],
+           eval_scenarios: list[Any], progress: bool) -> None:
+    """Build the model (restored from ``checkpoint``), learn to ``total_timesteps``, write the final model and
+    ``done.json``."""
+    from stable_baselines3.common.logger import Logger, TensorBoardOutputFormat
+
+    from seal.core.atomic import atomic_write_json
+    from seal.experiments.training.callbacks import ResumableCSVOutputFormat
+
+    total = int(config["total_timesteps"])
+    model = build_model(config, venv)
+    start_step, wall_before = 0, 0.0
+    if checkpoint is not None:
+        start_step = int(restored["state"]["step"])
+        ts.load_model_state(model, checkpoint / "model.zip")
+        if getattr(model, "replay_buffer", None) is not None:
+            ts.load_replay_buffer(model.replay_buffer, checkpoint / "replay_buffer.npz")
+        model.num_timesteps = start_step
+        model._n_updates = int(restored["state"]["n_updates"])
+        model._episode_num = int(restored["state"]["episode_num"])
+        wall_before = float(restored["state"].get("wall_s", 0.0))
+    (out / "eval").mkdir(exist_ok=True)
+    model.set_logger(Logger(folder=str(out), output_formats=[
+        ResumableCSVOutputFormat(str(out / ts.PROGRESS)), TensorBoardOutputFormat(str(out / "tb"))]))
+    session_start = time.perf_counter()
+
+    def save(m: Any) -> None:
+        states = m.get_env().env_method("get_state")
+        ts.write_checkpoint(out, m, states, {"wall_s": wall_before + time.perf_counter() - session_start})
+
+    callbacks, stats = _callbacks(config, out, checkpoint, restored, eval_scenarios, save, progress)
+    model.learn(total_timesteps=total - start_step, callback=callbacks, log_interval=_log_interval(config),
+                reset_num_timesteps=False)
+    if model.num_timesteps != total:
+        raise RuntimeError(f"training stopped at {model.num_timesteps} env steps, expected {total}")
+    tmp_model = out / f".tmp_{ts.FINAL_MODEL}"
+    model.save(tmp_model, exclude=ts.SAVE_EXCLUDE)
+    os.replace(tmp_model, out / ts.FINAL_MODEL)
+    wall = wall_before + time.perf_counter() - session_start
+    done = {"steps": int(model.num_timesteps), "wall_s": round(wall, 1), "resumed_from": start_step,
+            "episodes": int(model._episode_num), "session_totals": stats.totals}
+    atomic_write_json(out / ts.DONE, done)
+    logger.info(f"finished {out}: {done['steps']} steps in {done['wall_s']} s")
+
+
+def _callbacks(config: Mapping[str, Any], out: Path, checkpoint: Path | None, restored: dict[str, Any],
+               eval_scenarios: list[Any], save: Callable[[Any], None], progress: bool) -> tuple[Any, Any]:
+    """The training callbacks, in the order they must run, and the episode-stats callback among them."""
+    from stable_baselines3.common.callbacks import CallbackList
+
+    from seal.envs.scenario_env import ScenarioEnv
+    from seal.experiments.training.callbacks import (
+        CheckpointCallback,
+        EpisodeStatsCallback,
+        EvalCallback,
+        ProgressCallback,
+        RestoreCallback,
+    )
+    from seal.experiments.training.curriculum import CurriculumCallback
+
+    total = int(config["total_timesteps"])
+    curriculum = CurriculumCallback(total, **config["curriculum"])
+    stats = EpisodeStatsCallback()
+    eval_env_config = dict(config["eval_env"])
+    callbacks = [
+        curriculum,  # first: a resumed run's restore resets the envs, whose first episodes then use p(t)
+        RestoreCallback(restored["workers"], restored["state"]["rng"], restored["rng"])
+        if checkpoint is not None else None,
+        stats,
+        CheckpointCallback(int(config["checkpoint_every"]), total, save),
+        EvalCallback(int(config["eval_every"]), out / "eval", lambda: ScenarioEnv(eval_scenarios, eval_env_config),
+                     eval_scenarios) if eval_scenarios else None,
+        ProgressCallback(total, stats, curriculum, enabled=progress),
+    ]
+    return CallbackList([c for c in callbacks if c]), stats

@@ -59,6 +59,9 @@ def cmd_bench_training(args: argparse.Namespace) -> int:
         over["pipelines.cat.kwargs.prior"] = args.prior
         over["pipelines.seal.kwargs.prior"] = args.prior
     config = load_train_config(args.config, over)
+    import torch
+
+    torch.set_num_threads(int(config["torch_threads"]))
     result = run_training_bench(config, steps=args.steps, progress=not args.json)
     print_result(result, args.json, width=42)
     return 0

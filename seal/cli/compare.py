@@ -20,6 +20,11 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
     if not Path(args.store).is_file():
         raise CliError(f"--store {args.store}: no such results store (fill one with `seal eval runs`)")
+    if args.videos > 0:  # videos re-simulate prior-based generators: threads as the evaluation workers had them
+        from seal.adversaries.candidate_sources import PRIOR_THREADS
+        from seal.cli.args import set_torch_threads
+
+        set_torch_threads(PRIOR_THREADS)
     result = write_report(
         args.store, args.out, pipelines=_names(args.pipeline), settings=_names(args.setting),
         plots=not args.no_plots, videos=args.videos, video_format=args.video_format, progress=not args.no_progress,

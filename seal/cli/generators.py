@@ -60,11 +60,12 @@ def cmd_bench_generators(args: argparse.Namespace) -> int:
 
     from seal.adversaries.candidate_generator import uses_prior_file
     from seal.adversaries.candidate_sources import PRIOR_THREADS
+    from seal.core.dataset import load_split
     from seal.experiments.bench.generators import bench_generators, format_bench
-    from seal.experiments.evaluation.generators import build_generator, load_eval_scenarios
+    from seal.experiments.evaluation.protocol import build_generator
 
     config, shared = _generator_options(args)
-    scenarios = load_eval_scenarios(args.dataset, config["split"], config["limit"] or args.n)
+    scenarios = load_split(args.dataset, config["split"], config["limit"] or args.n)
     generators = {name: build_generator(name, kw, shared) for name, kw in config["generators"].items()}
     if uses_prior_file(generators.values()):
         torch.set_num_threads(PRIOR_THREADS)  # entry point: the library leaves torch's threads alone

@@ -12,37 +12,21 @@ from typing import Any
 from seal.cli.args import CliError, add_set_option, positive_float, positive_int, print_result
 from seal.cli.tree import CommandTree
 
-#: ``--split`` values besides the dataset's own split names.
+#: ``--split`` values besides the dataset's own split names (as `seal.core.dataset`'s, which ``seal --help`` does
+#: not import).
 ALL = "all"
 ALL_BUT_EVAL = "all-but-eval"
 HELD_OUT_SPLITS = ("eval", "hard")
 
 
 def load_split(dataset: str, split: str, limit: int | None = None) -> tuple[list[Any], dict[str, Any]]:
-    """Scenarios of ``split`` (a split name, ``all``, or ``all-but-eval`` = everything outside the eval and hard
-    splits) and a description of what was loaded."""
-    from seal.core.dataset import Dataset
+    """Scenarios of ``split`` (`seal.core.dataset.load_split`) and a description of what was loaded."""
+    from seal.core.dataset import load_split as load
 
-    ds = Dataset.open(dataset)
-    if split == ALL:
-        scenarios = ds.load()
-    elif split == ALL_BUT_EVAL:
-        held = {sid for name in HELD_OUT_SPLITS for sid in ds.splits.get(name, [])}
-        if not held:
-            raise CliError(
-                f"--split {ALL_BUT_EVAL}: {dataset} has no {' / '.join(HELD_OUT_SPLITS)} split to leave out "
-                "(run `seal data split` first, or use --split all)"
-            )
-        scenarios = [s for s in ds.load() if s.scenario_id not in held]
-    else:
-        if split not in ds.splits:
-            raise CliError(
-                f"--split {split!r}: {dataset} has no such split; choose from "
-                f"{sorted(ds.splits) + [ALL, ALL_BUT_EVAL]}"
-            )
-        scenarios = ds.load(split=split)
-    if limit is not None:
-        scenarios = scenarios[:limit]
+    try:
+        scenarios = load(dataset, split, limit, allow_empty=True)
+    except ValueError as exc:
+        raise CliError(f"--split {split!r}: {exc}") from None
     info = {"dataset": str(Path(dataset).resolve()), "split": split, "scenarios": len(scenarios)}
     return scenarios, info
 

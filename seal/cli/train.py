@@ -36,7 +36,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     from seal.experiments.training.config import load_train_config
     from seal.experiments.training.state import RunFolderError, read_done
-    from seal.experiments.training.train import train_run
+    from seal.experiments.training.train import run_torch_threads, train_run
 
     if (args.out is None) == (args.resume is None):
         raise CliError("give exactly one of --out RUN (a new run) or --resume RUN (continue a killed run)")
@@ -57,9 +57,11 @@ def cmd_train(args: argparse.Namespace) -> int:
         raise KeyboardInterrupt  # `timeout` / a scheduler's SIGTERM: close the env workers, say how to resume
 
     signal.signal(signal.SIGTERM, interrupt)
+    import torch
+
+    torch.set_num_threads(run_torch_threads(config, out, args.resume is not None))
     try:
-        train_run(config, out, resume=args.resume is not None, progress=not args.no_progress,
-                  log=lambda m: print(m, file=sys.stderr))
+        train_run(config, out, resume=args.resume is not None, progress=not args.no_progress)
     except RunFolderError as exc:
         raise CliError(str(exc)) from None
     except KeyboardInterrupt:

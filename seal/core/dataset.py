@@ -214,6 +214,49 @@ def load_scenarios(root: str | Path, split: str | None = None) -> list[Scenario]
     return Dataset.open(root).load(split)
 
 
+ALL = "all"
+"""``load_split`` name for every scenario of a dataset (as ``split=None``)."""
+ALL_BUT_EVAL = "all-but-eval"
+"""``load_split`` name for every scenario outside the held-out splits (`HELD_OUT_SPLITS`)."""
+HELD_OUT_SPLITS = ("eval", "hard")
+"""Splits that evaluation scores on, so model fits that must not see them leave them out."""
+
+
+def load_split(
+    root: str | Path | None, split: str | None, limit: int | None = None, what: str = "", allow_empty: bool = False
+) -> list[Scenario]:
+    """The scenarios of ``split`` of the dataset at ``root``, in dataset order, at most ``limit`` of them.
+
+    ``split`` is a split name, None or `ALL` (every scenario) or `ALL_BUT_EVAL` (every scenario outside
+    `HELD_OUT_SPLITS`). ``what`` names the scenarios' use in error messages (e.g. ``"training"``). Raises
+    ValueError when ``root`` is None, the split does not exist, or (unless ``allow_empty``) it has no scenarios.
+    """
+    if root is None:
+        raise ValueError(f"no dataset given for the {what or 'requested'} scenarios (--dataset DIR)")
+    ds = Dataset.open(root)
+    of_what = f" for the {what} scenarios" if what else ""
+    if split in (None, ALL):
+        scenarios = ds.load(limit=limit)
+    elif split == ALL_BUT_EVAL:
+        held = {sid for name in HELD_OUT_SPLITS for sid in ds.splits.get(name, [])}
+        if not held:
+            raise ValueError(
+                f"split {ALL_BUT_EVAL}: {root} has no {' / '.join(HELD_OUT_SPLITS)} split to leave out "
+                f"(run `seal data split` first, or use split {ALL})"
+            )
+        scenarios = [s for s in ds.load() if s.scenario_id not in held][:limit]
+    elif split not in ds.splits:
+        raise ValueError(
+            f"dataset {root} has no split {split!r}{of_what}; splits: {sorted(ds.splits) or 'none'} "
+            f"(make them with `seal data split`; {ALL} / {ALL_BUT_EVAL} ignore splits)"
+        )
+    else:
+        scenarios = ds.load(split=split, limit=limit)
+    if not scenarios and not allow_empty:
+        raise ValueError(f"dataset {root}: no{' ' + what if what else ''} scenarios in split {split!r}")
+    return scenarios
+
+
 def summarize(scenarios: Sequence[Scenario]) -> dict[str, Any]:
     """Counts per layout and split, agents per scenario and valid track lengths (steps)."""
     agents = np.array([s.n_agents for s in scenarios])

@@ -19,7 +19,8 @@ from seal.envs.behaviors import ReplayBehavior
 from seal.envs.scenario_env import ScenarioEnv
 from seal.envs.skill_behavior import SkillSwitchBehavior
 from seal.experiments.evaluation.episodes import run_episode
-from seal.experiments.evaluation.generators import build_generator, parse_generators
+from seal.experiments.evaluation.generators import parse_generators
+from seal.experiments.evaluation.protocol import build_generator
 from seal.experiments.training.egos import make_ego
 from seal.models.prior.candidates import Candidates
 from seal.models.skills.policy import SkillPolicy

@@ -60,6 +60,30 @@ def test_splits_recorded_in_manifest(tmp_path: Path) -> None:
         again.load("hard")
 
 
+def test_load_split_is_the_one_split_loader(tmp_path: Path) -> None:
+    """`load_split`: a split name, all / None, all-but-eval (outside eval and hard), limits and clear errors."""
+    from seal.core.dataset import ALL, ALL_BUT_EVAL, load_split
+
+    ds = write_dataset(tmp_path / "ds", [_scenario(i) for i in range(6)])
+    ds.update_manifest(splits={"train": ["s0000", "s0002"], "eval": ["s0005"], "hard": ["s0001"], "empty": []})
+    ids = lambda scenarios: [s.scenario_id for s in scenarios]  # noqa: E731
+    assert ids(load_split(tmp_path / "ds", "train")) == ["s0000", "s0002"]
+    assert ids(load_split(tmp_path / "ds", "train", limit=1)) == ["s0000"]
+    assert ids(load_split(tmp_path / "ds", None)) == ids(load_split(tmp_path / "ds", ALL)) == ids(ds.load())
+    assert ids(load_split(tmp_path / "ds", ALL_BUT_EVAL)) == ["s0000", "s0002", "s0003", "s0004"]
+    assert ids(load_split(tmp_path / "ds", ALL_BUT_EVAL, limit=2)) == ["s0000", "s0002"]
+    with pytest.raises(ValueError, match=r"has no split 'nope' for the training scenarios; splits: \['empty'"):
+        load_split(tmp_path / "ds", "nope", what="training")
+    with pytest.raises(ValueError, match="no eval scenarios in split 'empty'"):
+        load_split(tmp_path / "ds", "empty", what="eval")
+    assert load_split(tmp_path / "ds", "empty", allow_empty=True) == []
+    with pytest.raises(ValueError, match="no dataset given"):
+        load_split(None, "train")
+    ds.update_manifest(splits={"train": ["s0000"]})
+    with pytest.raises(ValueError, match="no eval / hard split to leave out"):
+        load_split(tmp_path / "ds", ALL_BUT_EVAL)
+
+
 def test_truncated_shard_names_the_file(tmp_path: Path) -> None:
     write_dataset(tmp_path / "ds", [_scenario(i) for i in range(6)], shard_size=3)
     shard = tmp_path / "ds" / "shards" / "shard-00001.npz"

@@ -119,8 +119,7 @@ def test_trained_run_real_dataset_and_cli(dataset: Path, tmp_path: Path, capsys)
 
 def test_videos_replay_the_scored_pass(dataset: Path, tmp_path: Path) -> None:
     """The report's videos re-simulate the stored episode: same seeds and generator settings, same outcome."""
-    from seal.experiments.evaluation.evaluate import episode_seed_of, scored_pass
-    from seal.experiments.evaluation.generators import build_generator
+    from seal.experiments.evaluation.protocol import build_generator, episode_seed_of, scored_pass
     from seal.experiments.report.compare_plots import render_generator_videos
 
     store_path = tmp_path / "r.sqlite"

@@ -1,5 +1,5 @@
-"""`seal run` orchestration with injected commands and job functions: the step order, what each step gets,
-skip-on-rerun, changed parameters, failing jobs; and the shipped presets."""
+"""`seal run` orchestration with injected step and job functions: the step order, what each step gets,
+skip-on-rerun, changed parameters, failing jobs; the step tasks' options; and the shipped presets."""
 
 from __future__ import annotations
 
@@ -14,28 +14,30 @@ from results_builders import episode
 from seal.core.dataset import Dataset, write_dataset
 from seal.experiments.backends import InlineBackend
 from seal.experiments.evaluation.results_store import ResultsStore
-from seal.experiments.pipeline.run import cli_options, fits_needed, load_run_config, run_pipeline, substitute
+from seal.experiments.pipeline.run import fits_needed, load_run_config, run_pipeline, substitute
+from seal.experiments.pipeline.tasks import run_task
 
 CONFIGS = Path(__file__).resolve().parents[2] / "experiments" / "configs"
 
 
-class FakeCommands:
-    """Records `seal` subcommands; `data generate` / `split` and `fit prior` write small real outputs."""
+class FakeTasks:
+    """Records the data / fit step jobs as (task or fit model, dataset, out, options); `generate` / `split` and the
+    fits write small real outputs."""
 
     def __init__(self) -> None:
-        self.calls: list[list[str]] = []
+        self.calls: list[tuple] = []
 
-    def __call__(self, argv) -> None:
-        argv = list(map(str, argv))
-        self.calls.append(argv)
-        if argv[:2] == ["data", "generate"]:
-            write_dataset(argv[argv.index("--out") + 1], [sf.highway_scenario(i) for i in range(3)])
-        elif argv[:2] == ["data", "split"]:
-            ds = Dataset.open(argv[2])
+    def __call__(self, job) -> None:
+        kind = job["model"] if job["task"] == "fit" else job["task"]
+        self.calls.append((kind, job["dataset"], job.get("out"), job["options"]))
+        if job["task"] == "generate":
+            write_dataset(job["dataset"], [sf.highway_scenario(i) for i in range(3)])
+        elif job["task"] == "split":
+            ds = Dataset.open(job["dataset"])
             ids = [s.scenario_id for s in ds.load()]
             ds.update_manifest(splits={"train": ids[:1], "eval": ids[1:], "hard": ids[:1]})
-        elif argv[0] == "fit":
-            Path(argv[argv.index("--out") + 1]).write_text("model")
+        elif job["task"] == "fit":
+            Path(job["out"]).write_text("model")
 
 
 def fake_train_config(config, preset_path, pipeline, seed, dataset, generators) -> dict:
@@ -87,23 +89,23 @@ def write_preset(tmp_path: Path, seeds=(0, 1), **changes) -> Path:
     return path
 
 
-def run(preset: Path, out: Path, commands: FakeCommands, train=fake_train) -> dict:
-    return run_pipeline(preset, out, backend=InlineBackend(), command=commands, train_fn=train, eval_fn=fake_eval,
-                        train_config_fn=fake_train_config, progress=False, log=lambda _: None)
+def run(preset: Path, out: Path, commands: FakeTasks, train=fake_train) -> dict:
+    return run_pipeline(preset, out, backend=InlineBackend(), task_fn=commands, train_fn=train, eval_fn=fake_eval,
+                        train_config_fn=fake_train_config, progress=False)
 
 
 def test_steps_then_skip_on_rerun(tmp_path: Path) -> None:
     preset, out = write_preset(tmp_path), tmp_path / "out"
-    commands = FakeCommands()
+    commands = FakeTasks()
     summary = run(preset, out, commands)
     data = str(out / "data")
     prior = str(out / "models" / "prior.pt")
     assert commands.calls == [
-        ["data", "generate", "--out", data, "--n", "3", "--seed", "0"],
-        ["data", "score", data],
-        ["data", "split", data, "--n-train", "1", "--n-eval", "2", "--n-hard", "1"],
+        ("generate", data, None, {"n": 3, "seed": 0}),
+        ("score", data, None, {}),
+        ("split", data, None, {"n_train": 1, "n_eval": 2, "n_hard": 1}),
         # only the prior: goose and skills are not referenced by the generators in use (cat)
-        ["fit", "prior", data, "--out", prior, "--split", "all-but-eval", "--epochs", "1", "--no-progress"],
+        ("prior", data, prior, {"epochs": 1, "no_progress": True}),
     ]
     assert summary["steps_ran"] == ["data", "score", "split", "fit-prior", "eval", "report"]
     assert summary["train_jobs"] == 4 and len(summary["runs"]) == 4 and summary["models"] == {"prior": prior}
@@ -125,7 +127,7 @@ def test_steps_then_skip_on_rerun(tmp_path: Path) -> None:
 
 
 def test_changed_parameters_rerun_only_what_changed(tmp_path: Path) -> None:
-    out, commands = tmp_path / "out", FakeCommands()
+    out, commands = tmp_path / "out", FakeTasks()
     run(write_preset(tmp_path), out, commands)
     trained = []
 
@@ -141,7 +143,7 @@ def test_changed_parameters_rerun_only_what_changed(tmp_path: Path) -> None:
 
 
 def test_failed_job_is_reported_and_retried(tmp_path: Path) -> None:
-    out, commands = tmp_path / "out", FakeCommands()
+    out, commands = tmp_path / "out", FakeTasks()
     with pytest.raises(RuntimeError, match=r"(?s)1 job\(s\) failed.*cat-s13: RuntimeError: diverged"):
         run(write_preset(tmp_path, seeds=(0, 13), pipelines=["cat"]), out, commands)
     summary = json.loads((out / "summary.json").read_text())
@@ -160,11 +162,11 @@ def test_failed_job_is_reported_and_retried(tmp_path: Path) -> None:
 
 def test_existing_dataset_and_model_paths(tmp_path: Path) -> None:
     data = tmp_path / "data"
-    FakeCommands()(["data", "generate", "--out", str(data)])
-    FakeCommands()(["data", "split", str(data)])
+    FakeTasks()({"task": "generate", "dataset": str(data), "options": {}})
+    FakeTasks()({"task": "split", "dataset": str(data), "options": {}})
     preset = write_preset(tmp_path, data={"path": str(data)}, pipelines=["goose"],
                           generators={"goose": {"model": "${fit.goose}"}}, eval={"settings": ["normal"], "limit": 1})
-    commands = FakeCommands()
+    commands = FakeTasks()
     summary = run(preset, tmp_path / "out", commands)
     assert commands.calls == []  # nothing generated, nothing fitted: goose's model is given as a path
     assert summary["dataset"] == str(data.resolve()) and summary["models"] == {"goose": "/models/goose.zip"}
@@ -185,15 +187,14 @@ def test_fit_dependencies_come_first(tmp_path: Path) -> None:
     config = load_run_config(write_preset(tmp_path, fit=fit, pipelines=["seal"],
                                           generators={"seal": {"objective": "${fit.objective}/objective.pt"}}))
     assert fits_needed(config) == ["prior", "objective"]
-    commands = FakeCommands()
+    commands = FakeTasks()
     out = tmp_path / "out"
     commands.calls.clear()
-    run_pipeline(config_path=tmp_path / "preset.yaml", out=out, backend=InlineBackend(), command=commands,
-                 train_fn=fake_train, eval_fn=fake_eval, train_config_fn=fake_train_config, progress=False,
-                 log=lambda _: None)
-    fits = [c for c in commands.calls if c[0] == "fit"]
-    assert [c[1] for c in fits] == ["prior", "objective"]
-    assert fits[1][-2:] == ["--prior", str(out / "models" / "prior.pt")]
+    run_pipeline(config_path=tmp_path / "preset.yaml", out=out, backend=InlineBackend(), task_fn=commands,
+                 train_fn=fake_train, eval_fn=fake_eval, train_config_fn=fake_train_config, progress=False)
+    fits = [c for c in commands.calls if c[0] in ("prior", "objective")]
+    assert [c[0] for c in fits] == ["prior", "objective"]
+    assert fits[1][3] == {"prior": str(out / "models" / "prior.pt")}
     seal_cfg = yaml.safe_load((out / "runs" / "seal-s0" / "config.yaml").read_text())
     assert seal_cfg["generator"]["kwargs"] == {"objective": str(out / "models" / "objective" / "objective.pt")}
     fit["prior"]["prior"] = "${fit.objective}"
@@ -202,9 +203,43 @@ def test_fit_dependencies_come_first(tmp_path: Path) -> None:
                                                  generators={"seal": {"objective": "${fit.objective}"}})))
 
 
+def test_failed_step_stops_the_pipeline(tmp_path: Path) -> None:
+    def failing(job) -> None:
+        raise OSError("disk full")
+
+    with pytest.raises(RuntimeError, match="step data failed: OSError: disk full"):
+        run_pipeline(write_preset(tmp_path), tmp_path / "out", backend=InlineBackend(), task_fn=failing,
+                     train_fn=fake_train, eval_fn=fake_eval, train_config_fn=fake_train_config, progress=False)
+    assert not (tmp_path / "out" / "steps" / "data.json").exists()  # not marked done: runs again next time
+
+
+def test_tasks_check_their_options(tmp_path: Path) -> None:
+    """The step tasks take the matching command's options (without dashes) and name unknown ones."""
+    with pytest.raises(ValueError, match=r"split: unknown option\(s\) \['n_trian'\]; known: \['hard_quantile'"):
+        run_task({"task": "split", "dataset": str(tmp_path), "options": {"n_trian": 80}})
+    with pytest.raises(ValueError, match=r"prior: unknown option\(s\) \['epoch'\]"):
+        run_task({"task": "fit", "model": "prior", "dataset": str(tmp_path), "out": "p.pt", "options": {"epoch": 1}})
+    with pytest.raises(ValueError, match="fit: unknown model 'bogus'"):
+        run_task({"task": "fit", "model": "bogus", "dataset": str(tmp_path), "out": "x", "options": {}})
+    with pytest.raises(ValueError, match="unknown task 'clean'"):
+        run_task({"task": "clean", "dataset": str(tmp_path), "options": {}})
+
+
+def test_split_task_is_the_split_command(tmp_path: Path) -> None:
+    """A real task in process: `split` writes the splits `seal data split` writes for the same options."""
+    from seal.cli import main
+
+    for name in ("a", "b"):
+        write_dataset(tmp_path / name, [sf.highway_scenario(i) for i in range(6)])
+        assert main(["data", "score", str(tmp_path / name), "--workers", "1", "--no-progress"]) == 0
+    run_task({"task": "split", "dataset": str(tmp_path / "a"),
+              "options": {"n_train": 2, "n_eval": 2, "n_hard": 1, "seed": 3}})
+    assert main(["data", "split", str(tmp_path / "b"), "--n-train", "2", "--n-eval", "2", "--n-hard", "1",
+                 "--seed", "3"]) == 0
+    assert Dataset.open(tmp_path / "a").splits == Dataset.open(tmp_path / "b").splits
+
+
 def test_helpers() -> None:
-    assert cli_options({"n_train": 80, "no_eval": True, "skip": False, "none": None, "layouts": ["a", "b"]}) == [
-        "--n-train", "80", "--no-eval", "--layouts", "a", "b"]
     assert substitute({"a": ["${fit.prior}", "x"], "b": "${fit.skills}/adv.pt"}, {"prior": "/p", "skills": "/s"}) \
         == {"a": ["/p", "x"], "b": "/s/adv.pt"}
 

@@ -172,11 +172,11 @@ def test_killed_run_resumes_to_the_same_step_count(tmp_path: Path, monkeypatch: 
 
     monkeypatch.setattr(train_callbacks.EpisodeStatsCallback, "_on_step", killing_on_step)
     with pytest.raises(KeyboardInterrupt):
-        train_run(config, run, progress=False, log=lambda m: None)
+        train_run(config, run, progress=False)
     monkeypatch.setattr(train_callbacks.EpisodeStatsCallback, "_on_step", original_on_step)
     assert not (run / ts.DONE).exists()
     with pytest.raises(ts.RunFolderError, match="--resume"):
-        train_run(config, run, progress=False, log=lambda m: None)
+        train_run(config, run, progress=False)
 
     ckpt = ts.latest_checkpoint(run)
     assert ckpt is not None and ckpt.name == "step_80"
@@ -197,7 +197,7 @@ def test_killed_run_resumes_to_the_same_step_count(tmp_path: Path, monkeypatch: 
         seen.append(int(self.model._n_updates))
 
     monkeypatch.setattr(train_callbacks.RestoreCallback, "_on_training_start", capturing_restore)
-    train_run({}, run, resume=True, progress=False, log=lambda m: None)
+    train_run({}, run, resume=True, progress=False)
 
     restored_meta = [json.loads(str(w["meta"])) for w in seen[:2]]
     assert restored_meta == saved_meta
@@ -229,7 +229,7 @@ def test_killed_run_resumes_to_the_same_step_count(tmp_path: Path, monkeypatch: 
     assert action.shape == (2,)
 
     with pytest.raises(ts.RunFolderError, match="finished run"):
-        train_run(config, run, progress=False, log=lambda m: None)
+        train_run(config, run, progress=False)
 
 
 def test_episode_end_info_and_warm_up() -> None:

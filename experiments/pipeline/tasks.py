@@ -1,0 +1,171 @@
+"""The data and model-fit steps of ``seal run`` as Python calls: one picklable job function, `run_task`, that a
+backend runs in a worker process (`seal.experiments.backends`), with the same defaults as the matching ``seal``
+commands (``seal data generate | score | split``, ``seal fit prior | goose | skills | objective``).
+
+A job is a dict: ``task`` (``generate``, ``score``, ``split``, ``fit``), ``dataset`` (the dataset folder),
+``model`` and ``out`` (fits: which model and the file or folder to write) and ``options`` (the preset's options of
+that step, named as the command's options without dashes: ``{n_train: 80}`` is ``--n-train 80``). Unknown
+options raise an error naming them and the known ones.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from seal.experiments.backends import Job
+
+logger = logging.getLogger(__name__)
+
+ALL_BUT_EVAL = "all-but-eval"
+FIT_DEFAULTS: dict[str, dict[str, Any]] = {"prior": {"split": ALL_BUT_EVAL}}
+"""Options fixed per fit unless the preset gives them (the prior must not see the eval / hard splits)."""
+
+OPTIONS: dict[str, tuple[str, ...]] = {
+    "generate": ("n", "seed", "layouts", "workers", "inattentive_share", "aggressive_share", "overwrite",
+                 "no_progress"),
+    "score": ("workers", "no_progress"),
+    "split": ("hard_quantile", "n_train", "n_eval", "n_hard", "seed"),
+    "prior": ("split", "config", "epochs", "max_minutes", "no_time_budget", "threads", "seed", "limit", "resume",
+              "no_progress"),
+    "goose": ("preset", "config", "algo", "steps", "split", "limit", "eval_split", "eval_limit", "no_eval", "run_dir",
+              "seed", "no_progress"),
+    "skills": ("preset", "config", "split", "limit", "demos", "workers", "seed", "no_progress"),
+    "objective": ("preset", "config", "prior", "candidates", "eval_split", "eval_limit", "workers", "seed", "split",
+                  "limit", "no_progress"),
+}
+"""Known options per task / fitted model (the options of the matching ``seal`` command)."""
+
+
+def _options(kind: str, options: Mapping[str, Any] | None) -> dict[str, Any]:
+    """``options`` checked against `OPTIONS` [kind]."""
+    given = dict(options or {})
+    unknown = sorted(set(given) - set(OPTIONS[kind]))
+    if unknown:
+        raise ValueError(f"{kind}: unknown option(s) {unknown}; known: {list(OPTIONS[kind])}")
+    return given
+
+
+def run_task(job: Job) -> Any:
+    """Run one data or fit step (module docstring); returns the step's summary."""
+    task = str(job["task"])
+    if task == "fit":
+        model = str(job["model"])
+        if model not in FITS:
+            raise ValueError(f"fit: unknown model {model!r}; known: {sorted(FITS)}")
+        options = _options(model, {**FIT_DEFAULTS.get(model, {}), **dict(job.get("options") or {})})
+        return FITS[model](str(job["dataset"]), str(job["out"]), options)
+    if task not in DATA_TASKS:
+        raise ValueError(f"unknown task {task!r}; known: {[*DATA_TASKS, 'fit']}")
+    return DATA_TASKS[task](str(job["dataset"]), _options(task, job.get("options")))
+
+
+# ---------------------------------------------------------------------------------------------- data
+def generate(dataset: str, o: dict[str, Any]) -> dict[str, Any]:
+    """``seal data generate --out DATASET``."""
+    from seal.envs.generate import generate_dataset
+    from seal.envs.layouts import LAYOUTS
+
+    layouts = o.get("layouts") or list(LAYOUTS)
+    if isinstance(layouts, str):
+        layouts = [name.strip() for name in layouts.split(",") if name.strip()]
+    ds = generate_dataset(
+        dataset, n=int(o["n"]), seed=int(o.get("seed", 0)), layouts=list(layouts), workers=o.get("workers"),
+        inattentive_share=float(o.get("inattentive_share", 0.15)),
+        aggressive_share=float(o.get("aggressive_share", 0.15)),
+        overwrite=bool(o.get("overwrite", False)), progress=not o.get("no_progress", False),
+    )
+    logger.info(f"wrote {len(ds)} scenarios to {ds.root}")
+    return {"scenarios": len(ds)}
+
+
+def score(dataset: str, o: dict[str, Any]) -> dict[str, Any]:
+    """``seal data score DATASET``."""
+    from seal.scoring.store import score_dataset
+
+    return score_dataset(dataset, workers=o.get("workers"), progress=not o.get("no_progress", False))
+
+
+def split(dataset: str, o: dict[str, Any]) -> dict[str, Any]:
+    """``seal data split DATASET``."""
+    from seal.scoring.splits import make_splits
+
+    return make_splits(dataset, **o)
+
+
+DATA_TASKS: dict[str, Callable[[str, dict[str, Any]], Any]] = {"generate": generate, "score": score, "split": split}
+
+
+# ---------------------------------------------------------------------------------------------- fits
+def fit_prior(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
+    """``seal fit prior DATASET --out OUT``: the model file and ``OUT.json`` (resolved config, training summary)."""
+    from dataclasses import replace
+
+    import yaml
+
+    from seal.core.atomic import atomic_write_json
+    from seal.core.dataset import load_split
+    from seal.models.prior.network import PriorConfig
+    from seal.models.prior.train import TrainConfig, fit_prior
+
+    doc = (yaml.safe_load(Path(o["config"]).read_text()) or {}) if o.get("config") else {}
+    if not isinstance(doc, dict) or set(doc) - {"model", "train"}:
+        raise ValueError(f"fit prior config {o['config']} must be a mapping with sections 'model' and/or 'train'")
+    model_cfg = PriorConfig.from_dict(dict(doc.get("model") or {}))
+    train_cfg = TrainConfig.from_dict(dict(doc.get("train") or {}))
+    overrides = {k: o.get(k) for k in ("epochs", "max_minutes", "threads", "seed")}
+    train_cfg = replace(train_cfg, **{k: v for k, v in overrides.items() if v is not None})
+    if o.get("no_time_budget"):
+        train_cfg = replace(train_cfg, max_minutes=None)
+    split_name = str(o.get("split", "train"))
+    scenarios = load_split(dataset, split_name, o.get("limit"), "prior", allow_empty=True)
+    info = {"dataset": str(Path(dataset).resolve()), "split": split_name, "scenarios": len(scenarios),
+            "config_file": o.get("config")}
+    logger.info(f"fit prior: {info['scenarios']} scenarios from {dataset} (split {split_name})")
+    prior = fit_prior(scenarios, out, model_cfg, train_cfg, data_info=info, resume=bool(o.get("resume")),
+                      progress=not o.get("no_progress", False))
+    summary = {k: v for k, v in prior.training.items() if not k.endswith("_scenario_ids")}
+    atomic_write_json(Path(str(out) + ".json"), {"model_config": prior.config.to_dict(), "training": summary})
+    return summary
+
+
+def fit_goose(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
+    """``seal fit goose DATASET --out OUT``."""
+    from seal.experiments.fitting.goose import fit_goose, resolve_config
+
+    config = resolve_config(
+        preset=o.get("preset", "standard"), config_file=o.get("config"), algo=o.get("algo"),
+        total_steps=o.get("steps"), seed=o.get("seed"), split=o.get("split"), limit=o.get("limit"),
+        eval_split=o.get("eval_split"), eval_limit=o.get("eval_limit"),
+    )
+    if o.get("no_eval"):
+        config["eval_split"] = None
+    return fit_goose(dataset, out, config, run_dir=o.get("run_dir"), progress=not o.get("no_progress", False))
+
+
+def fit_skills(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
+    """``seal fit skills DATASET --out OUT``."""
+    from seal.experiments.fitting.skills import fit_skills, resolve_config
+
+    config = resolve_config(preset=o.get("preset", "standard"), config_file=o.get("config"), split=o.get("split"),
+                            limit=o.get("limit"), seed=o.get("seed"), workers=o.get("workers"))
+    return fit_skills(dataset, out, config, demos_path=o.get("demos"), progress=not o.get("no_progress", False))
+
+
+def fit_objective(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
+    """``seal fit objective DATASET --out OUT``."""
+    from seal.experiments.fitting.objective import fit_objective, resolve_config
+
+    config = resolve_config(
+        preset=o.get("preset", "standard"), config_file=o.get("config"), prior=o.get("prior"),
+        candidates=o.get("candidates"), eval_split=o.get("eval_split"), eval_limit=o.get("eval_limit"),
+        workers=o.get("workers"), seed=o.get("seed"), split=o.get("split"), limit=o.get("limit"),
+    )
+    return fit_objective(dataset, out, config, progress=not o.get("no_progress", False))
+
+
+FITS: dict[str, Callable[[str, str, dict[str, Any]], Any]] = {
+    "prior": fit_prior, "goose": fit_goose, "skills": fit_skills, "objective": fit_objective,
+}
