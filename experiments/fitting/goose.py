@@ -179,15 +179,9 @@ class _Progress:
 
 
 def _scenarios(dataset: str | Path, split: str | None, limit: int | None) -> list:
-    from seal.core.dataset import Dataset
+    from seal.core.dataset import load_split
 
-    ds = Dataset.open(dataset)
-    if split is not None and split not in ds.splits:
-        raise ValueError(f"dataset {dataset} has no split {split!r}; splits: {sorted(ds.splits) or 'none'}")
-    scenarios = ds.load(split=split, limit=limit)
-    if not scenarios:
-        raise ValueError(f"dataset {dataset}: split {split!r} is empty")
-    return scenarios
+    return load_split(dataset, split, limit)
 
 
 def build_model(env: GooseEnv, config: GooseFitConfig, spec: GooseSpec) -> Any:

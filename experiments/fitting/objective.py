@@ -122,16 +122,10 @@ def labels_for_split(
 ) -> tuple[LabelSet, float]:
     """Build (or resume / reuse) the labels of ``split``'s first ``limit`` scenarios in ``folder``; returns the
     labels and the seconds it took."""
-    from seal.core.dataset import Dataset
+    from seal.core.dataset import load_split
     from seal.experiments.fitting.objective_labels import build_labels, source_spec
 
-    ds = Dataset.open(dataset)
-    if split not in ds.splits:
-        raise ValueError(f"dataset {dataset} has no split {split!r}; splits: {sorted(ds.splits) or 'none'} "
-                         "(make them with `seal data split`)")
-    scenarios = ds.load(split=split, limit=limit)
-    if not scenarios:
-        raise ValueError(f"dataset {dataset}: split {split!r} is empty")
+    scenarios = load_split(dataset, split, limit)
     spec = source_spec(None if config.prior is None else str(config.prior), config.candidates)
     start = time.perf_counter()
     labels = build_labels(scenarios, folder, spec, n_candidates=config.n_candidates,

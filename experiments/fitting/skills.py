@@ -25,8 +25,6 @@ stage.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import logging
 import time
 from collections.abc import Callable, Sequence
@@ -38,6 +36,7 @@ import numpy as np
 import yaml
 
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
+from seal.core.chunked import fingerprint
 from seal.core.config import load_config, overrides_field, to_dict
 from seal.experiments import presets
 from seal.models.skills.demonstrations import DemoConfig
@@ -123,22 +122,15 @@ def resolve_config(preset: str | None = "standard", config_file: str | Path | No
                        values=values, overrides=sets)
 
 
-def _fingerprint(*parts: Any) -> str:
-    return hashlib.sha256(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()[:16]
-
-
 def get_demonstrations(dataset: str | Path, config: SkillsFitConfig, path: Path,
                        progress: bool) -> tuple[Demonstrations, bool]:
     """The demonstrations of the configured split and whether they were reused from ``path`` (same scenarios and
     settings) rather than built (resumably) and written there."""
-    from seal.core.dataset import Dataset
+    from seal.core.dataset import load_split
     from seal.models.skills.demonstrations import build_demonstrations
 
-    ds = Dataset.open(dataset)
     split = config.split
-    if split is not None and split not in ds.splits:
-        raise ValueError(f"dataset {dataset} has no split {split!r}; splits: {sorted(ds.splits) or 'none'}")
-    scenarios = ds.load(split=split, limit=config.limit)
+    scenarios = load_split(dataset, split, config.limit)
     if len(scenarios) < 2:
         raise ValueError(f"dataset {dataset}: split {split!r} has {len(scenarios)} scenario(s); need at least 2")
     demo_cfg = DemoConfig.from_dict({"seed": config.seed, **config.demos}, "config key 'demos'")
@@ -198,7 +190,7 @@ def _fit_vae(demos: Demonstrations, rows: Rows, counts: dict[str, int], vae_cfg:
 
     seed = config.seed
     vae_train = SkillTrainConfig.from_dict({"seed": seed, **config.vae_train})
-    vae_fp = _fingerprint(data_fp, vae_cfg.to_dict(), vae_train.to_dict())
+    vae_fp = fingerprint((data_fp, vae_cfg.to_dict(), vae_train.to_dict()))
     vae = _reuse(out / VAE_FILE, vae_fp, load_model)
     if vae is not None:
         return vae, vae_fp, True
@@ -229,8 +221,8 @@ def _fit_priors(z: Rows, cond: Rows, counts: dict[str, int], prior_cfg: RealNVPC
     reused: list[str] = []
     for name in ("benign", "adversarial"):
         from_benign = name == "adversarial" and config.adversarial_init == "benign"
-        fp = _fingerprint(vae_fp, name, prior_cfg.to_dict(), prior_train.to_dict(),
-                          prior_fps["benign"] if from_benign else None)
+        fp = fingerprint((vae_fp, name, prior_cfg.to_dict(), prior_train.to_dict(),
+                          prior_fps["benign"] if from_benign else None))
         prior_fps[name] = fp
         prior = _reuse(out / prior_file(name), fp, load_model)
         if prior is not None:
@@ -315,8 +307,8 @@ def fit_skills(dataset: str | Path, out: str | Path, config: SkillsFitConfig, de
     logger.info("demonstrations: " + ", ".join(f"{k} {v}" for k, v in stats.items() if not isinstance(v, dict))
                 + f", end reasons {stats['end_reasons']}")
     rows, counts = _window_rows(demos, spec, config)
-    data_fp = _fingerprint(demos.params, list(demos.scenario_ids), spec.to_dict(), config.val_fraction,
-                           config.max_benign_windows, config.seed)
+    data_fp = fingerprint((demos.params, list(demos.scenario_ids), spec.to_dict(), config.val_fraction,
+                           config.max_benign_windows, config.seed))
 
     t = time.perf_counter()
     vae, vae_fp, vae_reused = _fit_vae(demos, rows, counts, vae_cfg, data_fp, config, out, progress)
