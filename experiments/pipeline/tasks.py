@@ -99,6 +99,13 @@ DATA_TASKS: dict[str, Callable[[str, dict[str, Any]], Any]] = {"generate": gener
 
 
 # ---------------------------------------------------------------------------------------------- fits
+def _torch_threads(threads: int) -> None:
+    """A fit task is the entry point of its worker process: torch threads as `seal fit ...` sets them."""
+    import torch
+
+    torch.set_num_threads(int(threads))
+
+
 def fit_prior(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
     """``seal fit prior DATASET --out OUT``: the model file and ``OUT.json`` (resolved config, training summary)."""
     from dataclasses import replace
@@ -108,13 +115,13 @@ def fit_prior(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
     from seal.core.atomic import atomic_write_json
     from seal.core.dataset import load_split
     from seal.models.prior.network import PriorConfig
-    from seal.models.prior.train import TrainConfig, fit_prior
+    from seal.models.prior.train import PriorTrainConfig, fit_prior
 
     doc = (yaml.safe_load(Path(o["config"]).read_text()) or {}) if o.get("config") else {}
     if not isinstance(doc, dict) or set(doc) - {"model", "train"}:
         raise ValueError(f"fit prior config {o['config']} must be a mapping with sections 'model' and/or 'train'")
     model_cfg = PriorConfig.from_dict(dict(doc.get("model") or {}))
-    train_cfg = TrainConfig.from_dict(dict(doc.get("train") or {}))
+    train_cfg = PriorTrainConfig.from_dict(dict(doc.get("train") or {}))
     overrides = {k: o.get(k) for k in ("epochs", "max_minutes", "threads", "seed")}
     train_cfg = replace(train_cfg, **{k: v for k, v in overrides.items() if v is not None})
     if o.get("no_time_budget"):
@@ -124,6 +131,7 @@ def fit_prior(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
     info = {"dataset": str(Path(dataset).resolve()), "split": split_name, "scenarios": len(scenarios),
             "config_file": o.get("config")}
     logger.info(f"fit prior: {info['scenarios']} scenarios from {dataset} (split {split_name})")
+    _torch_threads(train_cfg.threads)
     prior = fit_prior(scenarios, out, model_cfg, train_cfg, data_info=info, resume=bool(o.get("resume")),
                       progress=not o.get("no_progress", False))
     summary = {k: v for k, v in prior.training.items() if not k.endswith("_scenario_ids")}
@@ -133,7 +141,9 @@ def fit_prior(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
 
 def fit_goose(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
     """``seal fit goose DATASET --out OUT``."""
-    from seal.experiments.fitting.goose import fit_goose, resolve_config
+    from dataclasses import replace
+
+    from seal.experiments.fitting.goose import FIT_THREADS, fit_goose, resolve_config
 
     config = resolve_config(
         preset=o.get("preset", "standard"), config_file=o.get("config"), algo=o.get("algo"),
@@ -141,7 +151,8 @@ def fit_goose(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
         eval_split=o.get("eval_split"), eval_limit=o.get("eval_limit"),
     )
     if o.get("no_eval"):
-        config["eval_split"] = None
+        config = replace(config, eval_split=None)
+    _torch_threads(FIT_THREADS)
     return fit_goose(dataset, out, config, run_dir=o.get("run_dir"), progress=not o.get("no_progress", False))
 
 
@@ -151,6 +162,7 @@ def fit_skills(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
 
     config = resolve_config(preset=o.get("preset", "standard"), config_file=o.get("config"), split=o.get("split"),
                             limit=o.get("limit"), seed=o.get("seed"), workers=o.get("workers"))
+    _torch_threads(config.threads)
     return fit_skills(dataset, out, config, demos_path=o.get("demos"), progress=not o.get("no_progress", False))
 
 
@@ -163,6 +175,7 @@ def fit_objective(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
         candidates=o.get("candidates"), eval_split=o.get("eval_split"), eval_limit=o.get("eval_limit"),
         workers=o.get("workers"), seed=o.get("seed"), split=o.get("split"), limit=o.get("limit"),
     )
+    _torch_threads(config.threads)
     return fit_objective(dataset, out, config, progress=not o.get("no_progress", False))
 
 
