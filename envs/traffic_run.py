@@ -67,15 +67,7 @@ def traffic_plan(layout: str, params: dict, network: RoadNetwork, rng: np.random
             pop.append(((f"o{k}", f"ir{k}", 0), dests))
             pop.append(((f"il{k}", f"o{k}", 0), ()))
         sinks = tuple((f"il{k}", f"o{k}") for k in range(4))
-        return TrafficPlan(
-            sources=srcs,
-            populate=pop,
-            sinks=sinks,
-            regulated=True,
-            trucks=0.0,
-            spacing_s=1.0 / rate,
-            junction_nodes=tuple(f"ir{k}" for k in range(4)),
-        )
+        return _junction_plan(srcs, pop, sinks, rate, tuple(f"ir{k}" for k in range(4)))
     # roundabout
     rate = rng.uniform(0.3, 0.5)
     exits = ("sxr", "exr", "nxr", "wxr")
@@ -89,15 +81,14 @@ def traffic_plan(layout: str, params: dict, network: RoadNetwork, rng: np.random
         if len(i[0]) == 2 and len(i[1]) == 2:  # ring lanes (nodes "se", "ex", ...)
             pop.append((i, exits))
     sinks = tuple((f"{d}xs", f"{d}xr") for d in "senw")
-    return TrafficPlan(
-        sources=srcs,
-        populate=pop,
-        sinks=sinks,
-        regulated=True,
-        trucks=0.0,
-        spacing_s=1.0 / rate,
-        junction_nodes=("se", "ex", "ee", "nx", "ne", "wx", "we", "sx"),
-    )
+    return _junction_plan(srcs, pop, sinks, rate, ("se", "ex", "ee", "nx", "ne", "wx", "we", "sx"))
+
+
+def _junction_plan(sources: list[Source], populate: list[tuple[LaneIndex, tuple[str, ...]]],
+                   sinks: tuple[tuple[str, str], ...], rate: float, junction_nodes: tuple[str, ...]) -> TrafficPlan:
+    """An intersection's or roundabout's plan: road rules on, no trucks, initial headway 1 / arrival rate."""
+    return TrafficPlan(sources=sources, populate=populate, sinks=sinks, regulated=True, trucks=0.0,
+                       spacing_s=1.0 / rate, junction_nodes=junction_nodes)
 
 
 # ------------------------------------------------------------------------------------------ simulation

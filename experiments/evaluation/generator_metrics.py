@@ -8,7 +8,8 @@ head-on and severe head-on rates, and generation time (mean and p95 over every g
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -189,16 +190,20 @@ TABLE_COLUMNS = (
 )
 
 
-def markdown_table(rows: Sequence[dict[str, Any]]) -> str:
-    """The summary rows as a Markdown table (NaN shown as "-")."""
-    head = "| " + " | ".join(label for _, label, _ in TABLE_COLUMNS) + " |"
-    align = "|" + "|".join("---" if key == "generator" else "---:" for key, _, _ in TABLE_COLUMNS) + "|"
-    lines = [head, align]
+def format_markdown_table(rows: Sequence[Mapping[str, Any]], columns: Sequence[tuple[str, str, str]]) -> str:
+    """``rows`` as a Markdown table, one column per (key, label, format string): the first column left-aligned,
+    the others right-aligned; a missing or non-finite value shows as "-"."""
+    lines = ["| " + " | ".join(label for _, label, _ in columns) + " |", "|---|" + "---:|" * (len(columns) - 1)]
     for row in rows:
         cells = []
-        for key, _, fmt in TABLE_COLUMNS:
+        for key, _, fmt in columns:
             value = row.get(key)
-            missing = value is None or (isinstance(value, float) and not np.isfinite(value))
+            missing = value is None or (isinstance(value, float) and not math.isfinite(value))
             cells.append("-" if missing else fmt.format(value))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def markdown_table(rows: Sequence[dict[str, Any]]) -> str:
+    """The summary rows as a Markdown table (NaN shown as "-")."""
+    return format_markdown_table(rows, TABLE_COLUMNS)

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from seal.experiments.evaluation.evaluate import REAL_PREFIX, REPLAY_SETTINGS
+from seal.experiments.evaluation.generator_metrics import format_markdown_table
 from seal.experiments.evaluation.metrics import pooled_realism
 
 EGO_METRICS = ("success", "crash", "out_of_road")
@@ -182,16 +183,7 @@ GENERATOR_COLUMNS = (
 
 
 def generator_markdown(table: Sequence[Mapping[str, Any]]) -> str:
-    head = "| " + " | ".join(label for _, label, _ in GENERATOR_COLUMNS) + " |"
-    align = "|---|" + "---:|" * (len(GENERATOR_COLUMNS) - 1)
-    lines = [head, align]
-    for row in table:
-        cells = []
-        for key, _, fmt in GENERATOR_COLUMNS:
-            v = row.get(key)
-            cells.append("-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else fmt.format(v))
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+    return format_markdown_table(table, GENERATOR_COLUMNS)
 
 
 def to_csv(rows: Sequence[Mapping[str, Any]]) -> bytes:

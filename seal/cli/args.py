@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import importlib
 from collections.abc import Callable, Iterator, Sequence
-from typing import overload
+from typing import Any, overload
 
 LAYOUTS = ("highway", "merge", "intersection", "roundabout")
 
@@ -58,49 +58,36 @@ def generator_choices() -> RegistryChoices:
     return RegistryChoices("available_generators")
 
 
-def positive_int(name: str) -> Callable[[str], int]:
-    """Parser for a strictly positive integer option called ``name``."""
+def _number(name: str, convert: Callable[[str], Any], kind: str, ok: Callable[[Any], bool], allowed: str
+            ) -> Callable[[str], Any]:
+    """Parser for a number option called ``name``: ``convert`` it (else "must be KIND"), then check ``ok`` (else
+    "must be ALLOWED")."""
 
-    def parse(text: str) -> int:
+    def parse(text: str) -> Any:
         try:
-            value = int(text)
+            value = convert(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be an integer, got {text!r}") from None
-        if value <= 0:
-            raise argparse.ArgumentTypeError(f"{name} must be positive, got {value}")
+            raise argparse.ArgumentTypeError(f"{name} must be {kind}, got {text!r}") from None
+        if not ok(value):
+            raise argparse.ArgumentTypeError(f"{name} must be {allowed}, got {value}")
         return value
 
     return parse
+
+
+def positive_int(name: str) -> Callable[[str], int]:
+    """Parser for a strictly positive integer option called ``name``."""
+    return _number(name, int, "an integer", lambda v: v > 0, "positive")
 
 
 def positive_float(name: str) -> Callable[[str], float]:
     """Parser for a strictly positive float option called ``name``."""
-
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
-        if not value > 0.0:
-            raise argparse.ArgumentTypeError(f"{name} must be positive, got {value}")
-        return value
-
-    return parse
+    return _number(name, float, "a number", lambda v: v > 0.0, "positive")
 
 
 def share(name: str) -> Callable[[str], float]:
     """Parser for a share in [0, 1] called ``name``."""
-
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
-        if not 0.0 <= value <= 1.0:
-            raise argparse.ArgumentTypeError(f"{name} must be in [0, 1], got {value}")
-        return value
-
-    return parse
+    return _number(name, float, "a number", lambda v: 0.0 <= v <= 1.0, "in [0, 1]")
 
 
 def layouts(text: str) -> list[str]:

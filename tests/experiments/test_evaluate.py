@@ -9,22 +9,12 @@ import pytest
 import scenario_factory as sf
 
 from seal.cli import main
-from seal.core.dataset import Dataset, write_dataset
+from seal.core.dataset import Dataset
 from seal.envs.scenario_env import ScenarioEnv
 from seal.experiments.evaluation.episodes import run_episode
 from seal.experiments.evaluation.evaluate import evaluate_runs, parse_settings, read_run, resolve_eval_config
 from seal.experiments.evaluation.results_store import ResultsStore
 from seal.experiments.training.egos import HeuristicEgo
-
-
-@pytest.fixture(scope="module")
-def dataset(tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("eval") / "data"
-    scenarios = [sf.highway_scenario(i) for i in range(3)]
-    write_dataset(root, scenarios)
-    ids = [s.scenario_id for s in scenarios]
-    Dataset.open(root).update_manifest(splits={"train": [], "eval": ids[1:], "hard": ids[:1]})
-    return root
 
 
 def test_parse_settings(dataset: Path, tmp_path: Path) -> None:

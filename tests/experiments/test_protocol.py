@@ -8,10 +8,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import scenario_factory as sf
 
 from seal.adversaries.base import AdversaryGenerator, Generation, register
-from seal.core.dataset import Dataset, load_split, write_dataset
+from seal.core.dataset import load_split
 from seal.core.scenario import CURRENT_STEP, Scenario, X, Y
 from seal.envs.behaviors import TrackingBehavior
 from seal.envs.rollout import Rollout
@@ -34,15 +33,6 @@ class JitterGenerator(AdversaryGenerator):
         offset = rng.normal(scale=1.5, size=2)
         return Generation(TrackingBehavior(track[:, [X, Y]] + offset, start_step=0))
 
-
-@pytest.fixture(scope="module")
-def dataset(tmp_path_factory) -> Path:
-    root = tmp_path_factory.mktemp("protocol") / "data"
-    scenarios = [sf.highway_scenario(i) for i in range(3)]
-    write_dataset(root, scenarios)
-    ids = [s.scenario_id for s in scenarios]
-    Dataset.open(root).update_manifest(splits={"train": [], "eval": ids[1:], "hard": ids[:1]})
-    return root
 
 
 def test_episode_seed_and_generator_stream() -> None:
