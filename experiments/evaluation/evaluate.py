@@ -20,32 +20,46 @@ scenario are written in one transaction. Generators are rebuilt for every ego (s
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import yaml
 
 from seal.adversaries.base import K_ROLLOUTS, available_generators
+from seal.core.config import ConfigError, build, check_keys, defaults_of
 from seal.experiments.evaluation.results_store import ResultsStore
 
 REPLAY_SETTINGS = ("normal", "hard")
 REAL_PREFIX = "real:"
 BUILTIN_EGOS = ("replay", "heuristic")
 
-DEFAULTS: dict[str, Any] = {
-    "generators": {},
-    "prior": None,
-    "candidates": None,
-    "k": K_ROLLOUTS,
-    "limit": None,
-    "seed": 0,
-    "env": {},
-}
-"""Eval config keys: ``generators`` (mapping generator name -> constructor kwargs, e.g. ``goose: {model: F}``),
-``prior`` / ``candidates`` (candidate source handed to every generator whose constructor takes one), ``k``
-(perturbation passes), ``limit`` (first N scenarios of each split), ``seed`` (episode / generator rng seed, the
-same for every ego), ``env`` (`ScenarioEnv` config overrides)."""
+@dataclass(frozen=True)
+class EvalRunsConfig:
+    """Settings of ``seal eval runs`` (YAML keys of ``--config``, or a ``seal run`` preset's ``eval:`` section)."""
+
+    generators: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """Generator name -> constructor kwargs, e.g. ``goose: {model: F}``."""
+    prior: str | None = None
+    """Trajectory prior file handed to every generator whose constructor takes one."""
+    candidates: str | None = None
+    """Built-in candidate source instead of a prior (lanes | constant_velocity), handed on likewise."""
+    k: int = K_ROLLOUTS
+    """Perturbation passes per scenario; the last is scored."""
+    limit: int | None = None
+    """Use the first N scenarios of each split (None: all)."""
+    seed: int = 0
+    """Episode / generator rng seed, the same for every ego."""
+    env: dict[str, Any] = field(default_factory=dict)
+    """`ScenarioEnv` config overrides."""
+
+    def __post_init__(self) -> None:
+        if self.k < 1:
+            raise ConfigError(f"k must be >= 1, got {self.k}")
+
+
+DEFAULTS: dict[str, Any] = defaults_of(EvalRunsConfig)
+"""The defaults of `EvalRunsConfig` as plain data."""
 
 
 @dataclass(frozen=True)
@@ -122,9 +136,7 @@ def resolve_eval_config(
             raise ValueError(f"{path}: expected a mapping of eval options")
         if isinstance(loaded.get("eval"), dict):  # a `seal run` preset: use its eval section
             loaded = {k: v for k, v in loaded["eval"].items() if k in DEFAULTS}
-        unknown = sorted(set(loaded) - set(DEFAULTS))
-        if unknown:
-            raise ValueError(f"{path}: unknown eval option(s) {unknown}; known: {sorted(DEFAULTS)}")
+        check_keys(EvalRunsConfig, loaded, str(path))
         gens = loaded.pop("generators", None) or {}
         if not isinstance(gens, Mapping):
             raise ValueError(f"{path}: 'generators' must map generator names to constructor kwargs")
@@ -132,8 +144,7 @@ def resolve_eval_config(
             config["generators"][str(name)] = {**config["generators"].get(str(name), {}), **dict(kwargs or {})}
         config.update(loaded)
     config.update({k: v for k, v in overrides.items() if v is not None})
-    if int(config["k"]) < 1:
-        raise ValueError(f"k must be >= 1, got {config['k']}")
+    build(EvalRunsConfig, config, str(config_file or "eval options"))  # types and ranges
     return config
 
 

@@ -17,6 +17,7 @@ import csv
 import io
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +26,7 @@ import yaml
 
 from seal.adversaries.base import K_ROLLOUTS, AdversaryGenerator, available_generators
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
+from seal.core.config import ConfigError, build, check_keys, defaults_of
 from seal.core.dataset import load_split
 from seal.core.scenario import Scenario
 from seal.envs.scenario_env import ScenarioEnv
@@ -32,24 +34,41 @@ from seal.experiments.evaluation.generator_metrics import EpisodeRecord, LoggedA
 from seal.experiments.evaluation.protocol import build_generator, generator_name, generator_passes, normal_episode
 from seal.experiments.training.egos import make_ego
 
-DEFAULTS: dict[str, Any] = {
-    "generators": ["replay", "rule", "cat"],
-    "ego": "replay",
-    "split": "eval",
-    "limit": None,
-    "k": K_ROLLOUTS,
-    "seed": 0,
-    "prior": None,
-    "candidates": None,
-    "objective": None,
-    "skills": None,
-    "env": {},
-}
-"""Config keys: ``generators`` (names, or a mapping name -> constructor kwargs), ``ego`` (heuristic | replay |
-run path), ``split`` (None = every scenario), ``limit`` (first N scenarios of the split), ``k`` (passes = queue
-length), ``seed``, ``prior`` / ``candidates`` (candidate source handed to every generator that takes one),
-``objective`` / ``skills`` (SEAL's learned objective file or ``cat``, and skill model folder, likewise handed on),
-``env`` (`ScenarioEnv` config overrides)."""
+
+@dataclass(frozen=True)
+class EvalGeneratorsConfig:
+    """Settings of ``seal eval generators`` (YAML keys of ``--config``; command-line options override them)."""
+
+    generators: Any = field(default_factory=lambda: ["replay", "rule", "cat"])
+    """Generator names (a list or comma-separated text), or a mapping name -> constructor kwargs."""
+    ego: str = "replay"
+    """The ego: ``heuristic``, ``replay`` or a run folder / model path."""
+    split: str | None = "eval"
+    """Dataset split (None: every scenario)."""
+    limit: int | None = None
+    """Use the first N scenarios of the split (None: all)."""
+    k: int = K_ROLLOUTS
+    """Perturbation passes per scenario (the length of the roll-out queue); the last is scored."""
+    seed: int = 0
+    """Episode and generator rng seed."""
+    prior: str | None = None
+    """Trajectory prior file handed to every generator that takes one."""
+    candidates: str | None = None
+    """Built-in candidate source instead of a prior (lanes | constant_velocity), handed on likewise."""
+    objective: str | None = None
+    """SEAL's learned objective file, or ``cat``, handed to every generator that takes one."""
+    skills: str | None = None
+    """SEAL's skill model folder, handed on likewise."""
+    env: dict[str, Any] = field(default_factory=dict)
+    """`ScenarioEnv` config overrides."""
+
+    def __post_init__(self) -> None:
+        if self.k < 1:
+            raise ConfigError(f"k must be >= 1, got {self.k}")
+
+
+DEFAULTS: dict[str, Any] = defaults_of(EvalGeneratorsConfig)
+"""The defaults of `EvalGeneratorsConfig` as plain data."""
 
 SHARED_OPTIONS = ("prior", "candidates", "objective", "skills")
 """Options passed to every generator whose constructor has a parameter of that name."""
@@ -100,15 +119,12 @@ def resolve_config(
         loaded = yaml.safe_load(path.read_text()) or {}
         if not isinstance(loaded, dict):
             raise ValueError(f"{path}: expected a mapping of options")
-        unknown = set(loaded) - set(DEFAULTS)
-        if unknown:
-            raise ValueError(f"{path}: unknown option(s) {sorted(unknown)}; known: {sorted(DEFAULTS)}")
+        check_keys(EvalGeneratorsConfig, loaded, str(path))
         config.update(loaded)
     config.update({k: v for k, v in overrides.items() if v is not None})
+    build(EvalGeneratorsConfig, config, str(config_file or "eval generators options"))  # types and ranges
     config["generators"] = parse_generators(config["generators"])
     apply_generator_options(config["generators"], gen_opts)
-    if int(config["k"]) < 1:
-        raise ValueError(f"k must be >= 1, got {config['k']}")
     return config
 
 

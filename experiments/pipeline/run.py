@@ -45,21 +45,51 @@ import logging
 import re
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from functools import partial
 from pathlib import Path
 from typing import Any
 
 import yaml
 
+from seal.adversaries.base import NO_ADVERSARY
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
+from seal.core.config import check_keys
 from seal.experiments.backends import Backend, InlineBackend, Job, JobResult, LocalBackend, make_backend
 from seal.experiments.pipeline.tasks import run_task
 
 logger = logging.getLogger(__name__)
 
-SECTIONS = ("data", "fit", "generators", "pipelines", "seeds", "eval", "report", "backend", "train", "preset")
-NO_ADVERSARY = "noadv"
+
+
+@dataclass(frozen=True)
+class RunPreset:
+    """The sections of a ``seal run`` preset (``experiments/configs/quick|standard|paper.yaml``); each step's own
+    config type checks its section when the step runs."""
+
+    data: dict[str, Any] = field(default_factory=dict)
+    """How to build, score and split the pool (options of ``seal data generate / score / split``), or ``path:``."""
+    fit: dict[str, Any] = field(default_factory=dict)
+    """Model name -> fit options (``seal fit NAME``), or ``path:`` of an existing model."""
+    generators: dict[str, Any] = field(default_factory=dict)
+    """Generator name -> constructor kwargs (``"${fit.NAME}"`` = a fitted model's path)."""
+    pipelines: list[str] = field(default_factory=list)
+    """Training pipelines (``noadv`` and the registry's training generators)."""
+    seeds: list[int] = field(default_factory=list)
+    """Training seeds per pipeline."""
+    eval: dict[str, Any] = field(default_factory=dict)
+    """`seal.experiments.evaluation.evaluate.EvalRunsConfig` keys plus ``settings``."""
+    report: dict[str, Any] = field(default_factory=dict)
+    """Report options (plots, videos, video_format)."""
+    backend: dict[str, Any] = field(default_factory=dict)
+    """Backend options (name, workers, address)."""
+    train: dict[str, Any] = field(default_factory=dict)
+    """`seal.experiments.training.config.EgoTrainConfig` keys."""
+    preset: str = ""
+    """The preset's name (default: the file name)."""
+
+
+SECTIONS = tuple(f.name for f in fields(RunPreset))
 FIT_OUTPUTS = {"prior": "prior.pt", "goose": "goose.zip", "skills": "skills", "objective": "objective"}
 """Model name -> file or folder written under OUT/models by the fit of that model."""
 REF = re.compile(r"^\$\{fit\.(\w+)\}(.*)$")
@@ -73,9 +103,7 @@ def load_run_config(path: str | Path) -> dict[str, Any]:
     config = yaml.safe_load(path.read_text()) or {}
     if not isinstance(config, dict):
         raise ValueError(f"{path}: expected a mapping of sections ({', '.join(SECTIONS)})")
-    unknown = sorted(set(config) - set(SECTIONS))
-    if unknown:
-        raise ValueError(f"{path}: unknown section(s) {unknown}; known: {list(SECTIONS)}")
+    check_keys(RunPreset, config, str(path))
     for key in ("pipelines", "seeds"):
         if not isinstance(config.get(key), list) or not config[key]:
             raise ValueError(f"{path}: '{key}' must be a non-empty list")

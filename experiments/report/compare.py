@@ -25,12 +25,14 @@ from typing import Any
 
 import numpy as np
 
+from seal.adversaries.base import pipeline_names
 from seal.experiments.evaluation.evaluate import REAL_PREFIX, REPLAY_SETTINGS
 from seal.experiments.evaluation.generator_metrics import format_markdown_table
 from seal.experiments.evaluation.metrics import pooled_realism
 
 EGO_METRICS = ("success", "crash", "out_of_road")
-PIPELINE_ORDER = ("replay", "heuristic", "noadv", "goose", "cat", "seal")
+PIPELINE_ORDER = ("replay", "heuristic", *pipeline_names())
+"""Report order: the built-in egos, then the training pipelines in registry order (`seal.adversaries.base`)."""
 
 
 def setting_label(setting: str) -> str:

@@ -99,7 +99,7 @@ def _common(p: argparse.ArgumentParser, default_generators: str) -> None:
         help="constructor option of one generator, repeatable, e.g. goose.model=agent.pt or cat.follow=track",
     )
     p.add_argument("--config", default=None, help="YAML config (keys as in "
-        "seal.experiments.evaluation.generators.DEFAULTS)")
+        "seal.experiments.evaluation.generators.EvalGeneratorsConfig)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
 
 

@@ -173,7 +173,7 @@ def test_existing_dataset_and_model_paths(tmp_path: Path) -> None:
 
 
 def test_config_errors(tmp_path: Path) -> None:
-    with pytest.raises(ValueError, match="unknown section.*'bogus'"):
+    with pytest.raises(ValueError, match="unknown key.*'bogus'"):
         load_run_config(write_preset(tmp_path, bogus=1))
     with pytest.raises(ValueError, match="'seeds' must be a non-empty list"):
         load_run_config(write_preset(tmp_path, seeds=()))
