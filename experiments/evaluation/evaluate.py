@@ -27,7 +27,7 @@ from typing import Any
 import yaml
 
 from seal.adversaries.base import K_ROLLOUTS, available_generators
-from seal.core.config import ConfigError, build, check_keys, defaults_of
+from seal.core.config import ConfigError, apply_overrides, build, check_keys, defaults_of
 from seal.experiments.evaluation.results_store import ResultsStore
 
 REPLAY_SETTINGS = ("normal", "hard")
@@ -118,11 +118,13 @@ def parse_settings(spec: str | Sequence[str], dataset: str | Path | None) -> lis
 
 
 def resolve_eval_config(
-    config_file: str | Path | None = None, run_configs: Sequence[Mapping[str, Any]] = (), **overrides: Any
+    config_file: str | Path | None = None, run_configs: Sequence[Mapping[str, Any]] = (), sets: Sequence[str] = (),
+    **overrides: Any,
 ) -> dict[str, Any]:
     """Defaults < generator kwargs of the runs' own configs (``generator: {name, kwargs}``, first run per name) <
     the YAML ``config_file`` (keys `DEFAULTS`; a preset's ``eval:`` section is also accepted) < ``overrides``
-    (None ignored). The same resolved config serves every ego, so their settings are comparable."""
+    (None ignored) < ``sets`` (``key.sub=value``). The same resolved config serves every ego, so their settings are
+    comparable."""
     config: dict[str, Any] = {**DEFAULTS, "generators": {}, "env": {}}
     for rc in run_configs:
         gen = rc.get("generator") or {}
@@ -144,6 +146,9 @@ def resolve_eval_config(
             config["generators"][str(name)] = {**config["generators"].get(str(name), {}), **dict(kwargs or {})}
         config.update(loaded)
     config.update({k: v for k, v in overrides.items() if v is not None})
+    if sets:
+        config = apply_overrides(config, sets)
+        check_keys(EvalRunsConfig, config, "--set")
     build(EvalRunsConfig, config, str(config_file or "eval options"))  # types and ranges
     return config
 

@@ -146,6 +146,5 @@ def run_demo(out: Path, n_scenarios: int = 40, n_rollouts: int = 12, seed: int =
             continue
         seen.add(s.layout)
         render_episode(s, videos / f"{s.scenario_id}.mp4")
-    print("\n" + table)
-    print(f"wrote {out / 'summary.md'}, {out / 'rollouts.csv'} and {len(seen)} videos in {videos}")
-    return {"rows": rows}
+    return {"rows": rows, "table": table,
+            "wrote": f"wrote {out / 'summary.md'}, {out / 'rollouts.csv'} and {len(seen)} videos in {videos}"}

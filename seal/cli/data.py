@@ -116,7 +116,10 @@ def cmd_render(args: argparse.Namespace) -> int:
 def cmd_demo(args: argparse.Namespace) -> int:
     from seal.experiments.pipeline.demo import run_demo
 
-    run_demo(Path(args.out), n_scenarios=args.n, n_rollouts=args.rollouts, seed=args.seed, overwrite=args.overwrite)
+    result = run_demo(Path(args.out), n_scenarios=args.n, n_rollouts=args.rollouts, seed=args.seed,
+                      overwrite=args.overwrite)
+    print("\n" + result["table"])
+    print(result["wrote"])
     return 0
 
 

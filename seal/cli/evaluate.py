@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import argparse
 
-from seal.cli.args import CliError, positive_int
+from seal.cli.args import CliError, add_set_option, positive_int
 from seal.cli.tree import CommandTree
 
 
@@ -22,7 +22,7 @@ def cmd_eval_runs(args: argparse.Namespace) -> int:
         egos = [read_run(r) for r in args.runs]
         config = resolve_eval_config(
             args.config, run_configs=[e.config for e in egos], k=args.k, limit=args.limit, seed=args.seed,
-            prior=args.prior, candidates=args.candidates,
+            prior=args.prior, candidates=args.candidates, sets=args.set,
         )
         for option in args.gen_opt:
             name = option.partition(".")[0]
@@ -69,6 +69,7 @@ def register(tree: CommandTree) -> None:
                    help="YAML with generators kwargs (generators: {goose: {model: F}, cat: {prior: F}}), prior, "
                    "candidates, k, limit, seed, env; a `seal run` preset's eval section also works. Default: the "
                    "generator kwargs recorded in the runs' config.yaml")
+    add_set_option(p, "k=3 or generators.cat.stride=10")
     p.add_argument("--prior", default=None, help="trajectory prior for candidate-based generators (cat, seal)")
     p.add_argument("--candidates", default=None, help="built-in candidate source instead of a prior: lanes | "
                    "constant_velocity")

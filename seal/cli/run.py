@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from seal.cli.args import CliError, positive_int
+from seal.cli.args import CliError, add_set_option, positive_int
 from seal.cli.tree import CommandTree
 
 
@@ -16,7 +16,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from seal.experiments.pipeline.run import load_run_config, run_pipeline
 
     try:
-        config = load_run_config(args.config)
+        config = load_run_config(args.config, args.set)
     except (OSError, ValueError) as exc:
         raise CliError(str(exc)) from None
     bcfg = config.get("backend") or {}
@@ -55,5 +55,6 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--workers", type=positive_int("--workers"), default=None,
                    help="local worker processes (default: the preset's backend.workers, else the CPU count)")
     p.add_argument("--address", default=None, help="Ray cluster address (default RAY_ADDRESS, else auto)")
+    add_set_option(p, "eval.limit=5 or seeds=[0]")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_run)

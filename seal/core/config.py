@@ -71,6 +71,30 @@ def dotted_to_nested(flat: Mapping[str, Any]) -> dict[str, Any]:
     return nested
 
 
+def apply_overrides(data: Mapping[str, Any], overrides: Sequence[str]) -> dict[str, Any]:
+    """A copy of the plain mapping ``data`` with each ``"a.b=VALUE"`` of ``overrides`` set (nested mappings created
+    where missing), for configs that stay plain mappings (a ``seal run`` preset, the eval settings); the caller
+    checks the result's keys and types."""
+    out = _deep_copy_mappings(data)
+    for text in overrides:
+        key, value = parse_override(text)
+        node = out
+        parts = key.split(".")
+        for part in parts[:-1]:
+            child = node.get(part)
+            if child is None:
+                child = node[part] = {}
+            elif not isinstance(child, dict):
+                raise ConfigError(f"--set {text!r}: {part!r} holds {child!r}, not a mapping of keys")
+            node = child
+        node[parts[-1]] = value
+    return out
+
+
+def _deep_copy_mappings(data: Mapping[str, Any]) -> dict[str, Any]:
+    return {k: _deep_copy_mappings(v) if isinstance(v, Mapping) else v for k, v in data.items()}
+
+
 def read_yaml(path: str | Path, section: str | None = None) -> dict[str, Any]:
     """The mapping in the YAML file ``path`` (or its ``section:`` mapping); an error names the file."""
     path = Path(path)

@@ -182,3 +182,14 @@ def test_section_of_a_file(tmp_path: Path) -> None:
     assert load_config(Cfg, file=path, section="train").seed == 3
     with pytest.raises(ConfigError, match="no 'missing:' section"):
         load_config(Cfg, file=path, section="missing")
+
+
+def test_apply_overrides_nested_and_errors() -> None:
+    from seal.core.config import apply_overrides
+
+    d = {"eval": {"limit": 10}, "seeds": [0, 1]}
+    out = apply_overrides(d, ["eval.limit=5", "seeds=[0]", "eval.generators.cat.stride=10"])
+    assert out == {"eval": {"limit": 5, "generators": {"cat": {"stride": 10}}}, "seeds": [0]}
+    assert d == {"eval": {"limit": 10}, "seeds": [0, 1]}  # the input is left alone
+    with pytest.raises(ConfigError, match="not a mapping"):
+        apply_overrides(d, ["seeds.x=1"])

@@ -141,3 +141,14 @@ def test_eval_without_subcommand_means_eval_runs() -> None:
         assert tree.expand_default(argv) == argv
     args = parser.parse_args(tree.expand_default(["eval", "a", "b", "--settings", "hard"]))
     assert (args.eval_command, args.runs, args.settings) == ("runs", ["a", "b"], "hard")
+
+
+def test_eval_config_set_and_types() -> None:
+    config = resolve_eval_config(k=2, sets=["k=4", "generators.cat.stride=10"])
+    assert config["k"] == 4 and config["generators"] == {"cat": {"stride": 10}}
+    with pytest.raises(ValueError, match="--set: unknown key.*'kk'"):
+        resolve_eval_config(sets=["kk=4"])
+    with pytest.raises(ValueError, match="k must be int"):
+        resolve_eval_config(sets=["k=many"])
+    with pytest.raises(ValueError, match="k must be >= 1"):
+        resolve_eval_config(k=0)

@@ -182,6 +182,15 @@ def test_config_errors(tmp_path: Path) -> None:
         fits_needed(config)
 
 
+def test_set_overrides_the_preset(tmp_path: Path) -> None:
+    path = write_preset(tmp_path)
+    config = load_run_config(path, ["eval.limit=3", "seeds=[5]"])
+    assert config["eval"]["limit"] == 3 and config["seeds"] == [5]
+    assert load_run_config(path)["seeds"] != [5]  # the file is left alone
+    with pytest.raises(ValueError, match="--set: unknown key.*'evals'"):
+        load_run_config(path, ["evals.limit=3"])
+
+
 def test_fit_dependencies_come_first(tmp_path: Path) -> None:
     fit = {"objective": {"prior": "${fit.prior}"}, "prior": {"epochs": 1}, "skills": {}}
     config = load_run_config(write_preset(tmp_path, fit=fit, pipelines=["seal"],
