@@ -26,6 +26,7 @@ dataclass ``X`` -- every field without a default given -- replaces the old entry
 from __future__ import annotations
 
 import dataclasses
+import math
 import types
 import typing
 from collections.abc import Mapping, Sequence
@@ -241,6 +242,13 @@ def _coerce_scalar(value: Any, tp: Any, key: str, where: str) -> Any:
     elif tp is float:
         if isinstance(value, int | float) and not isinstance(value, bool):
             return float(value)
+        if isinstance(value, str):  # PyYAML reads `1e-3` (no dot) as a string; a finite number in it is meant
+            try:
+                number = float(value)
+            except ValueError:
+                number = math.nan
+            if math.isfinite(number):
+                return number
     elif tp is str:
         if isinstance(value, str):
             return value

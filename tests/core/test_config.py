@@ -193,3 +193,15 @@ def test_apply_overrides_nested_and_errors() -> None:
     assert d == {"eval": {"limit": 10}, "seeds": [0, 1]}  # the input is left alone
     with pytest.raises(ConfigError, match="not a mapping"):
         apply_overrides(d, ["seeds.x=1"])
+
+
+def test_float_fields_read_yaml_exponents_without_a_dot() -> None:
+    """PyYAML reads ``1e-3`` as the string "1e-3"; a float field takes it, but not words or non-finite values."""
+    import yaml
+
+    from seal.core.config import coerce
+
+    assert coerce(yaml.safe_load("1e-3"), float, "lr", "f.yaml") == 1e-3
+    for text in ("fast", "nan", "inf"):
+        with pytest.raises(ConfigError, match="lr"):
+            coerce(text, float, "lr", "f.yaml")
