@@ -99,6 +99,24 @@ AdversarySpec = AdversaryBehavior | Callable[[Scenario, np.random.Generator], Ad
 """An adversary for every episode: a behaviour (reset each episode), a factory ``(scenario, rng) -> behaviour``
 called at each reset (e.g. a generator with a curriculum), or None for `ReplayBehavior` of the log."""
 
+def _checked_action(action: Any) -> np.ndarray:
+    """The action as a float64 ``[2]`` array [steering, acceleration]. Finite values outside [-1, 1] are clipped by
+    the kinematic step (Gymnasium's convention for Box actions); a wrong shape, or NaN / inf, raises ValueError
+    (they used to become full lock and full brake without a word)."""
+    try:
+        a = np.asarray(action, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"ScenarioEnv.step: action must be 2 numbers [steering, acceleration], got {action!r}"
+        ) from None
+    if a.size != 2 or a.ndim > 2:
+        raise ValueError(f"ScenarioEnv.step: action must have shape (2,) [steering, acceleration], got shape {a.shape}")
+    a = a.reshape(2)
+    if not np.isfinite(a).all():
+        raise ValueError(f"ScenarioEnv.step: action must be finite, got {a.tolist()}")
+    return a
+
+
 class ScenarioEnv(gym.Env):
     """Gymnasium env over a set of scenarios (see the module docstring).
 
@@ -200,7 +218,7 @@ class ScenarioEnv(gym.Env):
         if self._done:
             raise RuntimeError("step() called on a finished episode; call reset()")
         cfg = self.config
-        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        a = _checked_action(action)
         ego = bicycle_step(self._ego, float(a[0]), float(a[1]))
         adv = self._move_adversary(self._t)
         self._t = t = self._t + 1

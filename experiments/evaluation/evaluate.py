@@ -27,7 +27,7 @@ from typing import Any
 import yaml
 
 from seal.adversaries.base import K_ROLLOUTS, available_generators
-from seal.core.config import ConfigError, apply_overrides, build, check_keys, defaults_of
+from seal.core.config import ConfigError, apply_overrides, build, check_keys, defaults_of, safe_load_file
 from seal.experiments.evaluation.results_store import ResultsStore
 
 REPLAY_SETTINGS = ("normal", "hard")
@@ -133,7 +133,7 @@ def resolve_eval_config(
             config["generators"][name] = dict(gen.get("kwargs") or {})
     if config_file is not None:
         path = Path(config_file)
-        loaded = yaml.safe_load(path.read_text()) or {}
+        loaded = safe_load_file(path) or {}
         if not isinstance(loaded, dict):
             raise ValueError(f"{path}: expected a mapping of eval options")
         if isinstance(loaded.get("eval"), dict):  # a `seal run` preset: use its eval section

@@ -26,7 +26,7 @@ import yaml
 
 from seal.adversaries.base import K_ROLLOUTS, AdversaryGenerator, available_generators
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
-from seal.core.config import ConfigError, build, check_keys, defaults_of
+from seal.core.config import ConfigError, build, check_keys, defaults_of, safe_load_file
 from seal.core.dataset import load_split
 from seal.core.scenario import Scenario
 from seal.envs.scenario_env import ScenarioEnv
@@ -116,7 +116,7 @@ def resolve_config(
     config = dict(DEFAULTS)
     if config_file is not None:
         path = Path(config_file)
-        loaded = yaml.safe_load(path.read_text()) or {}
+        loaded = safe_load_file(path) or {}
         if not isinstance(loaded, dict):
             raise ValueError(f"{path}: expected a mapping of options")
         check_keys(EvalGeneratorsConfig, loaded, str(path))

@@ -54,7 +54,7 @@ import yaml
 
 from seal.adversaries.base import NO_ADVERSARY
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
-from seal.core.config import apply_overrides, check_keys
+from seal.core.config import apply_overrides, check_keys, safe_load_file
 from seal.experiments.backends import Backend, InlineBackend, Job, JobResult, LocalBackend, make_backend
 from seal.experiments.pipeline.tasks import run_task
 
@@ -101,7 +101,7 @@ def load_run_config(path: str | Path, sets: Sequence[str] = ()) -> dict[str, Any
     """The preset YAML with ``sets`` (``section.key=value``, e.g. ``eval.limit=5``) applied, checked: known
     sections, ``pipelines`` and ``seeds`` present."""
     path = Path(path)
-    config = yaml.safe_load(path.read_text()) or {}
+    config = safe_load_file(path) or {}
     if not isinstance(config, dict):
         raise ValueError(f"{path}: expected a mapping of sections ({', '.join(SECTIONS)})")
     check_keys(RunPreset, config, str(path))

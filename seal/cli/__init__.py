@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 from collections.abc import Sequence
 
@@ -62,14 +63,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser, tree = build_tree()
     args = parser.parse_args(tree.expand_default(list(sys.argv[1:] if argv is None else argv)))
     configure_logging()
+    import yaml
+
     from seal.core.dataset import DatasetError
     from seal.core.road import RoadError
     from seal.core.scenario import ScenarioError
 
     try:
         return int(args.func(args) or 0)
-    except (CliError, DatasetError, ScenarioError, RoadError, FileNotFoundError, ValueError) as exc:
-        print(f"seal: error: {exc}", file=sys.stderr)
+    except BrokenPipeError:
+        # The reader of stdout went away (`seal data info | head`): stop quietly, as other command-line tools do.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
+    except (CliError, DatasetError, ScenarioError, RoadError, OSError, ValueError, yaml.YAMLError) as exc:
+        if os.environ.get("SEAL_DEBUG"):
+            raise
+        message = " ".join(str(exc).split())  # one line, whatever the exception's own layout (YAML marks, ...)
+        print(f"seal: error: {message} (SEAL_DEBUG=1 shows the traceback)", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("seal: interrupted (an unfinished dataset build resumes when re-run)", file=sys.stderr)

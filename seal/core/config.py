@@ -96,12 +96,24 @@ def _deep_copy_mappings(data: Mapping[str, Any]) -> dict[str, Any]:
     return {k: _deep_copy_mappings(v) if isinstance(v, Mapping) else v for k, v in data.items()}
 
 
+def safe_load_file(path: str | Path) -> Any:
+    """The YAML document in ``path``; a syntax error becomes a `ConfigError` naming the file, line and column."""
+    path = Path(path)
+    try:
+        return yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"{path}, line {mark.line + 1}, column {mark.column + 1}" if mark is not None else str(path)
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise ConfigError(f"{where}: not valid YAML ({problem})") from None
+
+
 def read_yaml(path: str | Path, section: str | None = None) -> dict[str, Any]:
     """The mapping in the YAML file ``path`` (or its ``section:`` mapping); an error names the file."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such config file")
-    loaded = yaml.safe_load(path.read_text()) or {}
+    loaded = safe_load_file(path) or {}
     if not isinstance(loaded, dict):
         raise ConfigError(f"{path}: expected a mapping of options")
     if section is None:

@@ -69,3 +69,16 @@ def test_bad_options_name_the_option(capsys: pytest.CaptureFixture[str]) -> None
 def test_info_on_a_missing_dataset_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["data", "info", str(tmp_path / "nope")]) == 2
     assert "not a seal dataset" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "command", [["train", "--out", "{out}", "--config", "{bad}"], ["run", "{bad}", "--out", "{out}"]]
+)
+def test_invalid_yaml_is_one_line_naming_the_file(tmp_path, capsys, command) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("pipelines: [noadv\n")
+    argv = [a.format(out=tmp_path / "out", bad=bad) for a in command]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{bad}, line 2, column 1: not valid YAML" in err[0]
+    assert not (tmp_path / "out").exists()  # refused before anything was written

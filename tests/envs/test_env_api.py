@@ -149,3 +149,24 @@ def test_render_rgb_array(lane_change: Scenario) -> None:
     frame = env.render()
     assert frame.ndim == 3 and frame.shape[2] == 3 and frame.dtype == np.uint8
     assert frame.std() > 5  # not blank
+
+
+@pytest.mark.parametrize("bad", [np.array([np.nan, 0.0]), [0.0, np.inf], [0.1, 0.2, 0.3], [0.5], 0.3, None, "go"])
+def test_step_refuses_non_finite_or_misshapen_actions(lane_change: Scenario, bad: object) -> None:
+    env = ScenarioEnv([lane_change])
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="ScenarioEnv.step: action must"):
+        env.step(bad)
+    obs, *_ = env.step(np.zeros(2))  # the episode goes on after a refused action
+    assert obs.shape == (OBS_DIM,)
+
+
+def test_out_of_range_actions_are_clipped(lane_change: Scenario) -> None:
+    """Finite actions beyond [-1, 1] act as the bound (Gymnasium's convention for Box actions)."""
+    a, b = ScenarioEnv([lane_change]), ScenarioEnv([lane_change])
+    a.reset(seed=0)
+    b.reset(seed=0)
+    for _ in range(5):
+        a.step(np.array([5.0, -7.0]))
+        b.step(np.array([1.0, -1.0]))
+        assert (a._ego.x, a._ego.y, a._ego.heading, a._ego.speed) == (b._ego.x, b._ego.y, b._ego.heading, b._ego.speed)
