@@ -40,6 +40,29 @@ class DatasetError(RuntimeError):
 
 
 # --------------------------------------------------------------------------------------------- shards
+_SHARD_FIELDS = ("file", "n_scenarios", "bytes", "sha256")
+
+
+def _check_totals(path: Path, manifest: dict[str, Any]) -> None:
+    """Every shard entry complete, and the scenario count equal to the shards' sum: a damaged manifest (an entry
+    lost or edited) fails here instead of silently loading fewer scenarios."""
+    shards, counts = manifest["shards"], manifest["counts"]
+    if not isinstance(shards, list) or not shards:
+        raise DatasetError(f"{path}: field 'shards' must be a non-empty list of shard entries")
+    for i, entry in enumerate(shards):
+        missing = [k for k in _SHARD_FIELDS if not isinstance(entry, dict) or k not in entry]
+        if missing:
+            raise DatasetError(f"{path}: shards[{i}] lacks field(s) {missing}")
+    if not isinstance(counts, dict) or not isinstance(counts.get("scenarios"), int):
+        raise DatasetError(f"{path}: field 'counts' must hold the integer 'scenarios'")
+    held = sum(int(entry["n_scenarios"]) for entry in shards)
+    if held != counts["scenarios"]:
+        raise DatasetError(
+            f"{path}: counts.scenarios is {counts['scenarios']} but the shards hold {held}; the manifest is damaged "
+            "(rebuild the dataset, or restore manifest.json)"
+        )
+
+
 def encode_shard(scenarios: Sequence[Scenario]) -> dict[str, np.ndarray]:
     """Columnar arrays for a list of scenarios (see the module docstring)."""
     if not scenarios:
@@ -153,6 +176,8 @@ class Dataset:
             manifest = json.loads(path.read_text())
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise DatasetError(f"{path} is not valid JSON ({exc})") from None
+        if not isinstance(manifest, dict):
+            raise DatasetError(f"{path}: expected a JSON object of manifest fields, got {type(manifest).__name__}")
         for key in ("schema_version", "format", "shards", "counts", "splits", "provenance"):
             if key not in manifest:
                 raise DatasetError(f"{path}: missing field {key!r}")
@@ -162,6 +187,7 @@ class Dataset:
             raise DatasetError(
                 f"{path}: field 'schema_version' is {manifest['schema_version']}; this seal reads {SCHEMA_VERSION}"
             )
+        _check_totals(path, manifest)
         return cls(root, manifest)
 
     def __len__(self) -> int:

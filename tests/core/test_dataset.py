@@ -118,6 +118,32 @@ def test_missing_or_bad_manifest(tmp_path: Path) -> None:
         Dataset.open(tmp_path)
 
 
+def _edit_manifest(root: Path, edit) -> None:
+    manifest = json.loads((root / MANIFEST).read_text())
+    (root / MANIFEST).write_text(json.dumps(edit(manifest)))
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda m: 42, "expected a JSON object of manifest fields, got int"),
+        (lambda m: {**m, "shards": m["shards"][1:]},
+         r"counts.scenarios is 6 but the shards hold 3; the manifest is damaged"),
+        (lambda m: {**m, "shards": []}, "field 'shards' must be a non-empty list"),
+        (lambda m: {**m, "shards": [{k: v for k, v in e.items() if k != "sha256"} for e in m["shards"]]},
+         r"shards\[0\] lacks field\(s\) \['sha256'\]"),
+        (lambda m: {**m, "counts": {"scenarios": "six"}}, "field 'counts' must hold the integer 'scenarios'"),
+    ],
+)
+def test_damaged_manifest_is_refused(tmp_path: Path, edit, message: str) -> None:
+    """Counts are cross-checked against the shards: a lost shard entry no longer loads fewer scenarios silently."""
+    write_dataset(tmp_path / "ds", [_scenario(i) for i in range(6)], shard_size=3)
+    assert len(Dataset.open(tmp_path / "ds")) == 6
+    _edit_manifest(tmp_path / "ds", edit)
+    with pytest.raises(DatasetError, match=message):
+        Dataset.open(tmp_path / "ds")
+
+
 def test_interrupted_build_is_not_loadable_and_resumes(tmp_path: Path) -> None:
     root = tmp_path / "ds"
     scenarios = [_scenario(i) for i in range(12)]
