@@ -28,6 +28,7 @@ from tqdm import tqdm
 import seal
 from seal.core.dataset import Dataset, DatasetBuilder
 from seal.core.scenario import Scenario
+from seal.core.workers import initializer
 from seal.envs.layouts import LAYOUTS, sample_params
 from seal.envs.network_topology import describe_network
 from seal.envs.traffic_run import Simulation
@@ -177,7 +178,8 @@ def _make_pool(workers: int) -> Any:
     calling `generate_dataset` without a ``__main__`` guard still work (workers use numpy/highway-env).
     """
     methods = mp.get_all_start_methods()
-    return mp.get_context("fork" if "fork" in methods else None).Pool(workers)
+    init, init_args = initializer()  # workers die with this process (no orphans after a kill)
+    return mp.get_context("fork" if "fork" in methods else None).Pool(workers, init, init_args)
 
 
 def _versions() -> dict[str, str]:

@@ -95,7 +95,11 @@ class LocalBackend:
         if not jobs:
             return []
         results: list[JobResult | None] = [None] * len(jobs)
-        with ProcessPoolExecutor(min(self.workers, len(jobs)), mp_context=mp.get_context("spawn")) as pool:
+        from seal.core.workers import initializer
+
+        init, init_args = initializer()  # job workers die with this process (no orphans after a kill)
+        with ProcessPoolExecutor(min(self.workers, len(jobs)), mp_context=mp.get_context("spawn"), initializer=init,
+                                 initargs=init_args) as pool:
             futures = {pool.submit(_worker_call, fn, job): i for i, job in enumerate(jobs)}
             for fut in tqdm(as_completed(futures), total=len(jobs), desc=desc, unit="job"):
                 i = futures[fut]

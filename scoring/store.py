@@ -32,6 +32,7 @@ import numpy as np
 from seal.core.atomic import atomic_write
 from seal.core.dataset import Dataset, DatasetError
 from seal.core.scenario import HEADING, VALID, Scenario, X, Y
+from seal.core.workers import initializer
 from seal.scoring.individual import INDIVIDUAL_FEATURES
 from seal.scoring.primitives import Primitives, fit_primitives
 from seal.scoring.scores import VARIANTS, ScenarioScores, score_scenario
@@ -136,8 +137,9 @@ def score_scenarios(
         return out
     # Fork where available: workers start instantly and share the imported modules.
     ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else mp.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=min(workers, len(chunks)), mp_context=ctx, initializer=_init_worker,
-                             initargs=(prim,)) as pool:
+    init, init_args = initializer(_init_worker, prim)  # workers die with this process (no orphans after a kill)
+    with ProcessPoolExecutor(max_workers=min(workers, len(chunks)), mp_context=ctx, initializer=init,
+                             initargs=init_args) as pool:
         for result in pool.map(_score_chunk, chunks):
             out.extend(result)
             bar(len(result))

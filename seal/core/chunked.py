@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from seal.core.atomic import atomic_write_json
+from seal.core.workers import initializer
 
 T = TypeVar("T")
 logger = logging.getLogger(__name__)
@@ -85,7 +86,8 @@ def run_chunked(
                initial=sum(len(c) for i, c in enumerate(chunks) if i not in pending))
     jobs = [(i, chunks[i], *work_args) for i in todo]
     if workers > 1 and len(jobs) > 1:
-        with mp.get_context("spawn").Pool(min(workers, len(jobs))) as pool:
+        init, init_args = initializer()  # workers die with this process (no orphans after a kill)
+        with mp.get_context("spawn").Pool(min(workers, len(jobs)), init, init_args) as pool:
             for i, result in pool.imap_unordered(work, jobs):
                 save(result, paths[i])
                 bar.update(len(chunks[i]))
