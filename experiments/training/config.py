@@ -11,7 +11,7 @@ to the orchestrator and are not read here.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,6 +22,20 @@ from seal.core.config import ConfigError, coerce, load_config, read_yaml, to_dic
 ALGOS = ("td3", "sac", "ppo")
 PIPELINES = pipeline_names()
 """``noadv`` and every generator the registry marks as a training pipeline (`seal.adversaries.base.GENERATORS`)."""
+
+
+_POSITIVE = (lambda v: v > 0, "> 0")
+_AT_LEAST_1 = (lambda v: v >= 1, ">= 1")
+_NON_NEGATIVE = (lambda v: v >= 0, ">= 0")
+_UNIT = (lambda v: 0 < v <= 1, "in (0, 1]")
+
+
+def _check_ranges(config: Any, rules: dict[str, tuple[Callable[[Any], bool], str]]) -> None:
+    """Refuse out-of-range values when the config is built, before any run folder exists (None = unset)."""
+    for name, (ok, allowed) in rules.items():
+        value = getattr(config, name)
+        if value is not None and not ok(value):
+            raise ConfigError(f"{type(config).__name__}.{name} must be {allowed}, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -48,6 +62,13 @@ class OffPolicyHyperparams:
     gradient_steps: int = -1
     """Gradient steps per training call (-1: as many as env steps collected, one per env step as in CAT)."""
 
+    def __post_init__(self) -> None:
+        _check_ranges(self, {
+            "learning_rate": _POSITIVE, "gamma": _UNIT, "tau": _UNIT, "batch_size": _AT_LEAST_1,
+            "learning_starts": _NON_NEGATIVE, "buffer_size": _AT_LEAST_1, "train_freq": _AT_LEAST_1,
+            "gradient_steps": (lambda v: v >= 1 or v == -1, ">= 1 or -1"),
+        })
+
 
 @dataclass(frozen=True)
 class TD3Hyperparams(OffPolicyHyperparams):
@@ -57,6 +78,10 @@ class TD3Hyperparams(OffPolicyHyperparams):
     """Critic updates per actor update."""
     action_noise_std: float = 0.1
     """Gaussian exploration noise (0 = none)."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _check_ranges(self, {"policy_delay": _AT_LEAST_1, "action_noise_std": _NON_NEGATIVE})
 
 
 @dataclass(frozen=True)
@@ -87,6 +112,12 @@ class PPOHyperparams:
     """Policy ratio clip."""
     ent_coef: float = 0.0
     """Entropy bonus weight."""
+
+    def __post_init__(self) -> None:
+        _check_ranges(self, {
+            "learning_rate": _POSITIVE, "gamma": _UNIT, "n_steps": _AT_LEAST_1, "batch_size": _AT_LEAST_1,
+            "n_epochs": _AT_LEAST_1, "gae_lambda": _UNIT, "clip_range": _POSITIVE, "ent_coef": _NON_NEGATIVE,
+        })
     net_arch: tuple[int, ...] = (256, 256)
     """Hidden layer widths of policy and value networks."""
 
@@ -177,6 +208,13 @@ class EgoTrainConfig:
     pipelines: dict[str, PipelineSpec | None] = field(default_factory=default_pipelines)
     """Pipeline name -> generator (None for noadv). An entry naming its generator replaces the old one whole; one
     without ``name`` (``pipelines.cat.kwargs.prior``) patches it."""
+
+    def __post_init__(self) -> None:
+        _check_ranges(self, {
+            "total_timesteps": _AT_LEAST_1, "train_limit": _AT_LEAST_1, "n_envs": _AT_LEAST_1, "k": _AT_LEAST_1,
+            "eval_every": _NON_NEGATIVE, "eval_episodes": _NON_NEGATIVE, "checkpoint_every": _NON_NEGATIVE,
+            "torch_threads": _AT_LEAST_1,
+        })
 
 
 RESOLVED_ONLY = ("generator", "preset", "hyperparams")

@@ -82,3 +82,18 @@ def test_invalid_yaml_is_one_line_naming_the_file(tmp_path, capsys, command) -> 
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"{bad}, line 2, column 1: not valid YAML" in err[0]
     assert not (tmp_path / "out").exists()  # refused before anything was written
+
+
+@pytest.mark.parametrize(("setting", "message"), [
+    ("hyperparams.td3.batch_size=-1", "TD3Hyperparams.batch_size must be >= 1, got -1"),
+    ("hyperparams.td3.learning_rate=-1", "TD3Hyperparams.learning_rate must be > 0, got -1.0"),
+    ("hyperparams.td3.learning_rate=fast", "learning_rate must be float, got 'fast'"),
+    ("total_timesteps=0", "EgoTrainConfig.total_timesteps must be >= 1, got 0"),
+])
+def test_train_refuses_bad_values_before_writing(tmp_path, capsys, setting: str, message: str) -> None:
+    preset = Path(__file__).resolve().parents[2] / "experiments" / "configs" / "quick.yaml"
+    out = tmp_path / "run"
+    assert main(["train", "--config", str(preset), "--pipeline", "noadv", "--set", setting, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
+    assert not out.exists()
