@@ -42,6 +42,7 @@ simulation core's (`seal.envs.sim_core`), shared with `seal.envs.multi_agent.Mul
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -99,8 +100,8 @@ AdversarySpec = AdversaryBehavior | Callable[[Scenario, np.random.Generator], Ad
 """An adversary for every episode: a behaviour (reset each episode), a factory ``(scenario, rng) -> behaviour``
 called at each reset (e.g. a generator with a curriculum), or None for `ReplayBehavior` of the log."""
 
-def _checked_action(action: Any) -> np.ndarray:
-    """The action as a float64 ``[2]`` array [steering, acceleration]. Finite values outside [-1, 1] are clipped by
+def _checked_action(action: Any) -> tuple[float, float]:
+    """The action as (steering, acceleration). Finite values outside [-1, 1] are clipped by
     the kinematic step (Gymnasium's convention for Box actions); a wrong shape, or NaN / inf, raises ValueError
     (they used to become full lock and full brake without a word)."""
     try:
@@ -111,10 +112,10 @@ def _checked_action(action: Any) -> np.ndarray:
         ) from None
     if a.size != 2 or a.ndim > 2:
         raise ValueError(f"ScenarioEnv.step: action must have shape (2,) [steering, acceleration], got shape {a.shape}")
-    a = a.reshape(2)
-    if not np.isfinite(a).all():
-        raise ValueError(f"ScenarioEnv.step: action must be finite, got {a.tolist()}")
-    return a
+    steering, acceleration = a.flat  # two scalar checks: cheaper than an array reduction on every step
+    if not (math.isfinite(steering) and math.isfinite(acceleration)):
+        raise ValueError(f"ScenarioEnv.step: action must be finite, got {a.reshape(2).tolist()}")
+    return float(steering), float(acceleration)
 
 
 class ScenarioEnv(gym.Env):
@@ -218,8 +219,8 @@ class ScenarioEnv(gym.Env):
         if self._done:
             raise RuntimeError("step() called on a finished episode; call reset()")
         cfg = self.config
-        a = _checked_action(action)
-        ego = bicycle_step(self._ego, float(a[0]), float(a[1]))
+        steering, acceleration = _checked_action(action)
+        ego = bicycle_step(self._ego, steering, acceleration)
         adv = self._move_adversary(self._t)
         self._t = t = self._t + 1
         self._ego, self._adv = ego, adv

@@ -1,9 +1,9 @@
 """Lay the source tree out as ``pip install`` does (``envs/`` as ``seal/envs/``, ...) for static tools.
 
-Import-linter's graph builder and mypy find modules by walking folders; the ``package_dir`` remapping of an
-editable install is invisible to them. This copies every package's ``.py`` files (per ``[tool.setuptools]`` in
-``pyproject.toml``) into ``OUT/seal/...`` plus ``pyproject.toml``, so ``lint-imports`` and ``mypy -p seal`` run in
-``OUT`` see the installed layout. ``python tests/installed_layout.py OUT`` does it from the shell.
+`package_sources` reads ``[tool.setuptools]`` of ``pyproject.toml`` (installed package -> source folder); `build`
+copies every package's ``.py`` files into ``OUT/seal/...`` plus ``pyproject.toml``: a scratch tree the
+architecture tests may edit (e.g. add an upward import) without touching the checkout.
+``python tests/installed_layout.py OUT`` does it from the shell.
 """
 
 from __future__ import annotations

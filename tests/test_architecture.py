@@ -44,8 +44,9 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
-def test_import_contracts_hold(installed: Path) -> None:
-    result = subprocess.run([_tool("lint-imports"), "--no-cache"], cwd=installed, capture_output=True, text=True)
+def test_import_contracts_hold() -> None:
+    """``lint-imports`` as a developer runs it, from the checkout (``seal/envs`` etc. are links to the folders)."""
+    result = subprocess.run([_tool("lint-imports"), "--no-cache"], cwd=ROOT, capture_output=True, text=True)
     assert result.returncode == 0, result.stdout[-4000:] + result.stderr[-2000:]
     assert "0 broken" in result.stdout or "broken" not in result.stdout.split("Contracts:")[-1]
 
@@ -80,12 +81,17 @@ MYPY_PACKAGES = ("seal",)
 """Packages mypy checks (with the settings of ``[tool.mypy]`` in pyproject.toml): all of them."""
 
 
+def test_checkout_links_show_the_installed_layout() -> None:
+    """``seal/envs`` -> ``envs/`` (and the other remapped folders): static tools and a plain checkout see the
+    installed layout; pip installs through ``package_dir``, not the links."""
+    for pkg, src in package_sources().items():
+        assert (ROOT / Path(*pkg.split("."))).resolve() == src.resolve(), pkg
+
+
 def test_mypy_clean() -> None:
-    """``mypy -p seal`` on the installed layout, in a fixed folder so that mypy's cache makes re-runs quick."""
-    out = ROOT / ".build" / "installed"
-    build(out)
+    """``mypy -p seal`` from the checkout, with its cache in ``.build`` so that re-runs are quick."""
     args = [_tool("mypy"), "--cache-dir", str(ROOT / ".build" / "mypy_cache")]
     for pkg in MYPY_PACKAGES:
         args += ["-p", pkg]
-    result = subprocess.run(args, cwd=out, capture_output=True, text=True)
+    result = subprocess.run(args, cwd=ROOT, capture_output=True, text=True)
     assert result.returncode == 0, result.stdout[-6000:] + result.stderr[-2000:]
