@@ -34,7 +34,7 @@ from seal.envs.network_topology import describe_network
 from seal.envs.traffic_run import Simulation
 from seal.envs.windows import find_windows, window_tracks
 
-GENERATOR_VERSION = 1
+GENERATOR_VERSION = 2
 """Bump when the generated content changes for the same arguments (it is part of the build parameters)."""
 RUNS_PER_CHUNK = 16
 """Runs per chunk (= shard) for large builds; small builds use smaller chunks (`runs_per_chunk`)."""
@@ -98,6 +98,7 @@ def simulate_run(task: RunTask) -> list[Scenario]:
                 metadata={
                     "layout": task.layout,
                     "run": task.run,
+                    "group": f"{SOURCE}:seed{task.seed}:run{task.run:05d}",
                     "t0_step": w.t0,
                     "pair_min_gap_m": round(w.min_gap_m, 3),
                     "pair_collision": w.pair_collision,

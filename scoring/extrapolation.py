@@ -1,13 +1,25 @@
 """Counterfactual future-extrapolated (FE) tracks (thesis 3.3.2): "what if the agent kept its progress in lane".
 
 For each agent valid at the current step the 11-step history is kept; from the current state it is projected
-onto its lane (Frenet s, d) and continued with a constant ds per step (the current velocity projected on the lane
-direction, negative values clipped to 0) and a constant lateral offset d, following the lane's successors (the
-straightest one at a fork). Agents without a lane continue with constant Cartesian velocity. Agents not valid at
-the current step have no history to extrapolate from and keep their logged track (their FE = GT).
+onto its lane (Frenet s, d) and continued with a constant lateral offset d along its route:
 
-FE agents valid at the current step are valid until the last step, even if the logged agent left earlier; past
-the end of a lane without successors they drive straight on, off the map (no lane).
+* **Route.** The lane chain starts at the agent's current lane and, at every fork, takes the successor the agent
+  drives on in its logged future (the lane sequence it really takes; of several, the one it spends the most
+  steps on); where the log does not decide (the agent leaves the map, changes lanes or its log ends) the
+  straightest successor.
+* **Progress.** An agent that is not decelerating keeps a constant ds per step: the current velocity projected
+  on the lane direction (negative values clipped to 0). An agent that is decelerating at the current step
+  (speed change over the last 0.5 s below -`DECEL_THRESHOLD_MPS2`) keeps decelerating to a stop instead of
+  driving on: at its current deceleration, or, where its route has a stop point ahead that it would otherwise
+  overrun and can still reach at no more than `MAX_STOP_DECEL_MPS2`, at the constant deceleration that stops
+  it there. The stop point is the first conflict point of the route ahead of the agent's front (a crossing,
+  merge or lane drop: where a driver yields; `seal.scoring.conflict_points`) less `STOP_CLEARANCE_M`, or the
+  end of the route where it has no successor. Once stopped the agent stays.
+
+Agents without a lane continue with constant Cartesian velocity. Agents not valid at the current step have no
+history to extrapolate from and keep their logged track (their FE = GT). FE agents valid at the current step are
+valid until the last step, even if the logged agent left earlier; past the end of a lane without successors a
+non-decelerating agent drives straight on, off the map (no lane).
 """
 
 from __future__ import annotations
@@ -15,8 +27,17 @@ from __future__ import annotations
 import numpy as np
 
 from seal.core.scenario import CURRENT_STEP, DT_S
-from seal.scoring.frenet import RoadIndex
+from seal.scoring.frenet import LaneChain, RoadIndex
 from seal.scoring.tracks import AgentTracks, lane_attributes
+
+DECEL_THRESHOLD_MPS2 = 0.5
+"""An agent whose speed fell faster than this over the last `DECEL_WINDOW_STEPS` is decelerating (m/s^2)."""
+DECEL_WINDOW_STEPS = 5
+"""History steps (0.5 s) over which the current deceleration is measured (smooths the noise of real logs)."""
+MAX_STOP_DECEL_MPS2 = 8.0
+"""A decelerating agent stops at its route's stop point only if that needs at most this deceleration (m/s^2)."""
+STOP_CLEARANCE_M = 2.0
+"""Distance (m) between the front of an agent stopped for a conflict point and the point (half a lane width)."""
 
 
 def future_extrapolate(gt: AgentTracks, index: RoadIndex, current: int = CURRENT_STEP, dt: float = DT_S) -> AgentTracks:
@@ -27,7 +48,7 @@ def future_extrapolate(gt: AgentTracks, index: RoadIndex, current: int = CURRENT
         return gt
     pos, vel, heading = gt.pos.copy(), gt.vel.copy(), gt.heading.copy()
     valid, lane, in_lane, limit = gt.valid.copy(), gt.lane.copy(), gt.in_lane.copy(), gt.speed_limit.copy()
-    k = np.arange(1, n_fut + 1, dtype=np.float64)
+    t = np.arange(1, n_fut + 1, dtype=np.float64) * dt
     fut = slice(current + 1, n_steps)
     cartesian: list[int] = []
     for a in np.flatnonzero(gt.valid[:, current]):
@@ -39,25 +60,30 @@ def future_extrapolate(gt: AgentTracks, index: RoadIndex, current: int = CURRENT
             continue
         # The chain starts at the start of the agent's lane, so it must cover the lane plus the drive.
         speed = float(np.hypot(v0[0], v0[1]))
-        chain, seg_lane = index.chain(lane0, float(index.lane_lengths[lane0]) + speed * dt * n_fut + 1.0)
-        s0, d0, tangent = chain.project(p0)
-        # Progress per step: the current velocity projected on the lane direction (no reversing).
-        ds = max(float(v0 @ tangent), 0.0) * dt
-        s = s0 + ds * k
-        pts, head = chain.at(s, d0)
+        chain = index.chain(lane0, float(index.lane_lengths[lane0]) + speed * t[-1] + 1.0, logged_route(gt, a, current))
+        line = chain.polyline
+        s0, d0, tangent = line.project(p0)
+        v_lane = max(float(v0 @ tangent), 0.0)  # progress along the lane, no reversing
+        decel = current_deceleration(gt, a, current, dt)
+        if decel > DECEL_THRESHOLD_MPS2 and v_lane > 0.0:
+            decel = stopping_deceleration(chain, s0, float(gt.length[a]), v_lane, decel)
+            s = s0 + np.where(t < v_lane / decel, v_lane * t - 0.5 * decel * t**2, 0.5 * v_lane**2 / decel)
+        else:
+            s = s0 + v_lane * t
+        pts, head = line.at(s, d0)
         pos[a, fut] = pts
         heading[a, fut] = head
         vel[a, fut] = np.diff(np.concatenate([p0[None], pts]), axis=0) / dt
-        seg = np.clip(np.searchsorted(chain.cum, s, side="right") - 1, 0, seg_lane.size - 1)
-        on_map = s <= chain.length  # past the end of a lane without successors the agent leaves the map
-        lanes_k = np.where(on_map, seg_lane[seg], -1)
+        seg = np.clip(np.searchsorted(line.cum, s, side="right") - 1, 0, chain.seg_lane.size - 1)
+        on_map = s <= line.length  # past the end of a lane without successors the agent leaves the map
+        lanes_k = np.where(on_map, chain.seg_lane[seg], -1)
         lane[a, fut] = lanes_k
         in_lane[a, fut] = on_map & (abs(d0) <= 0.5 * index.widths[np.maximum(lanes_k, 0)])
         limit[a, fut] = np.where(on_map, index.speed_limits[np.maximum(lanes_k, 0)], np.nan)
     if cartesian:
         idx = np.array(cartesian)
         p0, v0 = gt.pos[idx, current], gt.vel[idx, current]
-        pos[idx, fut] = p0[:, None, :] + v0[:, None, :] * (k[None, :, None] * dt)
+        pos[idx, fut] = p0[:, None, :] + v0[:, None, :] * t[None, :, None]
         vel[idx, fut] = v0[:, None, :]
         heading[idx, fut] = gt.heading[idx, current][:, None]
         sub_valid = np.zeros((idx.size, n_steps), dtype=bool)
@@ -68,3 +94,43 @@ def future_extrapolate(gt: AgentTracks, index: RoadIndex, current: int = CURRENT
         pos=pos, vel=vel, heading=heading, length=gt.length, width=gt.width, valid=valid, lane=lane,
         in_lane=in_lane, speed_limit=limit,
     )
+
+
+def logged_route(gt: AgentTracks, agent: int, current: int = CURRENT_STEP) -> tuple[int, ...]:
+    """The lanes agent ``agent`` is on from the current step on in its log, most logged steps first (ties: first
+    visited first). Ranking by time spent, not by first visit, keeps a step or two on the wrong branch right at a
+    diverge (where both branches start at the same point) from deciding the route."""
+    lanes = gt.lane[agent, current:][gt.valid[agent, current:]]
+    lanes = lanes[lanes >= 0]
+    if lanes.size == 0:
+        return ()
+    values, first, counts = np.unique(lanes, return_index=True, return_counts=True)
+    order = np.lexsort((first, -counts))
+    return tuple(int(v) for v in values[order])
+
+
+def current_deceleration(gt: AgentTracks, agent: int, current: int = CURRENT_STEP, dt: float = DT_S) -> float:
+    """Speed lost per second (m/s^2, positive = decelerating) over the last `DECEL_WINDOW_STEPS` valid steps."""
+    k = DECEL_WINDOW_STEPS
+    while k > 0 and not gt.valid[agent, current - k]:
+        k -= 1
+    if k == 0:
+        return 0.0
+    speed = np.hypot(gt.vel[agent, :, 0], gt.vel[agent, :, 1])
+    return float(speed[current - k] - speed[current]) / (k * dt)
+
+
+def stopping_deceleration(chain: LaneChain, s0: float, length_m: float, v_mps: float, decel_mps2: float) -> float:
+    """Deceleration (m/s^2) of a decelerating agent at arc length ``s0`` on ``chain`` (see the module docstring):
+    ``decel_mps2``, or more if that would overrun the route's stop point and stopping there needs at most
+    `MAX_STOP_DECEL_MPS2`."""
+    front = s0 + 0.5 * length_m
+    ahead = chain.conflict_s[chain.conflict_s > front]
+    stop_front = ahead[0] - STOP_CLEARANCE_M if ahead.size else np.inf
+    if chain.dead_end:
+        stop_front = min(stop_front, chain.polyline.length)
+    room = stop_front - front
+    if not np.isfinite(room) or room <= 0.0:
+        return decel_mps2
+    needed = v_mps**2 / (2.0 * room)
+    return max(decel_mps2, needed) if needed <= MAX_STOP_DECEL_MPS2 else decel_mps2

@@ -98,7 +98,7 @@ class RoadIndex:
         self._samples = self.seg_a[self._sample_seg] + frac[:, None] * self.seg_d[self._sample_seg]
         self._search_radius = MAX_LANE_DIST_WIDTHS * float(self.widths.max()) + 0.5 * _SAMPLE_SPACING_M + 1e-6
         self._conflict_points: np.ndarray | None = None
-        self._chains: dict[int, tuple[Polyline, np.ndarray, bool]] = {}
+        self._chains: dict[tuple[int, tuple[int, ...]], LaneChain] = {}
 
     @property
     def n_lanes(self) -> int:
@@ -152,16 +152,21 @@ class RoadIndex:
         return Projection(lane=lane, s=s, d=d, in_lane=in_lane)
 
     # ------------------------------------------------------------------------------------------ lane chains
-    def chain(self, lane: int, min_length_m: float) -> tuple[Polyline, np.ndarray]:
+    def chain(self, lane: int, min_length_m: float, route: tuple[int, ...] = ()) -> LaneChain:
         """Centre polyline starting with ``lane`` and continuing through successors for at least ``min_length_m``
-        metres (or until a lane has none), plus the lane index of each of its segments ``[P-1]``. Cached per lane.
+        metres (or until a lane has none). Cached per (lane, route).
 
-        Where a lane has several successors the straightest one is taken: the counterfactual driver keeps going.
+        Where a lane has several successors the chain takes the one that comes first in ``route`` (the lanes the
+        agent drives on in its logged future, in order of preference), and the straightest one where none of them
+        is in ``route``: the counterfactual driver follows the way it really went, and keeps going where the log
+        does not say.
         """
-        hit = self._chains.get(lane)
+        key = (lane, route)
+        hit = self._chains.get(key)
         # A cached chain serves if it is long enough or ended at a dead end (it cannot grow).
-        if hit is not None and (hit[0].length >= min_length_m or hit[2]):
-            return hit[0], hit[1]
+        if hit is not None and (hit.polyline.length >= min_length_m or hit.dead_end):
+            return hit
+        rank = {r: k for k, r in reversed(list(enumerate(route)))}
         # Build generously (8 s at 50 m/s past the lane) so that one build serves every agent on the lane.
         target = max(min_length_m, float(self.lane_lengths[lane]) + 400.0)
         pts = [self.centerlines[lane]]
@@ -171,13 +176,15 @@ class RoadIndex:
         seen = {lane}
         dead_end = False
         while total < target:
-            end_dir = _end_direction(self.centerlines[current])
-            best, best_turn = -1, np.inf
-            for cand in self.successors[current]:
-                turn = abs(float(wrap_angle(_start_direction(self.centerlines[cand]) - end_dir)))
-                if cand not in seen and turn < best_turn:
-                    best, best_turn = cand, turn
-            if best < 0:
+            options = [c for c in self.successors[current] if c not in seen]
+            on_route = [c for c in options if c in rank]
+            if on_route:
+                best = min(on_route, key=rank.__getitem__)
+            elif options:
+                end_dir = _end_direction(self.centerlines[current])
+                turns = [abs(float(wrap_angle(_start_direction(self.centerlines[c]) - end_dir))) for c in options]
+                best = options[int(np.argmin(turns))]
+            else:
                 dead_end = True
                 break
             nxt = self.centerlines[best]
@@ -188,9 +195,38 @@ class RoadIndex:
             total += float(self.lane_lengths[best])
             current = best
             seen.add(best)
-        result = (Polyline(np.concatenate(pts)), np.concatenate(seg_lane), dead_end)
-        self._chains[lane] = result
-        return result[0], result[1]
+        polyline = Polyline(np.concatenate(pts))
+        lanes = np.concatenate(seg_lane)
+        result = LaneChain(polyline, lanes, dead_end, self._conflicts_along(polyline, lanes))
+        self._chains[key] = result
+        return result
+
+    def _conflicts_along(self, polyline: Polyline, seg_lane: np.ndarray) -> np.ndarray:
+        """Sorted arc lengths (m) along ``polyline`` of the road's conflict points within half a lane width of it."""
+        points = self.conflict_points
+        if points.shape[0] == 0:
+            return np.zeros(0)
+        s, d, seg = polyline.project_many(points)
+        near = np.abs(d) <= 0.5 * self.widths[seg_lane[seg]]
+        return np.sort(s[near])
+
+
+@dataclass(frozen=True)
+class LaneChain:
+    """A lane chain of `RoadIndex.chain`.
+
+    Attributes:
+        polyline: the chained centre lines.
+        seg_lane: ``[P-1]`` lane index of each segment of ``polyline``.
+        dead_end: the chain ends at a lane without (unvisited) successors.
+        conflict_s: sorted arc lengths (m) of the road's conflict points on the chain (crossings, merges, lane
+            drops; `seal.scoring.conflict_points`).
+    """
+
+    polyline: Polyline
+    seg_lane: np.ndarray
+    dead_end: bool
+    conflict_s: np.ndarray
 
 
 def _polyline_length(pts: np.ndarray) -> float:
@@ -236,6 +272,20 @@ class Polyline:
         k = int(np.argmin(dist2))
         cross = self.tang[k, 0] * ry[k] - self.tang[k, 1] * rx[k]
         return float(self.cum[k] + t[k] * self.seg_len[k]), float(np.sign(cross) * np.sqrt(dist2[k])), self.tang[k]
+
+    def project_many(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`project` for points ``xy [N, 2]``: arc lengths ``[N]`` (m), signed offsets ``[N]`` (m) and the index of
+        the closest segment ``[N]``."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        a = self.points[:-1]
+        rx, ry = xy[:, 0, None] - a[None, :, 0], xy[:, 1, None] - a[None, :, 1]  # [N, P-1]
+        t = np.clip((rx * self.tang[:, 0] + ry * self.tang[:, 1]) / self.seg_len, 0.0, 1.0)
+        ex, ey = rx - t * self.seg_len * self.tang[:, 0], ry - t * self.seg_len * self.tang[:, 1]
+        k = np.argmin(ex * ex + ey * ey, axis=1)
+        n = np.arange(xy.shape[0])
+        cross = self.tang[k, 0] * ry[n, k] - self.tang[k, 1] * rx[n, k]
+        dist = np.hypot(ex[n, k], ey[n, k])
+        return self.cum[k] + t[n, k] * self.seg_len[k], np.sign(cross) * dist, k
 
     def at(self, s: np.ndarray, d: float) -> tuple[np.ndarray, np.ndarray]:
         """Points ``[K, 2]`` at arc lengths ``s [K]`` shifted ``d`` metres to the left, and their headings ``[K]``.

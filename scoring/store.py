@@ -39,7 +39,8 @@ from seal.scoring.scores import VARIANTS, ScenarioScores, score_scenario
 from seal.scoring.social import SOCIAL_FEATURES
 
 SCORES_FILE = "scores.npz"
-SCORES_VERSION = 1
+SCORES_VERSION = 2
+"""Bump when scores change for the same scenarios (2: route-following, stopping counterfactuals)."""
 PAIR_KEYS = ("gt", "fe", "as_ij", "as_ji")
 FIT_SCENARIOS = 300
 """Scenarios (a seeded sample) whose logged tracks fit the motion primitives; more adds time, not accuracy."""

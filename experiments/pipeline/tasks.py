@@ -27,7 +27,7 @@ OPTIONS: dict[str, tuple[str, ...]] = {
     "generate": ("n", "seed", "layouts", "workers", "inattentive_share", "aggressive_share", "overwrite",
                  "no_progress"),
     "score": ("workers", "no_progress"),
-    "split": ("hard_quantile", "n_train", "n_eval", "n_hard", "seed"),
+    "split": ("hard_quantile", "n_train", "n_eval", "n_hard", "seed", "hard_by", "score"),
     "prior": ("split", "config", "epochs", "max_minutes", "no_time_budget", "threads", "seed", "limit", "resume",
               "no_progress"),
     "goose": ("preset", "config", "algo", "steps", "split", "limit", "eval_split", "eval_limit", "no_eval", "run_dir",

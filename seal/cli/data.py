@@ -87,8 +87,25 @@ def cmd_data_split(args: argparse.Namespace) -> int:
         n_eval=args.n_eval,
         n_hard=args.n_hard,
         seed=args.seed,
+        score=args.score,
+        hard_by=args.hard_by,
     )
-    print(json.dumps(result, indent=2, default=str))
+    if args.json:
+        print(json.dumps(result, indent=2, default=str))
+        return 0
+    print(
+        f"splits of {args.dir} (Hard by {result['hard_by']}, {result['score'].upper()} score above "
+        f"{result['threshold']:.3f}): train {result['train']}, eval {result['eval']}, hard {result['hard']} "
+        f"scenes from {result['groups']['train']} / {result['groups']['eval']} / {result['groups']['hard']} "
+        f"groups; groups shared between splits: {result['shared_groups']}"
+    )
+    if result["hard_by"] == "pair":
+        print(f"  Hard scenes whose higher-scoring agent became the ego: {result['roles_exchanged']}")
+    print(f"  {'split':<8}{'GT close call':>15}{'GT collision':>14}{'AC close call':>15}{'AC collision':>14}")
+    for name, cc in result["close_calls"].items():
+        if cc:
+            print(f"  {name:<8}{cc['gt_close_call']:>15.1%}{cc['gt_collision']:>14.1%}"
+                  f"{cc['ac_close_call']:>15.1%}{cc['ac_collision']:>14.1%}")
     return 0
 
 
@@ -208,16 +225,22 @@ def _register_dataset_tools(data_sub: argparse._SubParsersAction) -> None:
 
     split = data_sub.add_parser(
         "split",
-        help="Normal train / eval and Hard splits from the AC scene score",
-        description="Hard = a seeded sample of the scenes above --hard-quantile of the AC scene score; Normal "
-        "train / eval are drawn from the rest. Recorded in the manifest; same arguments, same splits.",
+        help="Normal train / eval and Hard splits from the SafeShift scores, whole recordings per split",
+        description="Hard = a seeded sample of the scenes whose interacting pair's trajectory scores are both "
+        "above --hard-quantile (--hard-by pair, thesis 6.4: the higher-scoring agent becomes the ego) or whose "
+        "scene score is (--hard-by scene); Normal train / eval are drawn from the rest. Windows cut from one "
+        "recording or traffic run never go to two splits. Recorded in the manifest; same arguments, same splits.",
     )
     split.add_argument("dir", help="dataset directory (scored with `seal data score`)")
+    split.add_argument("--hard-by", choices=("pair", "scene"), default="pair", help="Hard rule (default pair)")
+    split.add_argument("--score", choices=("gt", "fe", "as", "ac"), default="ac",
+                       help="SafeShift score variant the Hard rule ranks by (default ac)")
     split.add_argument("--hard-quantile", type=share("--hard-quantile"), default=0.8, help="default 0.8")
     split.add_argument("--n-train", type=positive_int("--n-train"), default=400, help="default 400")
     split.add_argument("--n-eval", type=positive_int("--n-eval"), default=100, help="default 100")
     split.add_argument("--n-hard", type=positive_int("--n-hard"), default=100, help="default 100")
     split.add_argument("--seed", type=int, default=42, help="default 42")
+    split.add_argument("--json", action="store_true", help="print the result as JSON")
     split.set_defaults(func=cmd_data_split)
 
     report = data_sub.add_parser(

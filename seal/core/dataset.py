@@ -26,7 +26,7 @@ import numpy as np
 
 from seal.core.atomic import atomic_write, atomic_write_json
 from seal.core.road import RoadDescription, RoadError
-from seal.core.scenario import Scenario, ScenarioError
+from seal.core.scenario import GroupError, Scenario, ScenarioError, group_of
 
 SCHEMA_VERSION = 1
 MANIFEST = "manifest.json"
@@ -217,7 +217,7 @@ class Dataset:
             if limit is not None and len(out) >= limit:
                 return out[:limit]
             scenarios = read_shard(self.root / entry["file"], entry)
-            out.extend(s for s in scenarios if wanted is None or s.scenario_id in wanted)
+            out.extend(self._with_roles(s) for s in scenarios if wanted is None or s.scenario_id in wanted)
         if limit is not None:
             out = out[:limit]
         if ids is not None:
@@ -225,6 +225,24 @@ class Dataset:
             if missing:
                 raise DatasetError(f"{self.root}: unknown scenario ids {sorted(missing)[:5]}")
         return out
+
+    @property
+    def roles(self) -> dict[str, list[int]]:
+        """``{scenario_id: [ego_id, adv_id]}`` role assignments that override the built ones (set by
+        `seal data split --hard-by pair`, which makes the higher-scoring agent of a Hard pair the ego)."""
+        return self.manifest.get("roles") or {}
+
+    def _with_roles(self, s: Scenario) -> Scenario:
+        roles = self.roles.get(s.scenario_id)
+        if roles is None:
+            return s
+        try:
+            return s.with_roles(int(roles[0]), int(roles[1]))
+        except (ScenarioError, TypeError, ValueError, IndexError) as exc:
+            raise DatasetError(
+                f"{self.root / MANIFEST}: field 'roles' of scenario {s.scenario_id!r} is invalid ({exc}); "
+                "re-run `seal data split`"
+            ) from None
 
     def get(self, scenario_id: str) -> Scenario:
         return self.load(ids=[scenario_id])[0]
@@ -261,6 +279,13 @@ def load_split(
         raise ValueError(f"no dataset given for the {what or 'requested'} scenarios (--dataset DIR)")
     ds = Dataset.open(root)
     of_what = f" for the {what} scenarios" if what else ""
+    params = ds.manifest.get("split_params") or {}
+    if split not in (None, ALL) and params.get("method") == "safeshift" and "shared_groups" not in params:
+        raise ValueError(
+            f"dataset {root}: its splits were drawn before splits kept each recording / traffic run in one split "
+            f"(windows of one run may be in train and eval); run `seal data score {root}` and "
+            f"`seal data split {root}` again"
+        )
     if split in (None, ALL):
         scenarios = ds.load(limit=limit)
     elif split == ALL_BUT_EVAL:
@@ -270,7 +295,7 @@ def load_split(
                 f"split {ALL_BUT_EVAL}: {root} has no {' / '.join(HELD_OUT_SPLITS)} split to leave out "
                 f"(run `seal data split` first, or use split {ALL})"
             )
-        scenarios = [s for s in ds.load() if s.scenario_id not in held][:limit]
+        scenarios = _outside_groups(ds.load(), held)[:limit]
     elif split not in ds.splits:
         raise ValueError(
             f"dataset {root} has no split {split!r}{of_what}; splits: {sorted(ds.splits) or 'none'} "
@@ -281,6 +306,17 @@ def load_split(
     if not scenarios and not allow_empty:
         raise ValueError(f"dataset {root}: no{' ' + what if what else ''} scenarios in split {split!r}")
     return scenarios
+
+
+def _outside_groups(scenarios: Sequence[Scenario], held: set[str]) -> list[Scenario]:
+    """The scenarios that are not in ``held`` and share no recording / traffic run (`group_of`) with one that is,
+    so that a fit on them never sees another window of a held-out scene. Without group ids (hand-built
+    datasets) each scenario is its own group."""
+    try:
+        held_groups = {group_of(s) for s in scenarios if s.scenario_id in held}
+        return [s for s in scenarios if s.scenario_id not in held and group_of(s) not in held_groups]
+    except GroupError:
+        return [s for s in scenarios if s.scenario_id not in held]
 
 
 def summarize(scenarios: Sequence[Scenario]) -> dict[str, Any]:

@@ -102,6 +102,33 @@ class Scenario:
     def layout(self) -> str:
         return str(self.metadata.get("layout", self.road.layout))
 
+    def with_roles(self, ego_id: int, adv_id: int) -> Scenario:
+        """A copy where ``ego_id`` drives as the ego and ``adv_id`` is the adversary (tracks are shared).
+
+        When the two roles are exchanged, metadata keys that describe a role (``ego_*`` / ``adv_*``, e.g. the
+        drivers of a generated scenario) are exchanged with them and ``roles_swapped`` records it.
+        """
+        if (int(ego_id), int(adv_id)) == (self.ego_id, self.adv_id):
+            return self
+        meta = dict(self.metadata)
+        if (int(ego_id), int(adv_id)) == (self.adv_id, self.ego_id):
+            for key in [k for k in self.metadata if k.startswith("ego_")]:
+                twin = "adv_" + key[len("ego_"):]
+                if twin in self.metadata:
+                    meta[key], meta[twin] = self.metadata[twin], self.metadata[key]
+            meta["roles_swapped"] = not bool(self.metadata.get("roles_swapped", False))
+        return Scenario(
+            scenario_id=self.scenario_id,
+            tracks=self.tracks,
+            agent_ids=self.agent_ids,
+            agent_types=self.agent_types,
+            ego_id=ego_id,
+            adv_id=adv_id,
+            road=self.road,
+            source=self.source,
+            metadata=meta,
+        )
+
     def with_metadata(self, **updates: Any) -> Scenario:
         """A copy with ``metadata`` updated (tracks are shared, they are never modified in place)."""
         meta = dict(self.metadata)
@@ -117,6 +144,32 @@ class Scenario:
             source=self.source,
             metadata=meta,
         )
+
+
+class GroupError(ScenarioError):
+    """A scenario does not say which recording or traffic run it was cut from."""
+
+
+def group_of(s: Scenario) -> str:
+    """The recording / traffic run ``s`` was cut from: windows of one group must stay in one split.
+
+    ``metadata["group"]`` where the builder recorded it; for datasets built before group ids existed it is
+    derived from what their metadata already holds: a generated window's build seed and run number, or an
+    imported window's source (its recording file). Raises `GroupError` when neither is there (hand-built
+    scenarios: give them ``metadata["group"]``).
+    """
+    group = s.metadata.get("group")
+    if group is not None:
+        return str(group)
+    if "run" in s.metadata:
+        return f"{s.source}:seed{s.metadata.get('seed', '?')}:run{int(s.metadata['run']):05d}"
+    if "source_file" in s.metadata:  # imported before group ids: the recording is the source
+        return s.source
+    raise GroupError(
+        f"scenario {s.scenario_id!r}: no 'group' in its metadata and no source or run to derive it from; "
+        "rebuild the dataset with this seal (`seal data generate` / `seal data import`) so every window records "
+        "the recording it was cut from"
+    )
 
 
 def validate_scenario(s: Scenario) -> None:

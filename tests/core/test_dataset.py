@@ -179,3 +179,50 @@ def test_summary_counts() -> None:
     assert info["agents_per_scenario"]["mean"] == pytest.approx(3.5)
     assert info["track_length_steps"]["max"] == N_STEPS
     assert info["track_length_steps"]["min"] == 70
+
+
+def test_all_but_eval_leaves_out_every_window_of_a_held_out_group(tmp_path: Path) -> None:
+    """A fit on `all-but-eval` must not see another window of a recording whose scene is held out."""
+    from seal.core.dataset import ALL_BUT_EVAL, load_split
+
+    scenarios = [_scenario(i).with_metadata(group=f"run{i // 2}") for i in range(6)]  # 3 groups of 2 windows
+    ds = write_dataset(tmp_path / "ds", scenarios)
+    ds.update_manifest(splits={"train": ["s0000", "s0001"], "eval": ["s0002"], "hard": ["s0005"]})
+    assert [s.scenario_id for s in load_split(tmp_path / "ds", ALL_BUT_EVAL)] == ["s0000", "s0001"]
+
+
+def test_safeshift_splits_drawn_before_groups_are_refused(tmp_path: Path) -> None:
+    from seal.core.dataset import load_split
+
+    ds = write_dataset(tmp_path / "ds", [_scenario(i) for i in range(3)])
+    ds.update_manifest(splits={"train": ["s0000"], "eval": ["s0001"]}, split_params={"method": "safeshift"})
+    with pytest.raises(ValueError, match="seal data split .* again"):
+        load_split(tmp_path / "ds", "train")
+    ds.update_manifest(split_params={"method": "safeshift", "shared_groups": 0})
+    assert len(load_split(tmp_path / "ds", "train")) == 1
+
+
+def test_roles_in_the_manifest_apply_to_every_load(tmp_path: Path) -> None:
+    scenario = _scenario(0).with_metadata(ego_driver="careful", adv_driver="aggressive")
+    ds = write_dataset(tmp_path / "ds", [scenario, _scenario(1)])
+    ds.update_manifest(roles={"s0000": [101, 100]})
+    swapped, plain = Dataset.open(tmp_path / "ds").load()
+    assert (swapped.ego_id, swapped.adv_id) == (101, 100) and (plain.ego_id, plain.adv_id) == (100, 101)
+    assert swapped.metadata["ego_driver"] == "aggressive" and swapped.metadata["adv_driver"] == "careful"
+    assert swapped.metadata["roles_swapped"] is True
+    np.testing.assert_array_equal(swapped.tracks, scenario.tracks)  # the tracks are untouched
+    ds.update_manifest(roles={"s0000": [100, 999]})
+    with pytest.raises(DatasetError, match="field 'roles' of scenario 's0000' is invalid"):
+        Dataset.open(tmp_path / "ds").load()
+
+
+def test_group_of_reads_or_derives_the_recording() -> None:
+    from seal.core.scenario import GroupError, group_of
+
+    assert group_of(_scenario(0).with_metadata(group="run7")) == "run7"
+    generated = _scenario(0).with_metadata(run=12, seed=3)
+    assert group_of(generated) == "test:seed3:run00012"
+    imported = _scenario(0).with_metadata(source_file="a.xml")
+    assert group_of(imported) == "test"
+    with pytest.raises(GroupError, match="no 'group' in its metadata"):
+        group_of(_scenario(0))

@@ -324,7 +324,8 @@ def test_imported_datasets_score_and_split(tmp_path: Path) -> None:
         write(src / f"f{k}.xml", document(road_2020a(), cut_in(gap_m=gap, v=16.0 + k)))
     import_files([src], tmp_path / "ds", "commonroad", progress=False)
     score_dataset(tmp_path / "ds", workers=1, progress=False)
-    result = make_splits(tmp_path / "ds", hard_quantile=0.5, n_train=2, n_eval=1, n_hard=2, seed=0)
+    result = make_splits(tmp_path / "ds", hard_quantile=0.5, n_train=2, n_eval=1, n_hard=2, seed=0, hard_by="scene")
+    assert result["shared_groups"] == 0 and sum(result["groups"].values()) == 5  # one group per recording
     splits = Dataset.open(tmp_path / "ds").splits
     assert (result["train"], result["eval"], result["hard"]) == (2, 1, 2)
     assert len({*splits["train"], *splits["eval"], *splits["hard"]}) == 5

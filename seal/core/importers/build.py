@@ -63,7 +63,8 @@ def scenarios_from_log(
                 adv_id=int(ids[1]),
                 road=road,
                 source=source,
-                metadata={**metadata, **window_metadata(log, w)},
+                # Every window of one recording is one group: splits keep a recording's windows together.
+                metadata={"group": source, **metadata, **window_metadata(log, w)},
             )
         )
     return out
