@@ -58,7 +58,7 @@ def cmd_import(args: argparse.Namespace) -> int:
 def cmd_replay_check(args: argparse.Namespace) -> int:
     from seal.experiments.evaluation.replay_check import run
 
-    return run(args.dir, args.out, args.limit, progress=not args.no_progress)
+    return run(args.dir, args.out, args.limit, progress=not args.no_progress, ego=args.ego)
 
 
 def register(tree: CommandTree) -> None:
@@ -99,4 +99,9 @@ def register(tree: CommandTree) -> None:
     check.add_argument("--out", default=None, help="write the full result (one row per scenario) as JSON")
     check.add_argument("--limit", type=positive_int("--limit"), default=None, help="only the first N scenarios")
     check.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    check.add_argument(
+        "--ego", choices=("logged", "heuristic"), default="logged",
+        help="who drives the ego: its logged track (default) or the rule-based heuristic driver, whose failures "
+        "get the same explanations",
+    )
     check.set_defaults(func=cmd_replay_check)
