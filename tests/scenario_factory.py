@@ -15,8 +15,8 @@ from collections.abc import Callable
 import numpy as np
 
 from seal.core.road import LaneSpec, RoadDescription
+from seal.core.road_area import offset_polyline
 from seal.core.scenario import CURRENT_STEP, DT_S, N_STEPS, Scenario
-from seal.envs.road_geometry import offset_polyline
 
 LANE_WIDTH_M = 4.0
 

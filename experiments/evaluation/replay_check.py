@@ -46,7 +46,6 @@ from seal.envs.road_geometry import get_road_geometry
 from seal.envs.route import Route
 from seal.envs.scenario_env import DEFAULT_CONFIG, ScenarioEnv
 
-
 EGO_DRIVERS = ("logged", "heuristic")
 """Who drives the ego: its logged track turned into actions, or the rule-based `HeuristicDriver` (same failure
 explanations; the heuristic shows how a driver that does not know the log copes with the imported road)."""
@@ -87,10 +86,8 @@ def replay_one(env: ScenarioEnv, scenario: Scenario, ego_driver: str = "logged")
     obs, _ = env.reset(options={"scenario_id": scenario.scenario_id})
     t = CURRENT_STEP
     while True:
-        if driver is not None:
-            a = driver.act(obs)
-        else:
-            a = actions[t] if t < len(actions) else np.zeros(2)
+        logged = actions[t] if t < len(actions) else np.zeros(2)
+        a = driver.act(obs) if driver is not None else logged
         obs, _, terminated, truncated, info = env.step(a)
         t += 1
         if terminated or truncated:
