@@ -140,17 +140,23 @@ def test_road_from_lanelets(good_file: Path) -> None:
 
 def test_2018b_markings_are_inferred_from_adjacency(tmp_path: Path) -> None:
     w = LANE_W
+    oncoming = '<adjacentLeft ref="3" drivingDir="opposite"/>'
     lanes = [
         lanelet(1, [(0, w), (300, w)], [(0, 0), (300, 0)], adj_left=2, extra="<speedLimit>22.2</speedLimit>"),
-        lanelet(2, [(0, 2 * w), (300, 2 * w)], [(0, w), (300, w)], adj_right=1),
+        lanelet(2, [(0, 2 * w), (300, 2 * w)], [(0, w), (300, w)], adj_right=1, extra=oncoming),
+        # Lane 3 runs the other way (its left border is lane 2's left border); its right side has no neighbour.
+        lanelet(3, [(300, 2 * w), (0, 2 * w)], [(300, 3 * w), (0, 3 * w)],
+                extra='<adjacentLeft ref="2" drivingDir="opposite"/>'),
     ]
     obs = [obstacle(7, [(k, 10 + 15 * k * 0.1, 1.75, 0.0, 15.0) for k in range(40)], tag="obstacle", role="dynamic"),
            obstacle(8, [(0, 50.0, 5.25, 0.0, None)], tag="obstacle", role="static")]
     rec = read_commonroad(write(tmp_path / "old.xml", document(lanes, obs, version="2018b")))
     assert rec.version == "2018b"
-    # No lineMarking: striped towards a same-direction neighbour, continuous at the road edge.
-    assert rec.road.lane("1").line_types == ("striped", "continuous")
+    # No lineMarking: striped towards a same-direction neighbour, continuous towards oncoming traffic (a median),
+    # unmarked ("none") without a neighbour: not a solid line; the drivable area still ends the road there.
+    assert rec.road.lane("1").line_types == ("striped", "none")
     assert rec.road.lane("2").line_types == ("continuous", "striped")
+    assert rec.road.lane("3").line_types == ("continuous", "none")
     assert rec.road.lane("1").speed_limit_mps == pytest.approx(22.2)
     assert rec.road.lane("2").speed_limit_mps == pytest.approx(30.0)
     assert rec.log.agent_types == ("vehicle", "vehicle")
@@ -308,7 +314,9 @@ def test_an_interrupted_import_resumes_without_rereading_done_files(
     monkeypatch.setitem(driver.FORMATS, "commonroad", driver.Format(".xml", 8, flaky))
     with pytest.raises(KeyboardInterrupt):
         import_files([src], tmp_path / "ds", "commonroad", progress=False)
-    assert (tmp_path / "ds" / "build.json").exists() and not (tmp_path / "ds" / "manifest.json").exists()
+    # The interrupted build waits in the staging folder; no output folder exists until the import completes.
+    staging = driver.staging_dir(tmp_path / "ds")
+    assert (staging / "build.json").exists() and not (tmp_path / "ds").exists()
     ds, report = import_files([src], tmp_path / "ds", "commonroad", progress=False)
     assert seen == ["f0.xml", "f1.xml", "f1.xml", "f2.xml"]  # f0 was done before the interruption
     assert report["scenarios"] == 3 and [s.scenario_id for s in ds.load()] == ["f0-00", "f1-00", "f2-00"]
