@@ -68,7 +68,10 @@ def register(tree: CommandTree) -> None:
         help="import recorded scenarios (CommonRoad XML, ScenarioNet pickles) as a dataset",
         description="Import recorded driving scenarios into a seal dataset: the road from the recorded map, the "
         "agents' tracks at 10 Hz, and 9.1 s windows around interacting (ego, adversary) pairs. The result is an "
-        "ordinary dataset (score, split, evaluate it like a generated one).",
+        "ordinary dataset (score, split, evaluate it like a generated one). The import is atomic: it is built in a "
+        "hidden staging folder next to --out and renamed when complete, so a failed import leaves nothing behind; "
+        "an interrupted one resumes, reading again the files that changed. --json prints the report: files read "
+        "and skipped (with reasons), scenarios, and what was repaired or dropped and why.",
     )
     formats = imp.add_subparsers(dest="import_format", metavar="FORMAT", required=True)
     for fmt, (help_text, description, per_file) in _DESCRIPTIONS.items():

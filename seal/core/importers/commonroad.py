@@ -14,7 +14,12 @@ What is read:
 * obstacles (2020a ``dynamicObstacle`` / ``staticObstacle``; 2018b ``obstacle`` with ``role``): ``type``, a
   ``rectangle`` (or ``circle``) shape, the ``initialState`` and the ``trajectory`` states (``time`` step,
   ``position`` of the shape centre, ``orientation``, ``velocity`` along the orientation; missing velocities
-  come from the positions). Static obstacles stand still for the whole recording. Trajectories at another rate
+  come from the positions). Uncertain states (the format allows them; e.g. BMW-sourced files) are read as their
+  middle: a ``position`` given as a ``rectangle`` / ``circle`` / ``polygon`` as the shape's centre, an
+  ``orientation`` / ``velocity`` given as ``intervalStart`` / ``intervalEnd`` as the midpoint; they are counted
+  (`CommonRoadRecording.uncertain_states`). Pedestrians and bicycles are kept as replayed agents (their
+  rectangle or circle box), never as ego or adversary.
+  Static obstacles stand still for the whole recording. Trajectories at another rate
   than 10 Hz are resampled (`seal.core.importers.tracks`).
 
 Bad input raises `ImportFormatError` naming the file and the element: malformed XML, an unsupported version,

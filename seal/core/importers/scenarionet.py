@@ -9,16 +9,24 @@ Files are read with `seal.core.importers.safe_pickle` (numpy arrays and plain co
   other) and ``state`` arrays of one entry per time stamp: ``position`` ``[T, 2|3]``, ``heading`` ``[T]``,
   ``velocity`` ``[T, 2]`` (from the positions when absent), ``length`` / ``width`` ``[T]`` (defaults by type
   when absent) and ``valid`` ``[T]``. Invalid stretches of up to `MAX_BRIDGE_STEPS` are interpolated (brief
-  occlusions); longer gaps split a track and the window keeps one piece (`seal.core.importers.windows`);
+  occlusions); longer gaps split a track and the window keeps one piece (`seal.core.importers.windows`). A
+  vehicle wider than long whose heading follows its motion has its length and width swapped back
+  (`box_is_swapped`: ScenarioNet's nuScenes converter writes the ego's box that way), counted as
+  ``repaired["swapped_boxes"]``; tracks never valid are dropped (``dropped["tracks_never_valid"]``).
+  Pedestrians and cyclists stay in the scenario as replayed agents (their logged oriented boxes: the ego's
+  sensors see them and overlapping one is a crash); only vehicles can be the ego or the adversary;
 * ``map_features``: lane centre lines (``LANE_*`` types except bike lanes) with their width - the per-point
   ``width`` ``[P, 2]`` (distances to the left / right boundary, Waymo), else the lane ``polygon``, else
   `DEFAULT_LANE_WIDTH_M` -, ``exit_lanes`` as successors and ``speed_limit_kmh`` / ``speed_limit_mph``; the
   line type of each lane side comes from the nearest road line or road edge feature along that side
   (``ROAD_EDGE_*`` and solid lines -> ``continuous``, broken lines -> ``striped``, none -> ``none``; the
-  drivable-area boundary still gives the road edge there).
+  drivable-area boundary still gives the road edge there). A lane or line feature whose polyline has fewer than
+  2 distinct finite points (real Waymo maps hold single-point lanes) is dropped and counted
+  (``dropped["degenerate_map_features"]``), never the whole scenario.
 
-The ego is the SDC; the adversary the first object of interest that is a vehicle with a usable track, else the
-most interacting vehicle (`seal.core.importers.windows.find_windows` with a fixed ego).
+The ego is the SDC (a parked SDC, one that never gets `MIN_DISPLACEMENT_M` from its start, is reported as such
+by `parked_ego`: there is nothing to drive); the adversary the first object of interest that is a vehicle with a
+usable track, else the most interacting vehicle (`seal.core.importers.windows.find_windows` with a fixed ego).
 """
 
 from __future__ import annotations
