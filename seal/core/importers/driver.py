@@ -251,6 +251,7 @@ def _report(
 
 def staging_dir(out: Path) -> Path:
     """Where an import into ``out`` is built before it is renamed to ``out`` (a hidden sibling folder)."""
+    out = out.resolve() if out.name in ("", "..") else out  # "." or "dir/..": name the folder itself
     return out.with_name(f".{out.name}.importing")
 
 
