@@ -162,10 +162,28 @@ class FrameRenderer:
             color = EGO if i == ego_index else ADV if i == adv_index else OTHER
             self._draw_box(frame, row, color, x0, y_top)
         if text:
-            for k, line in enumerate(text.split("\n")):
+            for k, line in enumerate(self.wrap_text(text)):
                 img = self._font.render(line, True, TEXT, (0, 0, 0))
                 frame.blit(img, (6, 6 + k * (img.get_height() + 2)))
         return np.ascontiguousarray(pygame.surfarray.array3d(frame).swapaxes(0, 1))
+
+    def wrap_text(self, text: str) -> list[str]:
+        """``text`` as lines that fit the frame (6 px margins): each line of it broken at spaces (a single word
+        wider than the frame is cut), so a title is not cut off on a narrow frame."""
+        room = self.size[0] - 12
+        out: list[str] = []
+        for line in text.split("\n"):
+            current = ""
+            for word in line.split(" "):
+                trial = f"{current} {word}" if current else word
+                if current and self._font.size(trial)[0] > room:
+                    out.append(current)
+                    trial = word
+                while len(trial) > 1 and self._font.size(trial)[0] > room:
+                    trial = trial[:-1]
+                current = trial
+            out.append(current)
+        return out
 
     def _draw_box(self, frame: pygame.Surface, row: np.ndarray, color: tuple[int, int, int], x0: float,
                   y_top: float) -> None:

@@ -29,12 +29,12 @@ import numpy as np
 import shapely
 
 from seal.core.road import RoadDescription
+from seal.core.road_area import drivable_area, lane_borders
+from seal.core.road_area import offset_polyline as offset_polyline  # re-exported: older callers import it here
 
 CELL_M = 20.0
 SIMPLIFY_M = 0.1
 """Border polylines are simplified with this tolerance (m): fewer segments, same rays to within 10 cm."""
-_UNION_PAD_M = 0.05
-"""Lane polygons are grown by this much before the union so float gaps between adjacent lanes close."""
 
 
 @dataclass(frozen=True)
@@ -112,19 +112,6 @@ class SegmentGrid:
         return hit
 
 
-def offset_polyline(pts: np.ndarray, offset: float) -> np.ndarray:
-    """Polyline ``[P, 2]`` shifted by ``offset`` metres to its left (negative: right), mitred at vertices."""
-    seg = np.diff(pts, axis=0)
-    seg_len = np.maximum(np.hypot(seg[:, 0], seg[:, 1]), 1e-12)
-    normals = np.stack([-seg[:, 1], seg[:, 0]], axis=1) / seg_len[:, None]  # left normals [P-1, 2]
-    vn = np.vstack([normals[:1], normals[:-1] + normals[1:], normals[-1:]])
-    vn /= np.maximum(np.hypot(vn[:, 0], vn[:, 1]), 1e-12)[:, None]
-    # Mitre: scale by 1 / cos(half turn angle), capped so sharp corners do not spike.
-    cos_half = np.ones(len(pts))
-    cos_half[1:-1] = np.einsum("ij,ij->i", vn[1:-1], normals[1:])
-    return pts + vn * (offset / np.clip(cos_half, 0.5, None))[:, None]
-
-
 def _simplify(pts: np.ndarray) -> np.ndarray:
     if len(pts) <= 2:
         return pts
@@ -143,23 +130,15 @@ class RoadGeometry:
     def __init__(self, road: RoadDescription, ray_range_m: float = 50.0, line_range_m: float = 20.0) -> None:
         self.road = road
         lanes = road.lanes
-        lefts, rights, polys = [], [], []
-        for lane in lanes:
-            c = lane.centerline
-            left = offset_polyline(c, lane.width_m / 2)
-            right = offset_polyline(c, -lane.width_m / 2)
-            lefts.append(left)
-            rights.append(right)
-            polys.append(shapely.make_valid(shapely.Polygon(np.vstack([left, right[::-1]]))))
+        lefts, rights, polys = lane_borders(road)
         self.lane_left = lefts
         """Left border polyline of each lane ``[P, 2]`` (m)."""
         self.lane_right = rights
         self.speed_limits = np.array([lane.speed_limit_mps for lane in lanes], dtype=np.float64)
 
-        area = shapely.union_all([shapely.buffer(p, _UNION_PAD_M, join_style="mitre") for p in polys])
+        area = drivable_area(polys)
         self.drivable = area
         """Union of the lane polygons (shapely geometry, prepared for fast point tests)."""
-        shapely.prepare(self.drivable)
         self._grown_cache: dict[float, shapely.Geometry] = {}
         self._limit_cells: dict[tuple[int, int], float] = {}
 

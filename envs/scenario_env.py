@@ -52,6 +52,7 @@ import numpy as np
 from gymnasium import spaces
 
 from seal.core.outcome import Outcome
+from seal.core.road_area import OFFROAD_TOLERANCE_M
 from seal.core.scenario import CURRENT_STEP, VALID, Scenario
 from seal.envs.behaviors import AdversaryBehavior, BehaviorOutput, ReplayBehavior
 from seal.envs.kinematics import AgentState, bicycle_step
@@ -81,7 +82,7 @@ DEFAULT_CONFIG: dict[str, Any] = {
     "out_of_road_penalty": 10.0,
     "crash_penalty": 1.0,
     "check_continuous_lines": True,
-    "offroad_tolerance_m": 0.5,
+    "offroad_tolerance_m": OFFROAD_TOLERANCE_M,
     "split": None,
 }
 """Config keys (see the module docstring):

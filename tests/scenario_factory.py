@@ -5,18 +5,25 @@ not trivially exact).
 Roads: `straight_road` (multi-lane, lane 0 rightmost at y = 0, lanes to the left at +y) and `curved_road`
 (straight, left-hand arc, straight). Agents: `simulate_track`. Scenarios: `highway_scenario` (random traffic),
 `lane_change_scenario`, `curve_scenario`, `stopped_adversary_scenario`.
+
+Recordings for the importer tests: CommonRoad XML documents (`document`, `lanelet`, `obstacle`, `road_2020a`,
+`cut_in`) and ScenarioNet scenario dicts in the documented format (`scenarionet_scenario`, `dump_pickle`).
 """
 
 from __future__ import annotations
 
+import collections
 import math
+import pickle
 from collections.abc import Callable
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from seal.core.road import LaneSpec, RoadDescription
+from seal.core.road_area import offset_polyline
 from seal.core.scenario import CURRENT_STEP, DT_S, N_STEPS, Scenario
-from seal.envs.road_geometry import offset_polyline
 
 LANE_WIDTH_M = 4.0
 
@@ -249,3 +256,172 @@ def highway_scenario(seed: int, n_lanes: int = 3, n_agents: int = 12, scenario_i
     adv = min(cands, key=lambda i: abs(tracks[i][CURRENT_STEP, 0] - ex)) if cands else (ego + 1) % len(tracks)
     order = [ego, adv] + [i for i in range(len(tracks)) if i not in (ego, adv)]
     return make_scenario(road, [tracks[i] for i in order], scenario_id or f"highway-{seed}")
+
+
+# ------------------------------------------------------------------------------------------------ recordings
+# CommonRoad XML documents (importer tests).
+CR_LANE_W = 3.5
+
+
+def _cr_bound(tag: str, pts: list[tuple[float, float]], marking: str | None) -> str:
+    body = "".join(f"<point><x>{x}</x><y>{y}</y></point>" for x, y in pts)
+    if marking:
+        body += f"<lineMarking>{marking}</lineMarking>"
+    return f"<{tag}>{body}</{tag}>"
+
+
+def lanelet(lid: int, left: list, right: list, marks: tuple[str | None, str | None] = (None, None),
+            succ: tuple[int, ...] = (), adj_left: int | None = None, adj_right: int | None = None,
+            extra: str = "") -> str:
+    x = f'<lanelet id="{lid}">' + _cr_bound("leftBound", left, marks[0]) + _cr_bound("rightBound", right, marks[1])
+    x += "".join(f'<successor ref="{s}"/>' for s in succ)
+    if adj_left is not None:
+        x += f'<adjacentLeft ref="{adj_left}" drivingDir="same"/>'
+    if adj_right is not None:
+        x += f'<adjacentRight ref="{adj_right}" drivingDir="same"/>'
+    return x + extra + "</lanelet>"
+
+
+def _cr_state(tag: str, step: int, x: float, y: float, h: float, v: float | None) -> str:
+    vel = f"<velocity><exact>{v}</exact></velocity>" if v is not None else ""
+    return (f"<{tag}><position><point><x>{x}</x><y>{y}</y></point></position>"
+            f"<orientation><exact>{h}</exact></orientation><time><exact>{step}</exact></time>{vel}</{tag}>")
+
+
+def obstacle(oid: int, states: list[tuple[int, float, float, float, float | None]], kind: str = "car",
+             size: tuple[float, float] = (4.5, 1.8), tag: str = "dynamicObstacle", role: str | None = None,
+             shape: str | None = None) -> str:
+    x = f'<{tag} id="{oid}">' + (f"<role>{role}</role>" if role else "") + f"<type>{kind}</type>"
+    x += shape or f"<shape><rectangle><length>{size[0]}</length><width>{size[1]}</width></rectangle></shape>"
+    x += _cr_state("initialState", *states[0])
+    if len(states) > 1:
+        x += "<trajectory>" + "".join(_cr_state("state", *s) for s in states[1:]) + "</trajectory>"
+    return x + f"</{tag}>"
+
+
+def document(lanelets: list[str], obstacles: list[str], version: str = "2020a", dt: float = 0.1,
+             benchmark: str = "TEST-1") -> str:
+    return (f'<?xml version="1.0"?><commonRoad commonRoadVersion="{version}" timeStepSize="{dt}" '
+            f'benchmarkID="{benchmark}">' + "".join(lanelets) + "".join(obstacles) + "</commonRoad>")
+
+
+def road_2020a() -> list[str]:
+    """Two lanes along +x (lane 1 right, y in [0, 3.5]; lane 2 left) in two segments (x 0..200, 200..400) and a
+    widening on-ramp right of lane 1 (x 0..100, 3.5 m wide at the start, 5.5 m at the end)."""
+    w = CR_LANE_W
+    return [
+        lanelet(1, [(0, w), (200, w)], [(0, 0), (200, 0)], ("dashed", "dashed"), (3,), 2, 5),
+        lanelet(2, [(0, 2 * w), (200, 2 * w)], [(0, w), (200, w)], ("solid", "dashed"), (4,), None, 1),
+        lanelet(3, [(200, w), (400, w)], [(200, 0), (400, 0)], ("dashed", "broad_solid"), (), 4),
+        lanelet(4, [(200, 2 * w), (400, 2 * w)], [(200, w), (400, w)], ("broad_solid", "broad_dashed"), (), None, 3),
+        lanelet(5, [(0, 0), (100, 0)], [(0, -w), (100, -w - 2.0)], ("dashed", "solid"), (), 1),
+    ]
+
+
+def _cr_smooth(u: float) -> float:
+    u = min(1.0, max(0.0, u))
+    return u * u * (3 - 2 * u)
+
+
+def cut_in(steps: int = 101, dt: float = 0.1, gap_m: float = 8.0, v: float = 20.0) -> list[str]:
+    """Ego-to-be 10 in lane 1; 11 starts in lane 2 ``gap_m`` ahead and cuts into lane 1 between 3 s and 6 s;
+    12 drives far ahead in lane 2; 13 is parked on the ramp (static)."""
+    a, b, c = [], [], []
+    for k in range(steps):
+        t = k * dt
+        a.append((k, 20.0 + v * t, 1.75, 0.0, v))
+        y = 5.25 - 3.5 * _cr_smooth((t - 3.0) / 3.0)
+        dy = -3.5 * 6 * ((t - 3.0) / 3.0) * (1 - (t - 3.0) / 3.0) / 3.0 if 3.0 < t < 6.0 else 0.0
+        b.append((k, 20.0 + gap_m + v * t, y, math.atan2(dy, v), math.hypot(v, dy)))
+        c.append((k, 150.0 + v * t, 5.25, 0.0, v))
+    return [
+        obstacle(10, a), obstacle(11, b, kind="truck", size=(6.0, 2.2)), obstacle(12, c),
+        obstacle(13, [(0, 90.0, -2.5, 0.0, 0.0)], kind="parkedVehicle", tag="staticObstacle"),
+    ]
+
+
+def write_text(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+# ScenarioNet scenario pickles in the documented format (importer tests).
+SN_T = 91
+"""Steps of the ScenarioNet test recordings (9.1 s at 10 Hz)."""
+SN_LANE_W = 3.6
+
+
+def sn_track(kind: str, x0: float, y: Any, v: float, valid: np.ndarray | None = None,
+             size: tuple[float, float] = (4.6, 1.9)) -> dict:
+    t = np.arange(SN_T) * 0.1
+    x = x0 + v * t
+    y = np.broadcast_to(np.asarray(y, dtype=np.float64), (SN_T,)).copy()
+    vy = np.gradient(y, t)
+    valid = np.ones(SN_T, dtype=bool) if valid is None else valid
+    state = {
+        "position": np.stack([x, y, np.zeros(SN_T)], axis=1).astype(np.float32),
+        "heading": np.arctan2(vy, v).astype(np.float32),
+        "velocity": np.stack([np.full(SN_T, v), vy], axis=1).astype(np.float32),
+        "length": np.full((SN_T, 1), size[0], dtype=np.float32),
+        "width": np.full((SN_T, 1), size[1], dtype=np.float32),
+        "height": np.full((SN_T, 1), 1.5, dtype=np.float32),
+        "valid": valid,
+    }
+    for key in ("position", "heading", "velocity"):  # ScenarioNet zeroes invalid steps
+        state[key][~valid] = 0.0
+    return {"type": kind, "state": state, "metadata": {"type": kind, "track_length": SN_T}}
+
+
+def sn_line(y: float, x0: float = -100.0, x1: float = 300.0) -> np.ndarray:
+    x = np.arange(x0, x1 + 0.5, 0.5)
+    return np.stack([x, np.full_like(x, y), np.zeros_like(x)], axis=1)
+
+
+def scenarionet_scenario(objects_of_interest: list[str] | None = ("300", "200")) -> dict:
+    """Waymo-like: SDC 100 in lane 1 (y = 0) at 12 m/s; 200 cuts in from lane 2 (y = 3.6) 9 m ahead; 300 a
+    pedestrian of interest; 400 occluded for 3 steps; 500 gone for 20 steps mid-scenario; 600 far away."""
+    ts = np.arange(SN_T) * 0.1
+    cut = 3.6 - 3.6 * np.clip((ts - 2.0) / 3.0, 0.0, 1.0) ** 2 * (3 - 2 * np.clip((ts - 2.0) / 3.0, 0.0, 1.0))
+    occluded = np.ones(SN_T, dtype=bool)
+    occluded[50:53] = False
+    gone = np.ones(SN_T, dtype=bool)
+    gone[40:60] = False
+    tracks = {
+        "100": sn_track("VEHICLE", 0.0, 0.0, 12.0),
+        "200": sn_track("VEHICLE", 9.0, cut, 12.0),
+        "300": sn_track("PEDESTRIAN", 30.0, 9.0, 1.2, size=(0.5, 0.5)),
+        "400": sn_track("VEHICLE", -25.0, 0.0, 12.0, occluded),
+        "500": sn_track("VEHICLE", -20.0, 3.6, 12.5, gone),
+        "600": sn_track("VEHICLE", 200.0, 3.6, 10.0),
+    }
+    width = np.full((len(sn_line(0.0)), 2), SN_LANE_W / 2, dtype=np.float32)
+    poly_lane = sn_line(-7.2, 0.0, 100.0)
+    features = {
+        "1": {"type": "LANE_SURFACE_STREET", "polyline": sn_line(0.0), "width": width, "exit_lanes": ["3"],
+              "entry_lanes": [], "speed_limit_mph": 25.0},
+        "2": {"type": "LANE_SURFACE_STREET", "polyline": sn_line(SN_LANE_W), "width": width, "exit_lanes": []},
+        "3": {"type": "LANE_SURFACE_STREET", "polyline": sn_line(0.0, 300.0, 400.0), "exit_lanes": ["999"]},
+        "4": {"type": "LANE_SURFACE_STREET", "polyline": poly_lane,
+              "polygon": np.vstack([poly_lane[:, :2] + [0, 1.5], (poly_lane[:, :2] - [0, 1.5])[::-1]])},
+        "5": {"type": "LANE_BIKE_LANE", "polyline": sn_line(-12.0)},
+        "10": {"type": "ROAD_LINE_BROKEN_SINGLE_WHITE", "polyline": sn_line(SN_LANE_W / 2)},
+        "11": {"type": "ROAD_LINE_SOLID_DOUBLE_YELLOW", "polyline": sn_line(1.5 * SN_LANE_W)},
+        "12": {"type": "ROAD_EDGE_BOUNDARY", "polyline": sn_line(-SN_LANE_W / 2)},
+        "20": {"type": "CROSSWALK", "polygon": np.zeros((4, 3))},
+    }
+    meta: dict[str, Any] = {
+        "ts": ts.astype(np.float32), "sdc_id": "100", "dataset": "waymo", "coordinate": "waymo",
+        "scenario_id": "abc123", "metadrive_processed": False, "current_time_index": 10,
+        "number_summary": {"num_moving_objects_each_type": collections.defaultdict(int, {"VEHICLE": 5}),
+                           "object_types": {"VEHICLE", "PEDESTRIAN"}},
+    }
+    if objects_of_interest is not None:
+        meta["objects_of_interest"] = list(objects_of_interest)
+    return {"id": "abc123", "version": "v1", "length": SN_T, "tracks": tracks, "dynamic_map_states": {},
+            "map_features": features, "metadata": meta}
+
+
+def dump_pickle(path: Path, obj: Any, protocol: int = 4) -> Path:
+    with path.open("wb") as f:
+        pickle.dump(obj, f, protocol=protocol)
+    return path

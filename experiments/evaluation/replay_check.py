@@ -16,6 +16,8 @@ Each failure is explained:
   the recording, e.g. NGSIM measurement noise, not a replay error);
 * ``timeout``: the route completion reached.
 
+With ``ego="heuristic"`` the rule-based driver drives instead of the log (same explanations).
+
 Run: ``python -m seal.experiments.evaluation.replay_check DATASET [--out FILE.json] [--limit N]`` (or ``seal data
 replay-check``).
 """
@@ -38,10 +40,15 @@ from seal.core.atomic import atomic_write_json
 from seal.core.geometry import box_corners, boxes_overlap
 from seal.core.outcome import Outcome
 from seal.core.scenario import CURRENT_STEP, HEADING, LENGTH, N_STEPS, VALID, WIDTH, Scenario, X, Y
+from seal.envs.heuristic import HeuristicDriver
 from seal.envs.kinematics import recover_actions
 from seal.envs.road_geometry import get_road_geometry
 from seal.envs.route import Route
 from seal.envs.scenario_env import DEFAULT_CONFIG, ScenarioEnv
+
+EGO_DRIVERS = ("logged", "heuristic")
+"""Who drives the ego: its logged track turned into actions, or the rule-based `HeuristicDriver` (same failure
+explanations; the heuristic shows how a driver that does not know the log copes with the imported road)."""
 
 
 def _box(row: np.ndarray) -> np.ndarray:
@@ -70,15 +77,18 @@ def _off_road_reason(scenario: Scenario, ego_row: np.ndarray, step: int) -> dict
     return {"reason": reason, "lateral_m": round(lateral, 2), "logged_ego_off_drivable": logged_off}
 
 
-def replay_one(env: ScenarioEnv, scenario: Scenario) -> dict[str, Any]:
-    """Replay the logged ego of ``scenario`` in ``env`` (which must hold it); returns the outcome and its reason."""
+def replay_one(env: ScenarioEnv, scenario: Scenario, ego_driver: str = "logged") -> dict[str, Any]:
+    """Drive the ego of ``scenario`` in ``env`` (which must hold it) with its logged actions (``"logged"``) or the
+    rule-based `HeuristicDriver` (``"heuristic"``); returns the outcome and its reason."""
     ego = scenario.track(scenario.ego_id)
     actions = recover_actions(ego, CURRENT_STEP)
-    env.reset(options={"scenario_id": scenario.scenario_id})
+    driver = HeuristicDriver() if ego_driver == "heuristic" else None
+    obs, _ = env.reset(options={"scenario_id": scenario.scenario_id})
     t = CURRENT_STEP
     while True:
-        a = actions[t] if t < len(actions) else np.zeros(2)
-        *_, terminated, truncated, info = env.step(a)
+        logged = actions[t] if t < len(actions) else np.zeros(2)
+        a = driver.act(obs) if driver is not None else logged
+        obs, _, terminated, truncated, info = env.step(a)
         t += 1
         if terminated or truncated:
             break
@@ -106,11 +116,15 @@ def replay_one(env: ScenarioEnv, scenario: Scenario) -> dict[str, Any]:
     return row
 
 
-def replay_check(scenarios: Sequence[Scenario], progress: bool = True) -> dict[str, Any]:
-    """Replay every scenario's logged ego; summary (rates, failure reasons) plus one row per scenario."""
+def replay_check(scenarios: Sequence[Scenario], progress: bool = True, ego: str = "logged") -> dict[str, Any]:
+    """Drive every scenario's ego (``ego``: one of `EGO_DRIVERS`); summary (rates, failure reasons) plus one row
+    per scenario."""
+    if ego not in EGO_DRIVERS:
+        raise ValueError(f"ego must be one of {', '.join(EGO_DRIVERS)}, got {ego!r}")
     env = ScenarioEnv(list(scenarios))
     start = time.perf_counter()
-    rows = [replay_one(env, s) for s in tqdm(scenarios, desc="replay", unit="scenario", disable=not progress)]
+    bar = tqdm(scenarios, desc="replay", unit="scenario", disable=not progress)
+    rows = [replay_one(env, s, ego) for s in bar]
     outcomes = Counter(r["outcome"] for r in rows)
     n = len(rows)
     reasons = Counter(
@@ -118,6 +132,7 @@ def replay_check(scenarios: Sequence[Scenario], progress: bool = True) -> dict[s
         for r in rows if r["outcome"] != Outcome.SUCCESS
     )
     return {
+        "ego": ego,
         "scenarios": n,
         "success_rate": outcomes[Outcome.SUCCESS] / n if n else math.nan,
         "outcomes": dict(sorted(outcomes.items())),
@@ -137,16 +152,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--out", default=None, help="write the full result (with one row per scenario) as JSON")
     parser.add_argument("--limit", type=int, default=None, help="only the first N scenarios")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    parser.add_argument("--ego", choices=EGO_DRIVERS, default="logged", help="who drives the ego (default logged)")
     args = parser.parse_args(argv)
-    return run(args.dataset, args.out, args.limit, not args.no_progress)
+    return run(args.dataset, args.out, args.limit, not args.no_progress, args.ego)
 
 
-def run(dataset: str | Path, out: str | Path | None, limit: int | None, progress: bool = True) -> int:
+def run(
+    dataset: str | Path, out: str | Path | None, limit: int | None, progress: bool = True, ego: str = "logged"
+) -> int:
     """Check ``dataset``, print the summary and the failures, write the full result to ``out`` when given."""
     from seal.core.dataset import Dataset
 
     scenarios = Dataset.open(dataset).load(limit=limit)
-    result = replay_check(scenarios, progress=progress)
+    result = replay_check(scenarios, progress=progress, ego=ego)
     summary = {k: v for k, v in result.items() if k != "rows"}
     print(json.dumps(summary, indent=2))
     for r in result["rows"]:

@@ -58,7 +58,7 @@ def cmd_import(args: argparse.Namespace) -> int:
 def cmd_replay_check(args: argparse.Namespace) -> int:
     from seal.experiments.evaluation.replay_check import run
 
-    return run(args.dir, args.out, args.limit, progress=not args.no_progress)
+    return run(args.dir, args.out, args.limit, progress=not args.no_progress, ego=args.ego)
 
 
 def register(tree: CommandTree) -> None:
@@ -68,7 +68,10 @@ def register(tree: CommandTree) -> None:
         help="import recorded scenarios (CommonRoad XML, ScenarioNet pickles) as a dataset",
         description="Import recorded driving scenarios into a seal dataset: the road from the recorded map, the "
         "agents' tracks at 10 Hz, and 9.1 s windows around interacting (ego, adversary) pairs. The result is an "
-        "ordinary dataset (score, split, evaluate it like a generated one).",
+        "ordinary dataset (score, split, evaluate it like a generated one). The import is atomic: it is built in a "
+        "hidden staging folder next to --out and renamed when complete, so a failed import leaves nothing behind; "
+        "an interrupted one resumes, reading again the files that changed. --json prints the report: files read "
+        "and skipped (with reasons), scenarios, and what was repaired or dropped and why.",
     )
     formats = imp.add_subparsers(dest="import_format", metavar="FORMAT", required=True)
     for fmt, (help_text, description, per_file) in _DESCRIPTIONS.items():
@@ -99,4 +102,9 @@ def register(tree: CommandTree) -> None:
     check.add_argument("--out", default=None, help="write the full result (one row per scenario) as JSON")
     check.add_argument("--limit", type=positive_int("--limit"), default=None, help="only the first N scenarios")
     check.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    check.add_argument(
+        "--ego", choices=("logged", "heuristic"), default="logged",
+        help="who drives the ego: its logged track (default) or the rule-based heuristic driver, whose failures "
+        "get the same explanations",
+    )
     check.set_defaults(func=cmd_replay_check)

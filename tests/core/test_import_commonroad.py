@@ -5,12 +5,14 @@ scoring / splitting of the imported dataset."""
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 import shapely
+from scenario_factory import CR_LANE_W as LANE_W
+from scenario_factory import cut_in, document, lanelet, obstacle, road_2020a
+from scenario_factory import write_text as write
 
 from seal.cli import main
 from seal.core.dataset import Dataset
@@ -20,90 +22,6 @@ from seal.core.importers.commonroad import read_commonroad
 from seal.core.scenario import CURRENT_STEP, HEADING, LENGTH, N_STEPS, VALID, VX, VY, WIDTH, X, Y
 from seal.envs.road_geometry import RoadGeometry
 from seal.experiments.evaluation.replay_check import replay_check
-
-LANE_W = 3.5
-
-
-def _bound(tag: str, pts: list[tuple[float, float]], marking: str | None) -> str:
-    body = "".join(f"<point><x>{x}</x><y>{y}</y></point>" for x, y in pts)
-    if marking:
-        body += f"<lineMarking>{marking}</lineMarking>"
-    return f"<{tag}>{body}</{tag}>"
-
-
-def lanelet(lid: int, left: list, right: list, marks: tuple[str | None, str | None] = (None, None),
-            succ: tuple[int, ...] = (), adj_left: int | None = None, adj_right: int | None = None,
-            extra: str = "") -> str:
-    x = f'<lanelet id="{lid}">' + _bound("leftBound", left, marks[0]) + _bound("rightBound", right, marks[1])
-    x += "".join(f'<successor ref="{s}"/>' for s in succ)
-    if adj_left is not None:
-        x += f'<adjacentLeft ref="{adj_left}" drivingDir="same"/>'
-    if adj_right is not None:
-        x += f'<adjacentRight ref="{adj_right}" drivingDir="same"/>'
-    return x + extra + "</lanelet>"
-
-
-def _state(tag: str, step: int, x: float, y: float, h: float, v: float | None) -> str:
-    vel = f"<velocity><exact>{v}</exact></velocity>" if v is not None else ""
-    return (f"<{tag}><position><point><x>{x}</x><y>{y}</y></point></position>"
-            f"<orientation><exact>{h}</exact></orientation><time><exact>{step}</exact></time>{vel}</{tag}>")
-
-
-def obstacle(oid: int, states: list[tuple[int, float, float, float, float | None]], kind: str = "car",
-             size: tuple[float, float] = (4.5, 1.8), tag: str = "dynamicObstacle", role: str | None = None,
-             shape: str | None = None) -> str:
-    x = f'<{tag} id="{oid}">' + (f"<role>{role}</role>" if role else "") + f"<type>{kind}</type>"
-    x += shape or f"<shape><rectangle><length>{size[0]}</length><width>{size[1]}</width></rectangle></shape>"
-    x += _state("initialState", *states[0])
-    if len(states) > 1:
-        x += "<trajectory>" + "".join(_state("state", *s) for s in states[1:]) + "</trajectory>"
-    return x + f"</{tag}>"
-
-
-def document(lanelets: list[str], obstacles: list[str], version: str = "2020a", dt: float = 0.1,
-             benchmark: str = "TEST-1") -> str:
-    return (f'<?xml version="1.0"?><commonRoad commonRoadVersion="{version}" timeStepSize="{dt}" '
-            f'benchmarkID="{benchmark}">' + "".join(lanelets) + "".join(obstacles) + "</commonRoad>")
-
-
-def road_2020a() -> list[str]:
-    """Two lanes along +x (lane 1 right, y in [0, 3.5]; lane 2 left) in two segments (x 0..200, 200..400) and a
-    widening on-ramp right of lane 1 (x 0..100, 3.5 m wide at the start, 5.5 m at the end)."""
-    w = LANE_W
-    return [
-        lanelet(1, [(0, w), (200, w)], [(0, 0), (200, 0)], ("dashed", "dashed"), (3,), 2, 5),
-        lanelet(2, [(0, 2 * w), (200, 2 * w)], [(0, w), (200, w)], ("solid", "dashed"), (4,), None, 1),
-        lanelet(3, [(200, w), (400, w)], [(200, 0), (400, 0)], ("dashed", "broad_solid"), (), 4),
-        lanelet(4, [(200, 2 * w), (400, 2 * w)], [(200, w), (400, w)], ("broad_solid", "broad_dashed"), (), None, 3),
-        lanelet(5, [(0, 0), (100, 0)], [(0, -w), (100, -w - 2.0)], ("dashed", "solid"), (), 1),
-    ]
-
-
-def _smooth(u: float) -> float:
-    u = min(1.0, max(0.0, u))
-    return u * u * (3 - 2 * u)
-
-
-def cut_in(steps: int = 101, dt: float = 0.1, gap_m: float = 8.0, v: float = 20.0) -> list[str]:
-    """Ego-to-be 10 in lane 1; 11 starts in lane 2 ``gap_m`` ahead and cuts into lane 1 between 3 s and 6 s;
-    12 drives far ahead in lane 2; 13 is parked on the ramp (static)."""
-    a, b, c = [], [], []
-    for k in range(steps):
-        t = k * dt
-        a.append((k, 20.0 + v * t, 1.75, 0.0, v))
-        y = 5.25 - 3.5 * _smooth((t - 3.0) / 3.0)
-        dy = -3.5 * 6 * ((t - 3.0) / 3.0) * (1 - (t - 3.0) / 3.0) / 3.0 if 3.0 < t < 6.0 else 0.0
-        b.append((k, 20.0 + gap_m + v * t, y, math.atan2(dy, v), math.hypot(v, dy)))
-        c.append((k, 150.0 + v * t, 5.25, 0.0, v))
-    return [
-        obstacle(10, a), obstacle(11, b, kind="truck", size=(6.0, 2.2)), obstacle(12, c),
-        obstacle(13, [(0, 90.0, -2.5, 0.0, 0.0)], kind="parkedVehicle", tag="staticObstacle"),
-    ]
-
-
-def write(path: Path, text: str) -> Path:
-    path.write_text(text)
-    return path
 
 
 @pytest.fixture()
@@ -140,17 +58,23 @@ def test_road_from_lanelets(good_file: Path) -> None:
 
 def test_2018b_markings_are_inferred_from_adjacency(tmp_path: Path) -> None:
     w = LANE_W
+    oncoming = '<adjacentLeft ref="3" drivingDir="opposite"/>'
     lanes = [
         lanelet(1, [(0, w), (300, w)], [(0, 0), (300, 0)], adj_left=2, extra="<speedLimit>22.2</speedLimit>"),
-        lanelet(2, [(0, 2 * w), (300, 2 * w)], [(0, w), (300, w)], adj_right=1),
+        lanelet(2, [(0, 2 * w), (300, 2 * w)], [(0, w), (300, w)], adj_right=1, extra=oncoming),
+        # Lane 3 runs the other way (its left border is lane 2's left border); its right side has no neighbour.
+        lanelet(3, [(300, 2 * w), (0, 2 * w)], [(300, 3 * w), (0, 3 * w)],
+                extra='<adjacentLeft ref="2" drivingDir="opposite"/>'),
     ]
     obs = [obstacle(7, [(k, 10 + 15 * k * 0.1, 1.75, 0.0, 15.0) for k in range(40)], tag="obstacle", role="dynamic"),
            obstacle(8, [(0, 50.0, 5.25, 0.0, None)], tag="obstacle", role="static")]
     rec = read_commonroad(write(tmp_path / "old.xml", document(lanes, obs, version="2018b")))
     assert rec.version == "2018b"
-    # No lineMarking: striped towards a same-direction neighbour, continuous at the road edge.
-    assert rec.road.lane("1").line_types == ("striped", "continuous")
+    # No lineMarking: striped towards a same-direction neighbour, continuous towards oncoming traffic (a median),
+    # unmarked ("none") without a neighbour: not a solid line; the drivable area still ends the road there.
+    assert rec.road.lane("1").line_types == ("striped", "none")
     assert rec.road.lane("2").line_types == ("continuous", "striped")
+    assert rec.road.lane("3").line_types == ("continuous", "none")
     assert rec.road.lane("1").speed_limit_mps == pytest.approx(22.2)
     assert rec.road.lane("2").speed_limit_mps == pytest.approx(30.0)
     assert rec.log.agent_types == ("vehicle", "vehicle")
@@ -308,7 +232,9 @@ def test_an_interrupted_import_resumes_without_rereading_done_files(
     monkeypatch.setitem(driver.FORMATS, "commonroad", driver.Format(".xml", 8, flaky))
     with pytest.raises(KeyboardInterrupt):
         import_files([src], tmp_path / "ds", "commonroad", progress=False)
-    assert (tmp_path / "ds" / "build.json").exists() and not (tmp_path / "ds" / "manifest.json").exists()
+    # The interrupted build waits in the staging folder; no output folder exists until the import completes.
+    staging = driver.staging_dir(tmp_path / "ds")
+    assert (staging / "build.json").exists() and not (tmp_path / "ds").exists()
     ds, report = import_files([src], tmp_path / "ds", "commonroad", progress=False)
     assert seen == ["f0.xml", "f1.xml", "f1.xml", "f2.xml"]  # f0 was done before the interruption
     assert report["scenarios"] == 3 and [s.scenario_id for s in ds.load()] == ["f0-00", "f1-00", "f2-00"]

@@ -30,9 +30,11 @@ def test_both_versions_and_the_on_ramp_are_read() -> None:
     for path in US101_FILES:
         rec = read_commonroad(path)
         versions[path.name] = rec.version
-        ramp = [lane for lane in rec.road.lanes if lane.line_types == ("continuous", "continuous")]
-        # The on-ramp before it merges (2020a: marked solid on both sides; 2018b: no neighbours, inferred).
-        assert ramp, f"{path.name}: no lane separated by solid lines on both sides (the on-ramp)"
+        # The on-ramp before it merges: 2020a marks it solid on both sides; 2018b has no markings and the ramp no
+        # neighbours, so both its borders are unmarked (the drivable area bounds it).
+        sides = ("continuous", "continuous") if rec.version == "2020a" else ("none", "none")
+        ramp = [lane for lane in rec.road.lanes if lane.line_types == sides]
+        assert ramp, f"{path.name}: no lane with {sides} borders (the on-ramp)"
         assert all(3.0 < lane.width_m < 8.0 for lane in rec.road.lanes)
     assert set(versions.values()) == {"2018b", "2020a"}
 
@@ -47,3 +49,31 @@ def test_every_file_gives_several_scenarios(imported: tuple[Dataset, dict]) -> N
 def test_the_logged_ego_replays_to_its_destination(imported: tuple[Dataset, dict]) -> None:
     result = replay_check(imported[0].load(), progress=False)
     assert result["success_rate"] >= 0.9, result["failure_reasons"]
+
+
+# ------------------------------------------------------------------------------------------------ Lankershim (urban)
+LANKERSHIM = sorted(NGSIM.glob("USA_Lanker-*.xml"))
+
+
+@pytest.fixture(scope="module")
+def lankershim(tmp_path_factory: pytest.TempPathFactory) -> tuple[Dataset, dict]:
+    if not LANKERSHIM:
+        pytest.skip(f"no USA_Lanker-*.xml in {NGSIM}")
+    return import_files(LANKERSHIM, tmp_path_factory.mktemp("lanker") / "ds", "commonroad", max_per_file=30,
+                        progress=False)
+
+
+def test_lankershim_logged_egos_replay_and_off_map_windows_are_dropped(lankershim: tuple[Dataset, dict]) -> None:
+    ds, report = lankershim
+    assert report["skipped"] == [] and len(ds) >= 10
+    result = replay_check(ds.load(), progress=False)
+    assert result["success_rate"] >= 0.95, result["failure_reasons"]
+
+
+def test_the_heuristic_ego_meets_no_solid_line_inside_lankershim_junctions(lankershim: tuple[Dataset, dict]) -> None:
+    # The recording has no line markings: borders towards oncoming lanes are medians, the others unmarked.
+    road = read_commonroad(LANKERSHIM[0]).road
+    kinds = {t for lane in road.lanes for t in lane.line_types}
+    assert kinds == {"none", "striped", "continuous"}
+    result = replay_check(lankershim[0].load(), progress=False, ego="heuristic")
+    assert "out_of_road:solid_line" not in result["failure_reasons"], result["failure_reasons"]

@@ -10,6 +10,10 @@ from typing import Any
 
 import numpy as np
 import pytest
+from scenario_factory import SN_LANE_W as LANE_W
+from scenario_factory import SN_T as T
+from scenario_factory import dump_pickle as dump
+from scenario_factory import scenarionet_scenario as scenario
 
 from seal.cli import main
 from seal.core.dataset import Dataset
@@ -17,84 +21,6 @@ from seal.core.importers import ImportFormatError, UnsafePickleError, import_fil
 from seal.core.importers.scenarionet import read_scenarionet
 from seal.core.scenario import HEADING, LENGTH, VALID, VX, WIDTH, X
 from seal.experiments.evaluation.replay_check import replay_check
-
-T = 91
-LANE_W = 3.6
-
-
-def _track(kind: str, x0: float, y: Any, v: float, valid: np.ndarray | None = None, size=(4.6, 1.9)) -> dict:
-    t = np.arange(T) * 0.1
-    x = x0 + v * t
-    y = np.broadcast_to(np.asarray(y, dtype=np.float64), (T,)).copy()
-    vy = np.gradient(y, t)
-    valid = np.ones(T, dtype=bool) if valid is None else valid
-    state = {
-        "position": np.stack([x, y, np.zeros(T)], axis=1).astype(np.float32),
-        "heading": np.arctan2(vy, v).astype(np.float32),
-        "velocity": np.stack([np.full(T, v), vy], axis=1).astype(np.float32),
-        "length": np.full((T, 1), size[0], dtype=np.float32),
-        "width": np.full((T, 1), size[1], dtype=np.float32),
-        "height": np.full((T, 1), 1.5, dtype=np.float32),
-        "valid": valid,
-    }
-    for key in ("position", "heading", "velocity"):  # ScenarioNet zeroes invalid steps
-        state[key][~valid] = 0.0
-    return {"type": kind, "state": state, "metadata": {"type": kind, "track_length": T}}
-
-
-def _line(y: float, x0: float = -100.0, x1: float = 300.0) -> np.ndarray:
-    x = np.arange(x0, x1 + 0.5, 0.5)
-    return np.stack([x, np.full_like(x, y), np.zeros_like(x)], axis=1)
-
-
-def scenario(objects_of_interest: list[str] | None = ("300", "200")) -> dict:
-    """Waymo-like: SDC 100 in lane 1 (y = 0) at 12 m/s; 200 cuts in from lane 2 (y = 3.6) 9 m ahead; 300 a
-    pedestrian of interest; 400 occluded for 3 steps; 500 gone for 20 steps mid-scenario; 600 far away."""
-    ts = np.arange(T) * 0.1
-    cut = 3.6 - 3.6 * np.clip((ts - 2.0) / 3.0, 0.0, 1.0) ** 2 * (3 - 2 * np.clip((ts - 2.0) / 3.0, 0.0, 1.0))
-    occluded = np.ones(T, dtype=bool)
-    occluded[50:53] = False
-    gone = np.ones(T, dtype=bool)
-    gone[40:60] = False
-    tracks = {
-        "100": _track("VEHICLE", 0.0, 0.0, 12.0),
-        "200": _track("VEHICLE", 9.0, cut, 12.0),
-        "300": _track("PEDESTRIAN", 30.0, 9.0, 1.2, size=(0.5, 0.5)),
-        "400": _track("VEHICLE", -25.0, 0.0, 12.0, occluded),
-        "500": _track("VEHICLE", -20.0, 3.6, 12.5, gone),
-        "600": _track("VEHICLE", 200.0, 3.6, 10.0),
-    }
-    width = np.full((len(_line(0.0)), 2), LANE_W / 2, dtype=np.float32)
-    poly_lane = _line(-7.2, 0.0, 100.0)
-    features = {
-        "1": {"type": "LANE_SURFACE_STREET", "polyline": _line(0.0), "width": width, "exit_lanes": ["3"],
-              "entry_lanes": [], "speed_limit_mph": 25.0},
-        "2": {"type": "LANE_SURFACE_STREET", "polyline": _line(LANE_W), "width": width, "exit_lanes": []},
-        "3": {"type": "LANE_SURFACE_STREET", "polyline": _line(0.0, 300.0, 400.0), "exit_lanes": ["999"]},
-        "4": {"type": "LANE_SURFACE_STREET", "polyline": poly_lane,
-              "polygon": np.vstack([poly_lane[:, :2] + [0, 1.5], (poly_lane[:, :2] - [0, 1.5])[::-1]])},
-        "5": {"type": "LANE_BIKE_LANE", "polyline": _line(-12.0)},
-        "10": {"type": "ROAD_LINE_BROKEN_SINGLE_WHITE", "polyline": _line(LANE_W / 2)},
-        "11": {"type": "ROAD_LINE_SOLID_DOUBLE_YELLOW", "polyline": _line(1.5 * LANE_W)},
-        "12": {"type": "ROAD_EDGE_BOUNDARY", "polyline": _line(-LANE_W / 2)},
-        "20": {"type": "CROSSWALK", "polygon": np.zeros((4, 3))},
-    }
-    meta: dict[str, Any] = {
-        "ts": ts.astype(np.float32), "sdc_id": "100", "dataset": "waymo", "coordinate": "waymo",
-        "scenario_id": "abc123", "metadrive_processed": False, "current_time_index": 10,
-        "number_summary": {"num_moving_objects_each_type": collections.defaultdict(int, {"VEHICLE": 5}),
-                           "object_types": {"VEHICLE", "PEDESTRIAN"}},
-    }
-    if objects_of_interest is not None:
-        meta["objects_of_interest"] = list(objects_of_interest)
-    return {"id": "abc123", "version": "v1", "length": T, "tracks": tracks, "dynamic_map_states": {},
-            "map_features": features, "metadata": meta}
-
-
-def dump(path: Path, obj: Any, protocol: int = 4) -> Path:
-    with path.open("wb") as f:
-        pickle.dump(obj, f, protocol=protocol)
-    return path
 
 
 # ------------------------------------------------------------------------------------------------ safe pickle

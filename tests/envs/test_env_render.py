@@ -59,3 +59,16 @@ def test_render_episode_writes_videos(stopped_adv: Scenario, tmp_path: Path) -> 
 class _Straight:
     def predict(self, obs, state=None, episode_start=None, deterministic=True):
         return np.zeros(2, dtype=np.float32), state
+
+
+def test_a_long_title_is_wrapped_to_a_narrow_frame(lane_change: Scenario) -> None:
+    from seal.envs.render import FrameRenderer
+
+    renderer = FrameRenderer(lane_change.road, bounds=(0.0, -10.0, 40.0, 20.0), max_frame=(160, 720))
+    title = "USA_Lanker-1_1_T-1-03 heuristic ego vs replayed adversary: out_of_road at step 19\nsecond line"
+    lines = renderer.wrap_text(title)
+    assert len(lines) > 2 and lines[-1] == "second line"
+    assert all(renderer._font.size(line)[0] <= renderer.size[0] - 12 for line in lines)
+    assert " ".join(lines[:-1]) == title.split("\n")[0]  # nothing lost, only broken at spaces
+    frame = renderer.draw_state(lane_change.tracks[:, CURRENT_STEP], 0, 1, text=title)
+    assert frame.shape[1] == renderer.size[0]

@@ -6,14 +6,20 @@ What is read:
 * ``lanelet``: ``leftBound`` / ``rightBound`` polylines (left / right as seen driving along the lanelet, the
   same convention as `seal.core.road`) with their ``lineMarking`` (``solid`` / ``broad_solid`` -> ``continuous``,
   ``dashed`` / ``broad_dashed`` -> ``striped``, ``no_marking`` -> ``none``; missing or ``unknown``: ``striped``
-  towards an adjacent lanelet driven the same way, else ``continuous``, i.e. a road edge or median),
+  towards an adjacent lanelet driven the same way, ``continuous`` towards an oncoming one (a median), ``none``
+  without an adjacent lanelet: unmarked, so crossing it is no "solid line"; the drivable area still ends the road),
   ``successor`` references, and the speed limit (2018b ``speedLimit``; 2020a ``trafficSignRef`` to a max-speed
   sign, ids 274 / R2-1); without one, `DEFAULT_SPEED_LIMIT_MPS`. Lanes become `seal.core.road.LaneSpec` pieces
   (`seal.core.importers.lanes`): centre line midway between the bounds, width from the bounds, on-ramps included;
 * obstacles (2020a ``dynamicObstacle`` / ``staticObstacle``; 2018b ``obstacle`` with ``role``): ``type``, a
   ``rectangle`` (or ``circle``) shape, the ``initialState`` and the ``trajectory`` states (``time`` step,
   ``position`` of the shape centre, ``orientation``, ``velocity`` along the orientation; missing velocities
-  come from the positions). Static obstacles stand still for the whole recording. Trajectories at another rate
+  come from the positions). Uncertain states (the format allows them; e.g. BMW-sourced files) are read as their
+  middle: a ``position`` given as a ``rectangle`` / ``circle`` / ``polygon`` as the shape's centre, an
+  ``orientation`` / ``velocity`` given as ``intervalStart`` / ``intervalEnd`` as the midpoint; they are counted
+  (`CommonRoadRecording.uncertain_states`). Pedestrians and bicycles are kept as replayed agents (their
+  rectangle or circle box), never as ego or adversary.
+  Static obstacles stand still for the whole recording. Trajectories at another rate
   than 10 Hz are resampled (`seal.core.importers.tracks`).
 
 Bad input raises `ImportFormatError` naming the file and the element: malformed XML, an unsupported version,
@@ -25,10 +31,11 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import shapely
 
 from seal.core.importers.errors import ImportFormatError
 from seal.core.importers.lanes import geometry_from_bounds, lane_pieces, link_successors
@@ -73,6 +80,11 @@ class CommonRoadRecording:
     road: RoadDescription
     log: AgentLog
     tags: tuple[str, ...]
+    uncertain_states: int = 0
+    """States whose position (a shape), orientation or velocity (an interval) was uncertain, read as the shape's
+    centre / the interval's midpoint."""
+    dropped: dict[str, int] = field(default_factory=dict)
+    """``obstacles_between_grid_points``: dynamic obstacles logged only between two 0.1 s grid points."""
 
 
 class _Reader:
@@ -101,11 +113,51 @@ class _Reader:
         return value
 
     def exact(self, elem: ET.Element, tag: str, where: str) -> float:
-        """Value of ``<tag><exact>v</exact></tag>`` (intervals are not states of a recorded trajectory)."""
+        """Value of ``<tag><exact>v</exact></tag>`` (time steps of a trajectory must be exact)."""
         node = self.child(elem, tag, where)
         if node.find("exact") is None:
             raise self.fail(where, f"<{tag}> must hold an <exact> value (got {[c.tag for c in node]})")
         return self.number(node, "exact", f"{where} <{tag}>")
+
+    def value(self, elem: ET.Element, tag: str, where: str) -> tuple[float, bool]:
+        """(value, uncertain) of ``<tag>``: its ``<exact>`` value, or the midpoint of an uncertain
+        ``<intervalStart>`` / ``<intervalEnd>`` (then ``uncertain`` is True)."""
+        node = self.child(elem, tag, where)
+        if node.find("exact") is not None:
+            return self.number(node, "exact", f"{where} <{tag}>"), False
+        if node.find("intervalStart") is not None and node.find("intervalEnd") is not None:
+            lo = self.number(node, "intervalStart", f"{where} <{tag}>")
+            hi = self.number(node, "intervalEnd", f"{where} <{tag}>")
+            if hi < lo:
+                raise self.fail(f"{where} <{tag}>", f"interval end {hi} is below its start {lo}")
+            return 0.5 * (lo + hi), True
+        got = [c.tag for c in node]
+        raise self.fail(where, f"<{tag}> must hold <exact> or <intervalStart>/<intervalEnd> (got {got})")
+
+    def position(self, state: ET.Element, where: str) -> tuple[float, float, bool]:
+        """(x, y, uncertain) of a state's ``<position>``: its ``<point>``, or the centre of the shape(s) the
+        position is uncertain within (``<rectangle>`` / ``<circle>`` centre, ``<polygon>`` centroid; the mean
+        centre of several shapes)."""
+        pos = self.child(state, "position", where)
+        w = f"{where} <position>"
+        point = pos.find("point")
+        if point is not None:
+            return self.number(point, "x", w), self.number(point, "y", w), False
+        centres = []
+        for shape in pos:
+            if shape.tag in ("rectangle", "circle"):
+                c = self.child(shape, "center", f"{w} <{shape.tag}>")
+                centres.append((self.number(c, "x", w), self.number(c, "y", w)))
+            elif shape.tag == "polygon":
+                ring = self.points(shape, f"{w} <polygon>")
+                mid = shapely.Polygon(ring).centroid if len(ring) >= 3 else shapely.Point(ring.mean(axis=0))
+                if mid.is_empty:  # a degenerate (zero-area) polygon: the mean of its vertices
+                    mid = shapely.Point(ring.mean(axis=0))
+                centres.append((mid.x, mid.y))
+        if not centres:
+            raise self.fail(w, f"needs a <point> or a <rectangle> / <circle> / <polygon> (got {[c.tag for c in pos]})")
+        x, y = np.mean(np.array(centres, dtype=np.float64), axis=0)
+        return float(x), float(y), True
 
     def points(self, elem: ET.Element, where: str) -> np.ndarray:
         pts = elem.findall("point")
@@ -132,11 +184,19 @@ def _speed_signs(root: ET.Element, rd: _Reader) -> dict[str, float]:
 
 
 def _line_type(bound: ET.Element, adjacent: ET.Element | None) -> str:
+    """Line type of a lanelet border: its marking, else inferred from the neighbour across it.
+
+    Without a marking: ``striped`` towards a neighbour driven the same way, ``continuous`` towards oncoming
+    traffic (a median), and ``none`` without a neighbour. An unmarked border without a neighbour is not a solid
+    line: inside junctions lanelets overlap and cross without declared neighbours, and where such a border is the
+    road's edge the drivable-area boundary already ends the road there.
+    """
     marking = (bound.findtext("lineMarking") or "").strip()
     if marking in MARKINGS:
         return MARKINGS[marking]
-    same_way = adjacent is not None and adjacent.get("drivingDir", "same") == "same"
-    return "striped" if same_way else "continuous"
+    if adjacent is None:
+        return "none"
+    return "striped" if adjacent.get("drivingDir", "same") == "same" else "continuous"
 
 
 def read_road(root: ET.Element, rd: _Reader) -> RoadDescription:
@@ -192,6 +252,7 @@ class _Obstacle:
     heading: np.ndarray
     speed: np.ndarray | None
     lateral_speed: np.ndarray | None
+    uncertain_states: int
 
 
 def _shape(obs: ET.Element, rd: _Reader, where: str) -> tuple[float, float, tuple[float, float]]:
@@ -219,20 +280,24 @@ def _shape(obs: ET.Element, rd: _Reader, where: str) -> tuple[float, float, tupl
     return length, width, offset
 
 
-def _state(state: ET.Element, rd: _Reader, where: str) -> tuple[int, float, float, float, float | None, float | None]:
-    """(time step, x, y, orientation, velocity or None, lateral velocity or None) of one state."""
+_State = tuple[int, float, float, float, float | None, float | None, bool]
+
+
+def _state(state: ET.Element, rd: _Reader, where: str) -> _State:
+    """(time step, x, y, orientation, velocity or None, lateral velocity or None, uncertain) of one state;
+    ``uncertain``: some value was an interval or a shape and was read as its midpoint / centre."""
     step = rd.exact(state, "time", where)
     if step != int(step):
         raise rd.fail(where, f"<time> must be an integer time step, got {step}")
-    pos = rd.child(state, "position", where)
-    point = pos.find("point")
-    if point is None:
-        raise rd.fail(f"{where} <position>", f"needs a <point> (got {[c.tag for c in pos]})")
-    x, y = rd.number(point, "x", f"{where} <position>"), rd.number(point, "y", f"{where} <position>")
-    heading = rd.exact(state, "orientation", where)
-    v = rd.exact(state, "velocity", where) if state.find("velocity") is not None else None
-    vy = rd.exact(state, "velocityY", where) if state.find("velocityY") is not None else None
-    return int(step), x, y, heading, v, vy
+    x, y, unsure = rd.position(state, where)
+    heading, u_h = rd.value(state, "orientation", where)
+    v = vy = None
+    u_v = u_vy = False
+    if state.find("velocity") is not None:
+        v, u_v = rd.value(state, "velocity", where)
+    if state.find("velocityY") is not None:
+        vy, u_vy = rd.value(state, "velocityY", where)
+    return int(step), x, y, heading, v, vy, unsure or u_h or u_v or u_vy
 
 
 def _read_obstacle(obs: ET.Element, rd: _Reader, dynamic: bool) -> _Obstacle:
@@ -276,6 +341,7 @@ def _read_obstacle(obs: ET.Element, rd: _Reader, dynamic: bool) -> _Obstacle:
         heading=np.array([s[3] for s in states]),
         speed=None if any(v is None for v in speeds) else np.array(speeds, dtype=np.float64),
         lateral_speed=None if any(v is None for v in lateral) else np.array(lateral, dtype=np.float64),
+        uncertain_states=sum(1 for s in states if s[6]),
     )
 
 
@@ -362,7 +428,9 @@ def read_commonroad(path: str | Path) -> CommonRoadRecording:
         layout="polylines", lanes=road.lanes,
         params={"source": "commonroad", "benchmark_id": benchmark, "version": version},
     )
-    return CommonRoadRecording(path, version, benchmark, dt_s, road, log, tags)
+    uncertain = sum(o.uncertain_states for o in keep)
+    dropped = {"obstacles_between_grid_points": len(obstacles) - len(keep)}
+    return CommonRoadRecording(path, version, benchmark, dt_s, road, log, tags, uncertain, dropped)
 
 
 def describe(rec: CommonRoadRecording) -> dict[str, object]:

@@ -1,20 +1,29 @@
 """`import_files`: import recorded scenario files into a seal dataset, reporting and skipping bad files.
 
 Inputs are files and directories (searched recursively for the format's file suffix, in sorted order). Each
-file is imported on its own: a file that fails (malformed, unsupported, a forbidden pickle class, no usable
-window, ...) is reported with its reason and skipped, and the others go on. Files are processed in chunks of
-`FILES_PER_SHARD`; each chunk is one dataset shard written atomically by `seal.core.dataset.DatasetBuilder`, so an
-interrupted import resumes at the first missing chunk when re-run with the same arguments. Scenario ids are
+file is imported on its own: a file that fails (malformed, unsupported, a forbidden pickle class, a parked ego, no
+usable window, ...) is reported with its reason and skipped, and the others go on. Scenario ids are
 ``{file stem}-{k:02d}`` (``{stem}~{n}-{k:02d}`` for the n-th later file with an already used stem).
 
+Imports are atomic: the dataset is built in a hidden staging folder next to ``--out`` (`staging_dir`) and renamed
+to ``--out`` only when complete, so a failed import leaves no output folder behind. Files are processed in chunks
+of `FILES_PER_SHARD`; each chunk is one dataset shard written atomically by `seal.core.dataset.DatasetBuilder`
+together with the SHA-256 fingerprints of its files, so an interrupted import resumes at the first missing
+chunk when re-run with the same arguments, and a chunk whose files changed since is imported again.
+
 The finished dataset is an ordinary seal dataset: the manifest's provenance records the importer, its options,
-the inputs and the per-file outcome, and ``import_report.json`` in the dataset holds the same report.
+the inputs and the per-file outcome, and ``import_report.json`` in the dataset holds the same report: files read
+and skipped (with reasons), scenarios, and what was repaired or dropped and why (in total and per file: e.g.
+``swapped_boxes``, ``uncertain_states``, ``degenerate_map_features``, ``windows_ego_leaves_mapped_road``).
+Every scenario's metadata keeps its ``source_file`` (and `Scenario.source` names the file).
 """
 
 from __future__ import annotations
 
 import hashlib
+import shutil
 import time
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,12 +32,13 @@ from typing import Any
 from tqdm import tqdm
 
 from seal.core.atomic import atomic_write_json
-from seal.core.dataset import Dataset, DatasetBuilder
-from seal.core.importers.build import scenarios_from_log
+from seal.core.dataset import MANIFEST, Dataset, DatasetBuilder, DatasetError
+from seal.core.importers.build import WINDOWS_EGO_OFF_ROAD, FileImport, scenarios_from_log
+from seal.core.importers.errors import ImportFormatError
 from seal.core.importers.windows import MIN_FUTURE_STEPS
 from seal.core.scenario import N_FUTURE, Scenario
 
-IMPORTER_VERSION = 1
+IMPORTER_VERSION = 2
 """Bump when imported content changes for the same files and options (part of the build parameters)."""
 FILES_PER_SHARD = 64
 REPORT_FILE = "import_report.json"
@@ -58,23 +68,30 @@ class ImportOptions:
             raise ValueError(f"--min-future-steps must be in [1, {N_FUTURE}], got {self.min_future_steps!r}")
 
 
-def _commonroad(path: Path, prefix: str, opts: ImportOptions) -> list[Scenario]:
+def _commonroad(path: Path, prefix: str, opts: ImportOptions) -> FileImport:
     from seal.core.importers.commonroad import describe, read_commonroad
 
     rec = read_commonroad(path)
-    return scenarios_from_log(
+    scenarios, off_road = scenarios_from_log(
         rec.log, rec.road, prefix, f"commonroad:{path.name}", describe(rec), opts.max_per_file, opts.min_future_steps
+    )
+    return FileImport(
+        scenarios, {"uncertain_states": rec.uncertain_states}, {**rec.dropped, WINDOWS_EGO_OFF_ROAD: off_road}
     )
 
 
-def _scenarionet(path: Path, prefix: str, opts: ImportOptions) -> list[Scenario]:
-    from seal.core.importers.scenarionet import describe, read_scenarionet
+def _scenarionet(path: Path, prefix: str, opts: ImportOptions) -> FileImport:
+    from seal.core.importers.scenarionet import describe, parked_ego, read_scenarionet
 
     rec = read_scenarionet(path)
-    return scenarios_from_log(
+    parked = parked_ego(rec)
+    if parked is not None:
+        raise ImportFormatError(path, f"tracks[{rec.log.source_ids[rec.sdc_row]!r}]", parked)
+    scenarios, off_road = scenarios_from_log(
         rec.log, rec.road, prefix, f"scenarionet:{rec.dataset}:{path.name}", describe(rec), opts.max_per_file,
         opts.min_future_steps, ego_row=rec.sdc_row, adv_rows=rec.interest_rows,
     )
+    return FileImport(scenarios, dict(rec.repaired), {**rec.dropped, WINDOWS_EGO_OFF_ROAD: off_road})
 
 
 @dataclass(frozen=True)
@@ -83,7 +100,7 @@ class Format:
 
     suffix: str
     default_max_per_file: int
-    read: Callable[[Path, str, ImportOptions], list[Scenario]]
+    read: Callable[[Path, str, ImportOptions], FileImport]
     skip_names: tuple[str, ...] = ()
 
 
@@ -130,44 +147,72 @@ def id_prefixes(files: Sequence[Path]) -> list[str]:
     return out
 
 
-def _import_one(fmt: str, path: Path, prefix: str, opts: ImportOptions) -> tuple[list[Scenario], str | None]:
+def _import_one(fmt: str, path: Path, prefix: str, opts: ImportOptions) -> tuple[FileImport, str | None]:
     try:
-        scenarios = FORMATS[fmt].read(path, prefix, opts)
+        got = FORMATS[fmt].read(path, prefix, opts)
     except Exception as exc:  # one bad file must not stop the others: report it and go on
         msg = str(exc)
-        return [], msg if msg.startswith(str(path)) else f"{path}: {type(exc).__name__}: {msg}"
-    if not scenarios:
-        return [], (
+        return FileImport([]), msg if msg.startswith(str(path)) else f"{path}: {type(exc).__name__}: {msg}"
+    if not got.scenarios:
+        off = got.dropped.get(WINDOWS_EGO_OFF_ROAD, 0)
+        why = f" ({off} window(s) dropped: the logged ego leaves the mapped road)" if off else ""
+        return got, (
             f"{path}: no window with an interacting (ego, adversary) pair that both move and are logged for the "
-            f"1.1 s history and {opts.min_future_steps} future steps"
+            f"1.1 s history and {opts.min_future_steps} future steps{why}"
         )
-    return scenarios, None
+    return got, None
+
+
+def file_fingerprint(path: Path) -> str:
+    """SHA-256 of a file's bytes (16 hex digits): an input whose content changed is imported again."""
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()[:16]
+
+
+def _shard_fingerprints(files: Sequence[Path]) -> list[str]:
+    out = []
+    for f in files:
+        try:
+            out.append(file_fingerprint(f))
+        except OSError as exc:  # reported as that file's skip reason when the shard is imported
+            out.append(f"unreadable: {exc.strerror}")
+    return out
 
 
 def _import_shards(
     builder: DatasetBuilder, fmt: str, files: Sequence[Path], prefixes: Sequence[str], opts: ImportOptions,
     progress: bool,
 ) -> None:
-    """Import ``files`` in shards of `FILES_PER_SHARD` (skipping shards an earlier run finished), each written with
-    its scenarios per file and skipped files (with reasons)."""
+    """Import ``files`` in shards of `FILES_PER_SHARD`, each written with its scenarios, its files' fingerprints,
+    per-file counts (scenarios, repaired, dropped) and skipped files (with reasons). A shard an earlier run
+    finished is kept when its files are unchanged (same fingerprints), else imported again."""
     bar = tqdm(total=len(files), unit="file", desc=f"import {fmt}", disable=not progress)
     try:
         for chunk, first in enumerate(range(0, len(files), FILES_PER_SHARD)):
             span = range(first, min(first + FILES_PER_SHARD, len(files)))
-            if builder.is_done(chunk):
+            prints = _shard_fingerprints([files[k] for k in span])
+            if builder.is_done(chunk) and builder.shards[chunk]["info"].get("fingerprints") == prints:
                 bar.update(len(span))
                 continue
             scenarios: list[Scenario] = []
-            per_file: dict[str, int] = {}
+            per_file: dict[str, dict[str, Any]] = {}
             skipped: list[list[str]] = []
             for k in span:
                 got, reason = _import_one(fmt, files[k], prefixes[k], opts)
-                scenarios.extend(got)
-                per_file[str(files[k])] = len(got)
+                scenarios.extend(got.scenarios)
+                per_file[str(files[k])] = {
+                    "scenarios": len(got.scenarios),
+                    "repaired": {k: v for k, v in got.repaired.items() if v},
+                    "dropped": {k: v for k, v in got.dropped.items() if v},
+                }
                 if reason is not None:
                     skipped.append([str(files[k]), reason])
                 bar.update(1)
-            builder.write_shard(chunk, scenarios, {"per_file": per_file, "skipped": skipped})
+            info = {"fingerprints": prints, "per_file": per_file, "skipped": skipped}
+            builder.write_shard(chunk, scenarios, info)
     finally:
         bar.close()
 
@@ -177,24 +222,46 @@ def _report(
     seconds: float,
 ) -> dict[str, Any]:
     """The import report, gathered from every shard's info (those of a resumed run included)."""
-    per_file: dict[str, int] = {}
+    per_file: dict[str, dict[str, Any]] = {}
     skipped: list[list[str]] = []
     for chunk in sorted(builder.shards):
         info = builder.shards[chunk]["info"]
         per_file.update(info["per_file"])
         skipped.extend(info["skipped"])
+    totals: dict[str, Counter[str]] = {"repaired": Counter(), "dropped": Counter()}
+    for row in per_file.values():
+        for key, counts in totals.items():
+            counts.update(row[key])
     return {
         "importer": fmt,
         "inputs": [str(p) for p in inputs],
         "options": {"max_per_file": opts.max_per_file, "min_future_steps": opts.min_future_steps},
         "files": n_files,
-        "imported_files": sum(1 for n in per_file.values() if n > 0),
+        "imported_files": sum(1 for row in per_file.values() if row["scenarios"] > 0),
         "skipped_files": len(skipped),
         "skipped": [{"file": f, "reason": r} for f, r in skipped],
-        "scenarios": sum(per_file.values()),
-        "scenarios_per_file": per_file,
+        "scenarios": sum(row["scenarios"] for row in per_file.values()),
+        "repaired": dict(sorted(totals["repaired"].items())),
+        "dropped": dict(sorted(totals["dropped"].items())),
+        "scenarios_per_file": {f: row["scenarios"] for f, row in per_file.items()},
+        "per_file": per_file,
         "seconds": round(seconds, 2),
     }
+
+
+def staging_dir(out: Path) -> Path:
+    """Where an import into ``out`` is built before it is renamed to ``out`` (a hidden sibling folder)."""
+    out = out.resolve() if out.name in ("", "..") else out  # "." or "dir/..": name the folder itself
+    return out.with_name(f".{out.name}.importing")
+
+
+def _check_out(out: Path, overwrite: bool) -> None:
+    if overwrite or not out.exists():
+        return
+    if (out / MANIFEST).exists():
+        raise DatasetError(f"{out} already holds a finished dataset; choose another --out or pass --overwrite")
+    if not out.is_dir() or any(out.iterdir()):
+        raise DatasetError(f"{out} exists and is not a seal dataset; choose another --out or pass --overwrite")
 
 
 def import_files(
@@ -208,18 +275,23 @@ def import_files(
 ) -> tuple[Dataset, dict[str, Any]]:
     """Import ``inputs`` (files / directories) of format ``fmt`` into the dataset directory ``out``.
 
+    The dataset is built in `staging_dir` and renamed to ``out`` when complete: a failed import (no scenario, or
+    an error) leaves neither; an interrupted one (Ctrl-C) leaves the staging folder, and the same command resumes
+    it, importing again the shards whose input files changed since.
+
     Args:
         inputs: files and directories.
-        out: dataset directory to create (an unfinished import with the same arguments is resumed).
+        out: dataset directory to create.
         fmt: ``"commonroad"`` or ``"scenarionet"``.
         max_per_file: most scenarios per file (default: 8 for CommonRoad, 1 for ScenarioNet).
         min_future_steps: see `ImportOptions`.
-        overwrite: replace a finished dataset or an unfinished build with other arguments.
+        overwrite: replace a finished dataset (only once the new one is complete) or an unfinished build with
+            other arguments.
         progress: show a progress bar over the files.
 
     Returns:
         The dataset and the report (files, imported / skipped counts, the reason for every skipped file,
-        scenarios per file, seconds).
+        scenarios per file, what was repaired or dropped and why, in total and per file, seconds).
 
     Raises:
         ImportFailed: no file gave a scenario.
@@ -239,13 +311,25 @@ def import_files(
         "max_per_file": opts.max_per_file,
         "min_future_steps": opts.min_future_steps,
     }
-    builder = DatasetBuilder(out, params, overwrite=overwrite)
+    out = Path(out)
+    _check_out(out, overwrite)
+    staging = staging_dir(out)
+    builder = DatasetBuilder(staging, params, overwrite=overwrite)
     start = time.perf_counter()
-    _import_shards(builder, fmt, files, prefixes, opts, progress)
-    report = _report(builder, fmt, inputs, opts, len(files), time.perf_counter() - start)
-    if report["scenarios"] == 0:
-        reasons = "\n".join(f"  {s['reason']}" for s in report["skipped"][:20])
-        raise ImportFailed(f"no scenario imported from {len(files)} {fmt} file(s):\n{reasons}")
-    ds = builder.finalize(provenance={**report, "importer": f"seal.core.importers.{fmt}"})
-    atomic_write_json(Path(out) / REPORT_FILE, report)
-    return ds, report
+    try:
+        _import_shards(builder, fmt, files, prefixes, opts, progress)
+        report = _report(builder, fmt, inputs, opts, len(files), time.perf_counter() - start)
+        if report["scenarios"] == 0:
+            reasons = "\n".join(f"  {s['reason']}" for s in report["skipped"][:20])
+            raise ImportFailed(f"no scenario imported from {len(files)} {fmt} file(s):\n{reasons}")
+        builder.finalize(provenance={**report, "importer": f"seal.core.importers.{fmt}"})
+        atomic_write_json(staging / REPORT_FILE, report)
+    except Exception:  # a failed import leaves nothing behind (an interruption is no Exception: it resumes)
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    if out.is_dir():  # --overwrite, or an empty folder (`_check_out`)
+        shutil.rmtree(out)
+    elif out.exists():
+        out.unlink()
+    staging.rename(out)
+    return Dataset.open(out), report

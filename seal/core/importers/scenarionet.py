@@ -9,22 +9,30 @@ Files are read with `seal.core.importers.safe_pickle` (numpy arrays and plain co
   other) and ``state`` arrays of one entry per time stamp: ``position`` ``[T, 2|3]``, ``heading`` ``[T]``,
   ``velocity`` ``[T, 2]`` (from the positions when absent), ``length`` / ``width`` ``[T]`` (defaults by type
   when absent) and ``valid`` ``[T]``. Invalid stretches of up to `MAX_BRIDGE_STEPS` are interpolated (brief
-  occlusions); longer gaps split a track and the window keeps one piece (`seal.core.importers.windows`);
+  occlusions); longer gaps split a track and the window keeps one piece (`seal.core.importers.windows`). A
+  vehicle wider than long whose heading follows its motion has its length and width swapped back
+  (`box_is_swapped`: ScenarioNet's nuScenes converter writes the ego's box that way), counted as
+  ``repaired["swapped_boxes"]``; tracks never valid are dropped (``dropped["tracks_never_valid"]``).
+  Pedestrians and cyclists stay in the scenario as replayed agents (their logged oriented boxes: the ego's
+  sensors see them and overlapping one is a crash); only vehicles can be the ego or the adversary;
 * ``map_features``: lane centre lines (``LANE_*`` types except bike lanes) with their width - the per-point
   ``width`` ``[P, 2]`` (distances to the left / right boundary, Waymo), else the lane ``polygon``, else
   `DEFAULT_LANE_WIDTH_M` -, ``exit_lanes`` as successors and ``speed_limit_kmh`` / ``speed_limit_mph``; the
   line type of each lane side comes from the nearest road line or road edge feature along that side
   (``ROAD_EDGE_*`` and solid lines -> ``continuous``, broken lines -> ``striped``, none -> ``none``; the
-  drivable-area boundary still gives the road edge there).
+  drivable-area boundary still gives the road edge there). A lane or line feature whose polyline has fewer than
+  2 distinct finite points (real Waymo maps hold single-point lanes) is dropped and counted
+  (``dropped["degenerate_map_features"]``), never the whole scenario.
 
-The ego is the SDC; the adversary the first object of interest that is a vehicle with a usable track, else the
-most interacting vehicle (`seal.core.importers.windows.find_windows` with a fixed ego).
+The ego is the SDC (a parked SDC, one that never gets `MIN_DISPLACEMENT_M` from its start, is reported as such
+by `parked_ego`: there is nothing to drive); the adversary the first object of interest that is a vehicle with a
+usable track, else the most interacting vehicle (`seal.core.importers.windows.find_windows` with a fixed ego).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -35,8 +43,9 @@ from seal.core.importers.errors import ImportFormatError
 from seal.core.importers.lanes import LaneGeometry, chunked_lines, lane_pieces, link_successors, sample_along
 from seal.core.importers.safe_pickle import safe_load
 from seal.core.importers.tracks import AgentLog, resample_states, speeds_from_positions
+from seal.core.interaction import MIN_DISPLACEMENT_M
 from seal.core.road import LaneSpec, RoadDescription
-from seal.core.scenario import DT_S, TRACK_FIELDS
+from seal.core.scenario import DT_S, TRACK_FIELDS, VALID, X, Y
 
 LANE_TYPES = ("LANE_SURFACE_STREET", "LANE_SURFACE_UNSTRUCTURE", "LANE_UNKNOWN", "LANE_FREEWAY")
 AGENT_TYPE = {"VEHICLE": "vehicle", "PEDESTRIAN": "pedestrian", "CYCLIST": "cyclist"}
@@ -51,6 +60,10 @@ WIDTH_TOLERANCE_M = 0.5
 LINE_MATCH_M = 0.75
 """A road line within this distance (m) of a lane border is that border's paint."""
 LINE_SAMPLE_M = 4.0
+SWAP_MIN_SPEED_MPS = 1.0
+"""Steps slower than this (m/s) tell nothing about the direction of travel (`box_is_swapped`)."""
+SWAP_MIN_ALIGNMENT = math.cos(math.radians(30.0))
+"""Heading within 30 degrees of the direction of travel (or of its reverse) counts as following the motion."""
 
 
 @dataclass(frozen=True)
@@ -65,6 +78,10 @@ class ScenarioNetRecording:
     log: AgentLog
     sdc_row: int
     interest_rows: tuple[int, ...]
+    repaired: dict[str, int] = field(default_factory=dict)
+    """``swapped_boxes``: vehicles whose length and width were swapped back (`box_is_swapped`)."""
+    dropped: dict[str, int] = field(default_factory=dict)
+    """``degenerate_map_features`` (fewer than 2 distinct points), ``tracks_never_valid``."""
 
 
 def _fail(path: Path, element: str, problem: str) -> ImportFormatError:
@@ -102,10 +119,35 @@ def bridge_gaps(valid: np.ndarray, max_steps: int = MAX_BRIDGE_STEPS) -> np.ndar
     return out
 
 
+def box_is_swapped(
+    kind: str, times: np.ndarray, pos: np.ndarray, heading: np.ndarray, length: np.ndarray, width: np.ndarray,
+    valid: np.ndarray,
+) -> bool:
+    """A vehicle's box has length and width swapped: wider than long (medians over its ``valid`` steps) while its
+    heading follows its motion (median ``|cos|`` of the angle between heading and the direction of travel above
+    `SWAP_MIN_ALIGNMENT`, over steps faster than `SWAP_MIN_SPEED_MPS`). Then the box, not the heading, is wrong
+    (ScenarioNet's nuScenes converter swaps the ego's size). Without such motion nothing is decided: False.
+
+    Args: ``times [T]`` (s), ``pos [T, >=2]`` (m), ``heading [T]`` (rad), ``length`` / ``width [T]`` (m),
+    ``valid [T]`` bool (only finite steps should be valid).
+    """
+    idx = np.flatnonzero(valid)
+    if kind != "vehicle" or idx.size < 2 or not np.median(width[idx]) > np.median(length[idx]):
+        return False
+    step = np.diff(pos[idx, :2], axis=0)
+    dist = np.hypot(step[:, 0], step[:, 1])
+    moving = dist > SWAP_MIN_SPEED_MPS * np.diff(times[idx])
+    if moving.sum() < 2:
+        return False
+    travel = np.arctan2(step[moving, 1], step[moving, 0])
+    return bool(np.median(np.abs(np.cos(travel - heading[idx[:-1]][moving]))) > SWAP_MIN_ALIGNMENT)
+
+
 def _track_rows(
     path: Path, tid: str, obj: Any, times: np.ndarray, n_grid: int
-) -> tuple[np.ndarray, str] | None:
-    """``[n_grid, 8]`` grid rows of one track and its agent type; None when it is never valid."""
+) -> tuple[np.ndarray, str, bool] | None:
+    """``[n_grid, 8]`` grid rows of one track, its agent type and whether its box was swapped back
+    (`box_is_swapped`); None when it is never valid."""
     where = f"tracks[{tid!r}]"
     obj = _mapping(path, obj, where)
     state = _mapping(path, obj.get("state"), f"{where}.state")
@@ -130,6 +172,10 @@ def _track_rows(
             v = np.full(t, default)
         size.append(v)
     vel = _array(path, state["velocity"], f"{where}.state.velocity", (2,), t) if "velocity" in state else None
+    usable = valid & np.isfinite(pos[:, :2]).all(1) & np.isfinite(heading)
+    swapped = box_is_swapped(kind, times, pos, heading, size[0], size[1], usable)
+    if swapped:
+        size.reverse()
     bridged = bridge_gaps(valid)
     rows = np.zeros((n_grid, len(TRACK_FIELDS)))
     idx = np.flatnonzero(bridged)
@@ -152,7 +198,7 @@ def _track_rows(
             rows[g.first : end] = g.rows[: end - g.first]
     if not (rows[:, -1] > 0.5).any():
         return None
-    return rows, kind
+    return rows, kind, swapped
 
 
 def _times(path: Path, data: dict, meta: dict) -> np.ndarray:
@@ -251,8 +297,10 @@ def _side_types(lanes: list[LaneSpec], lines: list[tuple[np.ndarray, str]]) -> l
     ]
 
 
-def read_road(path: Path, features: dict) -> RoadDescription:
-    """Lanes of ``map_features`` as a ``polylines`` `RoadDescription` (module docstring)."""
+def read_road(path: Path, features: dict) -> tuple[RoadDescription, int]:
+    """Lanes of ``map_features`` as a ``polylines`` `RoadDescription` (module docstring), and the number of lane
+    and line features dropped because their polyline has fewer than 2 distinct finite points."""
+    degenerate = 0
     pieces: dict[str, list[LaneSpec]] = {}
     successors: dict[str, list[str]] = {}
     lines: list[tuple[np.ndarray, str]] = []
@@ -267,17 +315,25 @@ def read_road(path: Path, features: dict) -> RoadDescription:
             continue
         if "polyline" not in feat:
             raise _fail(path, where, f"{ftype} feature has no 'polyline'")
-        pts = np.asarray(feat["polyline"], dtype=np.float64)
-        if pts.ndim != 2 or pts.shape[0] < 2 or pts.shape[1] < 2 or not np.isfinite(pts[:, :2]).all():
-            raise _fail(path, f"{where}.polyline", f"must be a finite [P >= 2, 2 or 3] array, got {list(pts.shape)}")
+        try:
+            pts = np.asarray(feat["polyline"], dtype=np.float64)
+        except (TypeError, ValueError):
+            raise _fail(path, f"{where}.polyline", "must be a numeric array") from None
+        if pts.size == 0:
+            pts = pts.reshape(0, 2)
+        if pts.ndim != 2 or pts.shape[1] < 2:
+            raise _fail(path, f"{where}.polyline", f"must be a [P, 2 or 3] array, got {list(pts.shape)}")
+        finite = np.isfinite(pts[:, :2]).all(1)
         pts = pts[:, :2]
+        # Consecutive duplicates and non-finite points carry no shape; fewer than 2 distinct points: no line.
+        keep = finite & np.concatenate([[True], np.hypot(*np.diff(pts, axis=0).T) > 1e-6])
+        if keep.sum() < 2:
+            degenerate += 1
+            continue
         if kind is not None:
-            lines.append((pts, kind))
+            lines.append((pts[finite], kind))
             continue
         width = _lane_width(path, fid, feat, pts, len(pts))
-        keep = np.concatenate([[True], np.hypot(*np.diff(pts, axis=0).T) > 1e-6])
-        if keep.sum() < 2:
-            continue
         limit = DEFAULT_SPEED_LIMIT_MPS
         if float(feat.get("speed_limit_kmh", 0) or 0) > 0:
             limit = float(feat["speed_limit_kmh"]) / 3.6
@@ -288,8 +344,9 @@ def read_road(path: Path, features: dict) -> RoadDescription:
         successors[fid] = [str(s) for s in feat.get("exit_lanes", []) or []]
     lanes = link_successors(pieces, successors)
     if not lanes:
-        raise _fail(path, "map_features", f"no lane centre lines (features of type {', '.join(LANE_TYPES)})")
-    return RoadDescription(layout="polylines", lanes=tuple(_side_types(lanes, lines)), params={})
+        extra = f"; {degenerate} degenerate feature(s) with fewer than 2 distinct points dropped" if degenerate else ""
+        raise _fail(path, "map_features", f"no lane centre lines (features of type {', '.join(LANE_TYPES)}){extra}")
+    return RoadDescription(layout="polylines", lanes=tuple(_side_types(lanes, lines)), params={}), degenerate
 
 
 # ------------------------------------------------------------------------------------------------ entry
@@ -311,12 +368,16 @@ def read_scenarionet(path: str | Path) -> ScenarioNetRecording:
     times = _times(path, data, meta)
     n_grid = int(math.floor(times[-1] / DT_S + 1e-6)) + 1 if len(times) else 0
     rows, kinds, sids = [], [], []
+    swapped = never_valid = 0
     for raw_id, obj in tracks.items():
         got = _track_rows(path, str(raw_id), obj, times, n_grid)
-        if got is not None:
-            rows.append(got[0])
-            kinds.append(got[1])
-            sids.append(str(raw_id))
+        if got is None:
+            never_valid += 1
+            continue
+        rows.append(got[0])
+        kinds.append(got[1])
+        sids.append(str(raw_id))
+        swapped += got[2]
     if sdc not in sids:
         raise _fail(path, f"tracks[{sdc!r}]", "the SDC track is never valid")
     numeric = all(s.lstrip("-").isdigit() for s in sids) and len({int(s) for s in sids}) == len(sids)
@@ -324,12 +385,29 @@ def read_scenarionet(path: str | Path) -> ScenarioNetRecording:
     log = AgentLog(np.stack(rows), ids, tuple(kinds), tuple(sids))
     interest = [str(o) for o in (meta.get("objects_of_interest") or [])]
     interest_rows = tuple(sids.index(o) for o in interest if o in sids and o != sdc)
-    road = read_road(path, features)
+    road, degenerate = read_road(path, features)
     dataset = str(meta.get("dataset", "unknown"))
     road = RoadDescription(layout="polylines", lanes=road.lanes, params={"source": "scenarionet", "dataset": dataset})
     scenario_id = str(data.get("id", meta.get("scenario_id", path.stem)))
     return ScenarioNetRecording(
-        path, scenario_id, dataset, str(meta.get("coordinate", "unknown")), road, log, sids.index(sdc), interest_rows
+        path, scenario_id, dataset, str(meta.get("coordinate", "unknown")), road, log, sids.index(sdc), interest_rows,
+        repaired={"swapped_boxes": swapped},
+        dropped={"degenerate_map_features": degenerate, "tracks_never_valid": never_valid},
+    )
+
+
+def parked_ego(rec: ScenarioNetRecording) -> str | None:
+    """Why the SDC cannot be an ego when it is parked (it never gets `MIN_DISPLACEMENT_M` from where it is first
+    logged), else None: a parked ego gives no scenario to drive."""
+    row = rec.log.tracks[rec.sdc_row]
+    xy = row[row[:, VALID] > 0.5][:, [X, Y]]
+    reach = float(np.hypot(*(xy - xy[0]).T).max()) if len(xy) else 0.0
+    if reach >= MIN_DISPLACEMENT_M:
+        return None
+    return (
+        f"the self-driving car (the ego) is parked: it stays within {reach:.1f} m of where it starts over the "
+        f"{len(xy) * DT_S:.1f} s it is logged (an ego must travel at least {MIN_DISPLACEMENT_M:.0f} m); "
+        "nothing to drive"
     )
 
 

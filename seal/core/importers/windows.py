@@ -23,6 +23,7 @@ Differences for recorded data, and why:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -241,8 +242,10 @@ def find_windows(
     min_future_steps: int = MIN_FUTURE_STEPS,
     ego_row: int | None = None,
     adv_rows: tuple[int, ...] = (),
-) -> list[PairWindow]:
-    """Up to ``max_windows`` windows of the recording (module docstring), best first.
+    ego_ok: Callable[[np.ndarray], bool] | None = None,
+) -> tuple[list[PairWindow], int]:
+    """Up to ``max_windows`` windows of the recording (module docstring), best first, and how many windows were
+    passed over because ``ego_ok`` refused their ego.
 
     Args:
         log: the recording on the 10 Hz grid.
@@ -252,6 +255,8 @@ def find_windows(
         ego_row: fix the ego (e.g. the SDC of a ScenarioNet scenario); None: any vehicle.
         adv_rows: with ``ego_row``, adversaries to use in this order (objects of interest) before the most
             interacting other vehicle; these pairs are kept even without an interaction event.
+        ego_ok: test of a window's ego rows ``[91, 8]`` (e.g. that its logged path stays on the mapped road); a
+            refused window is passed over (counted) and the next best takes its place.
     """
     if not 1 <= min_future_steps <= N_STEPS - CURRENT_STEP - 1:
         raise ValueError(f"min_future_steps must be in [1, {N_STEPS - CURRENT_STEP - 1}], got {min_future_steps}")
@@ -276,16 +281,20 @@ def find_windows(
 
     chosen: list[PairWindow] = []
     uses: dict[int, int] = {}
+    refused = 0
     for c in candidates:
         if len(chosen) >= max_windows:
             break
         if ego_row is None and (uses.get(c.i, 0) >= MAX_PER_AGENT or uses.get(c.j, 0) >= MAX_PER_AGENT):
             continue
+        ego, adv = (c.i, c.j) if ego_row is not None else _roles(log, c)
+        if ego_ok is not None and not ego_ok(_cut(log, c.t0, (ego,))[0][0]):
+            refused += 1
+            continue
         uses[c.i] = uses.get(c.i, 0) + 1
         uses[c.j] = uses.get(c.j, 0) + 1
-        ego, adv = (c.i, c.j) if ego_row is not None else _roles(log, c)
         chosen.append(_window(log, c, ego, adv))
-    return chosen
+    return chosen, refused
 
 
 def _roles(log: AgentLog, c: _Candidate) -> tuple[int, int]:
