@@ -28,6 +28,7 @@ import numpy as np
 
 from seal.core.scenario import CURRENT_STEP, DT_S
 from seal.scoring.frenet import LaneChain, RoadIndex
+from seal.scoring.kernels import polyline_at, polyline_project, rank_by_dwell
 from seal.scoring.tracks import AgentTracks, lane_attributes
 
 DECEL_THRESHOLD_MPS2 = 0.5
@@ -62,7 +63,8 @@ def future_extrapolate(gt: AgentTracks, index: RoadIndex, current: int = CURRENT
         speed = float(np.hypot(v0[0], v0[1]))
         chain = index.chain(lane0, float(index.lane_lengths[lane0]) + speed * t[-1] + 1.0, logged_route(gt, a, current))
         line = chain.polyline
-        s0, d0, tangent = line.project(p0)
+        s0, d0, k0 = polyline_project(line.points, line.cum, line.tang, line.seg_len, float(p0[0]), float(p0[1]))
+        tangent = line.tang[int(k0)]
         v_lane = max(float(v0 @ tangent), 0.0)  # progress along the lane, no reversing
         decel = current_deceleration(gt, a, current, dt)
         if decel > DECEL_THRESHOLD_MPS2 and v_lane > 0.0:
@@ -70,11 +72,10 @@ def future_extrapolate(gt: AgentTracks, index: RoadIndex, current: int = CURRENT
             s = s0 + np.where(t < v_lane / decel, v_lane * t - 0.5 * decel * t**2, 0.5 * v_lane**2 / decel)
         else:
             s = s0 + v_lane * t
-        pts, head = line.at(s, d0)
+        pts, head, seg = polyline_at(line.points, line.cum, line.tang, line.vertex_tang, s, d0)
         pos[a, fut] = pts
         heading[a, fut] = head
         vel[a, fut] = np.diff(np.concatenate([p0[None], pts]), axis=0) / dt
-        seg = np.clip(np.searchsorted(line.cum, s, side="right") - 1, 0, chain.seg_lane.size - 1)
         on_map = s <= line.length  # past the end of a lane without successors the agent leaves the map
         lanes_k = np.where(on_map, chain.seg_lane[seg], -1)
         lane[a, fut] = lanes_k
@@ -101,12 +102,7 @@ def logged_route(gt: AgentTracks, agent: int, current: int = CURRENT_STEP) -> tu
     visited first). Ranking by time spent, not by first visit, keeps a step or two on the wrong branch right at a
     diverge (where both branches start at the same point) from deciding the route."""
     lanes = gt.lane[agent, current:][gt.valid[agent, current:]]
-    lanes = lanes[lanes >= 0]
-    if lanes.size == 0:
-        return ()
-    values, first, counts = np.unique(lanes, return_index=True, return_counts=True)
-    order = np.lexsort((first, -counts))
-    return tuple(int(v) for v in values[order])
+    return tuple(rank_by_dwell(np.ascontiguousarray(lanes, dtype=np.int64)).tolist())
 
 
 def current_deceleration(gt: AgentTracks, agent: int, current: int = CURRENT_STEP, dt: float = DT_S) -> float:

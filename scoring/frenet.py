@@ -20,7 +20,7 @@ import shapely
 from seal.core.geometry import wrap_angle
 from seal.core.road import RoadDescription
 from seal.scoring.conflict_points import lane_conflict_points
-from seal.scoring.neighbours import close_pairs
+from seal.scoring.kernels import cell_keys, project_points
 
 SIMPLIFY_TOL_M = 0.05
 MAX_HEADING_DIFF_RAD = np.pi / 3
@@ -97,6 +97,16 @@ class RoadIndex:
         )
         self._samples = self.seg_a[self._sample_seg] + frac[:, None] * self.seg_d[self._sample_seg]
         self._search_radius = MAX_LANE_DIST_WIDTHS * float(self.widths.max()) + 0.5 * _SAMPLE_SPACING_M + 1e-6
+        # The compiled projection's grid: sample points by cell (side = the search radius), sorted by cell key.
+        self._grid_origin = self._samples.min(axis=0) if self._samples.size else np.zeros(2)
+        keys = cell_keys(self._samples, self._grid_origin, self._search_radius)
+        order = np.argsort(keys, kind="stable")
+        sorted_keys = keys[order]
+        starts = np.flatnonzero(np.concatenate([[True], sorted_keys[1:] != sorted_keys[:-1]]))
+        self._grid_cells = np.ascontiguousarray(sorted_keys[starts])
+        self._grid_start = np.concatenate([starts, [sorted_keys.size]]).astype(np.int64)
+        self._grid_seg = np.ascontiguousarray(self._sample_seg[order], dtype=np.int64)
+        self.seg_lane = np.ascontiguousarray(self.seg_lane, dtype=np.int64)
         self._conflict_points: np.ndarray | None = None
         self._chains: dict[tuple[int, tuple[int, ...]], LaneChain] = {}
 
@@ -113,42 +123,20 @@ class RoadIndex:
 
     # ------------------------------------------------------------------------------------------ projection
     def project(self, xy: np.ndarray, heading: np.ndarray | None = None) -> Projection:
-        """Project points ``xy [N, 2]`` (m) with headings ``[N]`` (rad, optional) onto the closest compatible lane."""
-        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        n = xy.shape[0]
-        lane = np.full(n, -1, dtype=np.int64)
-        s = np.full(n, np.nan)
-        d = np.full(n, np.nan)
-        in_lane = np.zeros(n, dtype=bool)
-        # Candidate (point, segment) pairs from a grid search against points sampled every <= 4 m along the
-        # segments: any segment within the assignment distance of a point has a sample within the search radius,
-        # and a point only meets the few segments around it instead of all of them.
-        ip, isamp = close_pairs(xy, self._samples, self._search_radius)
-        if ip.size == 0:
-            return Projection(lane=lane, s=s, d=d, in_lane=in_lane)
-        seg = self._sample_seg[isamp]  # duplicates (several samples of one segment) are harmless
-        a, sd = self.seg_a[seg], self.seg_d[seg]
-        rx, ry = xy[ip, 0] - a[:, 0], xy[ip, 1] - a[:, 1]
-        t = np.clip((rx * sd[:, 0] + ry * sd[:, 1]) / self.seg_len2[seg], 0.0, 1.0)
-        ex, ey = rx - t * sd[:, 0], ry - t * sd[:, 1]
-        dist2 = ex * ex + ey * ey
-        if heading is not None:
-            h = np.asarray(heading, dtype=np.float64).reshape(-1)[ip]
-            # Compatible direction: cos(heading - segment heading) >= cos(max difference).
-            cos_diff = np.cos(h) * self._seg_cos[seg] + np.sin(h) * self._seg_sin[seg]
-            dist2 = np.where(cos_diff < np.cos(MAX_HEADING_DIFF_RAD), np.inf, dist2)
-        order = np.lexsort((dist2, ip))  # per point (ip sorted), closest candidate first
-        first = order[np.concatenate([[True], ip[order][1:] != ip[order][:-1]])]
-        pt, k, best2 = ip[first], seg[first], dist2[first]
-        best = np.sqrt(np.where(np.isfinite(best2), best2, 0.0))
-        seg_lane = self.seg_lane[k]
-        ok = np.isfinite(best2) & (best <= MAX_LANE_DIST_WIDTHS * self.widths[seg_lane])
-        cross = (sd[first, 0] * ry[first] - sd[first, 1] * rx[first]) / self.seg_len[k]
-        lane[pt] = np.where(ok, seg_lane, -1)
-        s[pt] = np.where(ok, self.seg_s0[k] + t[first] * self.seg_len[k], np.nan)
-        # Past a lane's end the closest point is the end point: the lateral offset is then the full distance.
-        d[pt] = np.where(ok, np.sign(cross) * best, np.nan)
-        in_lane[pt] = ok & (best <= 0.5 * self.widths[seg_lane])
+        """Project points ``xy [N, 2]`` (m) with headings ``[N]`` (rad, optional) onto the closest compatible lane.
+
+        Candidate segments come from a grid of points sampled every <= 4 m along the segments: any segment within
+        the assignment distance of a point has a sample in the 3 x 3 cells around it, and a point only meets the
+        few segments around it instead of all of them (compiled: `seal.scoring.kernels.project_points`).
+        """
+        xy = np.ascontiguousarray(np.asarray(xy, dtype=np.float64).reshape(-1, 2))
+        use_heading = heading is not None
+        h = np.ascontiguousarray(np.asarray(heading, dtype=np.float64).reshape(-1)) if use_heading else np.zeros(0)
+        lane, s, d, in_lane = project_points(
+            xy, h, use_heading, self._grid_origin, self._search_radius, self._grid_cells, self._grid_start,
+            self._grid_seg, self.seg_a, self.seg_d, self.seg_len2, self.seg_len, self._seg_cos, self._seg_sin,
+            float(np.cos(MAX_HEADING_DIFF_RAD)), self.seg_lane, self.seg_s0, self.widths, MAX_LANE_DIST_WIDTHS,
+        )
         return Projection(lane=lane, s=s, d=d, in_lane=in_lane)
 
     # ------------------------------------------------------------------------------------------ lane chains

@@ -32,7 +32,7 @@ import numpy as np
 
 from seal.core.geometry import box_corners, boxes_overlap, wrap_angle
 from seal.scoring.frenet import RoadIndex
-from seal.scoring.neighbours import close_pairs
+from seal.scoring.kernels import agent_mttcp
 from seal.scoring.primitives import Primitives, agent_windows, pair_anomaly
 from seal.scoring.tracks import AgentTracks
 
@@ -60,9 +60,6 @@ class TrackContext:
         self.windows = agent_windows(tracks.pos, tracks.heading, tracks.valid)  # motion-primitive windows
         # Separate x / y planes: hypot on [.., T] arrays is much faster than norms over a trailing axis of 2.
         self.x, self.y = np.ascontiguousarray(tracks.pos[..., 0]), np.ascontiguousarray(tracks.pos[..., 1])
-        # float32 copies for the per-row time-to-conflict-point arrays (memory bound; cm precision is plenty).
-        self.x32, self.y32 = self.x.astype(np.float32), self.y.astype(np.float32)
-        self.speed32 = self.speed.astype(np.float32)
         # Path points for conflict search. A standing agent repeats its position up to 91 times, which would
         # make the neighbour search quadratic; runs of consecutive positions in the same 1 cm grid cell are
         # collapsed to one point: the last step of the run where the agent is "i" (the latest conflict step gives
@@ -77,15 +74,23 @@ class TrackContext:
         last[:, :-1] &= ~same
         # Both masks enumerate the same runs in the same (agent, step) order, so entry k of the first_* and
         # last_* arrays is one run: its first and last step.
-        self.last_agent, self.last_step = np.nonzero(last)
+        self.last_agent, self.last_step = (np.ascontiguousarray(v, dtype=np.int64) for v in np.nonzero(last))
         self.last_points = tracks.pos[self.last_agent, self.last_step]  # [N, 2]
-        self.first_agent, self.first_step = np.nonzero(first)
+        self.first_agent, self.first_step = (np.ascontiguousarray(v, dtype=np.int64) for v in np.nonzero(first))
         self.first_points = tracks.pos[self.first_agent, self.first_step]
         self.last_run_start = self.first_step  # run k's first step, aligned with last_* (same run order)
         self.first_run_end = self.last_step
         n_steps = valid.shape[1]
-        self.valid_start = np.argmax(valid, axis=1)
-        self.valid_end = n_steps - 1 - np.argmax(valid[:, ::-1], axis=1)
+        self.valid_start = np.argmax(valid, axis=1).astype(np.int64)
+        self.valid_end = (n_steps - 1 - np.argmax(valid[:, ::-1], axis=1)).astype(np.int64)
+        # For the compiled path-conflict search: each agent's range of runs, and its "first" runs sorted by x.
+        agents = np.arange(tracks.n_agents + 1)
+        self.last_runs = np.searchsorted(self.last_agent, agents).astype(np.int64)
+        self.first_runs = np.searchsorted(self.first_agent, agents).astype(np.int64)
+        self.last_points_x = np.ascontiguousarray(self.last_points[:, 0])
+        order = np.lexsort((self.first_points[:, 0], self.first_agent))
+        self.first_sorted_x = np.ascontiguousarray(self.first_points[order, 0])
+        self.first_sorted_run = order.astype(np.int64)
         cps = index.conflict_points
         if cps.shape[0]:
             d = np.hypot(self.x[..., None] - cps[:, 0], self.y[..., None] - cps[:, 1])  # [A, T, C]
@@ -233,12 +238,6 @@ def _min_time_difference(d_i, d_j, v_i, v_j, st_i, st_j, window) -> np.ndarray:
     return diff.min(1).astype(np.float64)
 
 
-def _buckets(t_end: np.ndarray, t_steps: int, width: int = 16) -> list[tuple[int, int]]:
-    """Column ranges ``(lo, hi]`` of window lengths, in steps of ``width``, that contain rows."""
-    edges = np.unique(np.minimum(-(-t_end // width) * width, t_steps))
-    return list(zip(np.concatenate([[0], edges[:-1]]).tolist(), edges.tolist(), strict=True))
-
-
 def _rows_min(values: np.ndarray, rows: np.ndarray, n: int) -> np.ndarray:
     """Per-pair minimum of row values (inf where a pair has no row), inverted to 1/time."""
     best = np.full(n, np.inf)
@@ -247,50 +246,18 @@ def _rows_min(values: np.ndarray, rows: np.ndarray, n: int) -> np.ndarray:
 
 
 def _agent_mttcp(ca: TrackContext, cb: TrackContext, I, J, st_i, st_j, mask) -> np.ndarray:
-    n, t_steps = mask.shape
-    # Path points of i (set a) within 1 m of path points of j (set b), at any two steps: grid neighbour search
-    # over all agents at once, then keep the (i, j) combinations that are active pairs.
-    pair_of = np.full((ca.tracks.n_agents, cb.tracks.n_agents), -1, dtype=np.int64)
-    pair_of[I, J] = np.arange(n)
-    ia, ib = close_pairs(
-        ca.last_points, cb.first_points, AGENT_CP_DIST_M,
-        allowed=lambda ia, ib: pair_of[ca.last_agent[ia], cb.first_agent[ib]] >= 0,
+    # Path points of i (set a) within 1 m of path points of j (set b), at any two steps; each step of i with a
+    # conflict is one row, j's step is the first one close to it (as in SafeShift); the compiled kernel does the
+    # search and the per-row minimum (tests/scoring_reference.py keeps the numpy form).
+    return agent_mttcp(
+        I.astype(np.int64), J.astype(np.int64), np.ascontiguousarray(st_i), np.ascontiguousarray(st_j),
+        np.ascontiguousarray(mask),
+        ca.x, ca.y, ca.speed, ca.last_runs, ca.last_step, ca.last_run_start, ca.last_points_x, ca.valid_start,
+        ca.valid_end,
+        cb.x, cb.y, cb.speed, cb.first_runs, cb.first_step, cb.first_run_end, cb.first_sorted_x, cb.first_sorted_run,
+        cb.valid_start, cb.valid_end,
+        AGENT_CP_DIST_M, SPEED_EPS, MIN_TIME_S,
     )
-    ai, bj = ca.last_agent[ia], cb.first_agent[ib]
-    p = pair_of[ai, bj]
-    # Latest step of i's run where j is valid too, earliest step of j's run where i is valid too (validity is
-    # one block per agent): the steps the uncollapsed rows would have used.
-    ti = np.minimum(ca.last_step[ia], cb.valid_end[bj])
-    tj = np.maximum(cb.first_step[ib], ca.valid_start[ai])
-    keep = (ti >= np.maximum(ca.last_run_start[ia], cb.valid_start[bj])) & (
-        tj <= np.minimum(cb.first_run_end[ib], ca.valid_end[ai])
-    )
-    p, ti, tj = p[keep], ti[keep], tj[keep]
-    if p.size == 0:
-        return np.zeros(n)
-    # Each step of i with a conflict is one row; j's step is the first one close to it (as in SafeShift).
-    first_j = np.full((n, t_steps), t_steps, dtype=np.int64)
-    np.minimum.at(first_j, (p, ti), tj)
-    rp, ti = np.nonzero(first_j < t_steps)
-    tj = first_j[rp, ti]
-    ri, rj = I[rp], J[rp]
-    t_end = np.minimum(ti, tj) + 1  # rows only look at steps before the first of the two reaches the point
-    vals = np.empty(rp.size)
-    # Bucket rows by window length so that short windows do not pay for all T steps.
-    for lo, hi in _buckets(t_end, t_steps):
-        sel = np.flatnonzero((t_end > lo) & (t_end <= hi))
-        if sel.size == 0:
-            continue
-        a_, b_, r_ = ri[sel], rj[sel], rp[sel]
-        cx = ca.x32[a_, ti[sel]][:, None]  # conflict point = i's position at the conflict step
-        cy = ca.y32[a_, ti[sel]][:, None]
-        d_i = np.hypot(ca.x32[a_, :hi] - cx, ca.y32[a_, :hi] - cy)  # [R, hi]
-        d_j = np.hypot(cb.x32[b_, :hi] - cx, cb.y32[b_, :hi] - cy)
-        window = (np.arange(hi)[None, :] < t_end[sel][:, None]) & mask[r_, :hi]
-        vals[sel] = _min_time_difference(
-            d_i, d_j, ca.speed32[a_, :hi], cb.speed32[b_, :hi], st_i[r_], st_j[r_], window
-        )
-    return _rows_min(vals, rp, n)
 
 
 def _map_mttcp(ca: TrackContext, cb: TrackContext, I, J, si, sj, st_i, st_j, mask) -> np.ndarray:
