@@ -284,3 +284,121 @@ def project_points(
         d[p] = sign * best
         in_lane[p] = best <= 0.5 * w
     return lane, s, d, in_lane
+
+
+_CORNER_SIGNS = ((0.5, 0.5), (0.5, -0.5), (-0.5, -0.5), (-0.5, 0.5))
+"""Corner order of `seal.core.geometry.box_corners` (front left, front right, rear right, rear left)."""
+
+
+@njit(**_OPTS)
+def _corners(x: float, y: float, heading: float, length: float, width: float, out: np.ndarray) -> None:
+    """Corners ``out [4, 2]`` (m) of a box, as `seal.core.geometry.box_corners`."""
+    c = math.cos(heading)
+    s = math.sin(heading)
+    for k in range(4):
+        dl = _CORNER_SIGNS[k][0] * length
+        dw = _CORNER_SIGNS[k][1] * width
+        out[k, 0] = x + dl * c - dw * s
+        out[k, 1] = y + dl * s + dw * c
+
+
+@njit(**_OPTS)
+def _boxes_overlap(a: np.ndarray, b: np.ndarray) -> bool:
+    """Separating-axis test of two rectangles given by corners ``[4, 2]`` (`seal.core.geometry.boxes_overlap`)."""
+    for k in range(4):
+        box = a if k < 2 else b
+        e = k % 2
+        ax = box[e + 1, 0] - box[e, 0]
+        ay = box[e + 1, 1] - box[e, 1]
+        lo_a = hi_a = ax * a[0, 0] + ay * a[0, 1]
+        lo_b = hi_b = ax * b[0, 0] + ay * b[0, 1]
+        for c in range(1, 4):
+            pa = ax * a[c, 0] + ay * a[c, 1]
+            pb = ax * b[c, 0] + ay * b[c, 1]
+            lo_a = min(lo_a, pa)
+            hi_a = max(hi_a, pa)
+            lo_b = min(lo_b, pb)
+            hi_b = max(hi_b, pb)
+        if hi_a < lo_b or hi_b < lo_a:
+            return False
+    return True
+
+
+@njit(**_OPTS)
+def _orient(ax: float, ay: float, bx: float, by: float, cx: float, cy: float) -> float:
+    return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+
+
+@njit(**_OPTS)
+def _on_segment(ax: float, ay: float, bx: float, by: float, cx: float, cy: float) -> bool:
+    return min(ax, bx) <= cx <= max(ax, bx) and min(ay, by) <= cy <= max(ay, by)
+
+
+@njit(**_OPTS)
+def segments_cross(
+    p0x: float, p0y: float, p1x: float, p1y: float, q0x: float, q0y: float, q1x: float, q1y: float,
+) -> bool:
+    """Whether segments p0-p1 and q0-q1 intersect, touching included (`seal.scoring.social.segments_intersect`)."""
+    d1 = _orient(q0x, q0y, q1x, q1y, p0x, p0y)
+    d2 = _orient(q0x, q0y, q1x, q1y, p1x, p1y)
+    d3 = _orient(p0x, p0y, p1x, p1y, q0x, q0y)
+    d4 = _orient(p0x, p0y, p1x, p1y, q1x, q1y)
+    if ((d1 > 0 and d2 < 0) or (d1 < 0 and d2 > 0)) and ((d3 > 0 and d4 < 0) or (d3 < 0 and d4 > 0)):
+        return True
+    return (
+        (d1 == 0 and _on_segment(q0x, q0y, q1x, q1y, p0x, p0y))
+        or (d2 == 0 and _on_segment(q0x, q0y, q1x, q1y, p1x, p1y))
+        or (d3 == 0 and _on_segment(p0x, p0y, p1x, p1y, q0x, q0y))
+        or (d4 == 0 and _on_segment(p0x, p0y, p1x, p1y, q1x, q1y))
+    )
+
+
+@njit(float64[::1](
+    int64[::1], int64[::1], types.boolean[:, ::1],
+    float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], float64[::1],
+    float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], float64[::1], float64), **_OPTS)
+def pair_contacts(
+    I: np.ndarray, J: np.ndarray, mask: np.ndarray,
+    ax: np.ndarray, ay: np.ndarray, ah: np.ndarray, alen: np.ndarray, awid: np.ndarray,
+    bx: np.ndarray, by: np.ndarray, bh: np.ndarray, blen: np.ndarray, bwid: np.ndarray, centre_dist_m: float,
+) -> np.ndarray:
+    """``[P]`` contacts of pairs ``(I[p] of set a, J[p] of set b)`` over the steps where ``mask [P, T]`` (both
+    valid): runs of consecutive contact steps, a contact step being one where the centres are within
+    ``centre_dist_m``, the oriented boxes overlap, or the per-step motion segments of the centres cross
+    (`seal.scoring.social`'s ``collisions``, whose numpy form the tests keep as the reference). Tracks: centres
+    ``x, y [A, T]`` (m), headings ``[A, T]`` (rad), lengths and widths ``[A]`` (m)."""
+    n, n_steps = mask.shape
+    out = np.zeros(n)
+    box_a = np.empty((4, 2))
+    box_b = np.empty((4, 2))
+    for p in range(n):
+        i = I[p]
+        j = J[p]
+        reach_box = 0.5 * (math.hypot(alen[i], awid[i]) + math.hypot(blen[j], bwid[j]))
+        prev_hit = False
+        prev_dist = 0.0
+        count = 0
+        for t in range(n_steps):
+            if not mask[p, t]:
+                prev_hit = False
+                continue
+            dist = math.hypot(ax[i, t] - bx[j, t], ay[i, t] - by[j, t])
+            hit = dist <= centre_dist_m
+            if not hit and dist <= reach_box:
+                _corners(ax[i, t], ay[i, t], ah[i, t], alen[i], awid[i], box_a)
+                _corners(bx[j, t], by[j, t], bh[j, t], blen[j], bwid[j], box_b)
+                hit = _boxes_overlap(box_a, box_b)
+            if not hit and t > 0 and mask[p, t - 1]:
+                # Motion segments can only cross if the centres are closer than the two step lengths together.
+                step_i = math.hypot(ax[i, t] - ax[i, t - 1], ay[i, t] - ay[i, t - 1])
+                step_j = math.hypot(bx[j, t] - bx[j, t - 1], by[j, t] - by[j, t - 1])
+                reach = step_i + step_j + 1e-6
+                if dist <= reach or prev_dist <= reach:
+                    hit = segments_cross(ax[i, t - 1], ay[i, t - 1], ax[i, t], ay[i, t],
+                                         bx[j, t - 1], by[j, t - 1], bx[j, t], by[j, t])
+            if hit and not prev_hit:
+                count += 1
+            prev_hit = hit
+            prev_dist = dist
+        out[p] = count
+    return out

@@ -30,9 +30,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from seal.core.geometry import box_corners, boxes_overlap, wrap_angle
+from seal.core.geometry import wrap_angle
 from seal.scoring.frenet import RoadIndex
-from seal.scoring.kernels import agent_mttcp
+from seal.scoring.kernels import agent_mttcp, pair_contacts
 from seal.scoring.primitives import Primitives, agent_windows, pair_anomaly
 from seal.scoring.tracks import AgentTracks
 
@@ -60,6 +60,9 @@ class TrackContext:
         self.windows = agent_windows(tracks.pos, tracks.heading, tracks.valid)  # motion-primitive windows
         # Separate x / y planes: hypot on [.., T] arrays is much faster than norms over a trailing axis of 2.
         self.x, self.y = np.ascontiguousarray(tracks.pos[..., 0]), np.ascontiguousarray(tracks.pos[..., 1])
+        self.heading = np.ascontiguousarray(tracks.heading, dtype=np.float64)
+        self.length = np.ascontiguousarray(tracks.length, dtype=np.float64)
+        self.width = np.ascontiguousarray(tracks.width, dtype=np.float64)
         # Path points for conflict search. A standing agent repeats its position up to 91 times, which would
         # make the neighbour search quadratic; runs of consecutive positions in the same 1 cm grid cell are
         # collapsed to one point: the last step of the run where the agent is "i" (the latest conflict step gives
@@ -128,7 +131,7 @@ def social_features(
     st_i, st_j = mean_i[act] <= STATIONARY_MPS, mean_j[act] <= STATIONARY_MPS
     pi, pj = a.pos[I], b.pos[J]
 
-    out["collisions"][act] = _collisions(a, b, I, J, pi, pj, dist, mask)
+    out["collisions"][act] = _collisions(ca, cb, I, J, mask)
     thw, ttc, drac = _following(a, b, I, J, pi, pj, si, sj, dist, mask, index)
     out["inv_thw"][act], out["inv_ttc"][act], out["drac"][act] = thw, ttc, drac
     out["inv_mttcp_agents"][act] = _agent_mttcp(ca, cb, I, J, st_i, st_j, mask)
@@ -151,55 +154,15 @@ def social_score(f: dict[str, np.ndarray]) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------------------------ measures
-def segments_intersect(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
-    """Whether segments ``p0-p1`` and ``q0-q1`` (``[..., 2]``, broadcast) intersect (touching counts)."""
-
-    def orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-        return (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0])
-
-    def on_segment(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:  # c within the box of a-b
-        return (
-            (np.minimum(a[..., 0], b[..., 0]) <= c[..., 0]) & (c[..., 0] <= np.maximum(a[..., 0], b[..., 0]))
-            & (np.minimum(a[..., 1], b[..., 1]) <= c[..., 1]) & (c[..., 1] <= np.maximum(a[..., 1], b[..., 1]))
-        )
-
-    d1, d2 = orient(q0, q1, p0), orient(q0, q1, p1)
-    d3, d4 = orient(p0, p1, q0), orient(p0, p1, q1)
-    proper = (((d1 > 0) & (d2 < 0)) | ((d1 < 0) & (d2 > 0))) & (((d3 > 0) & (d4 < 0)) | ((d3 < 0) & (d4 > 0)))
-    touch = (
-        ((d1 == 0) & on_segment(q0, q1, p0)) | ((d2 == 0) & on_segment(q0, q1, p1))
-        | ((d3 == 0) & on_segment(p0, p1, q0)) | ((d4 == 0) & on_segment(p0, p1, q1))
-    )
-    return proper | touch
-
-
-def _collisions(
-    a: AgentTracks, b: AgentTracks, I: np.ndarray, J: np.ndarray, pi: np.ndarray, pj: np.ndarray,
-    dist: np.ndarray, mask: np.ndarray,
-) -> np.ndarray:
-    hit = (dist <= COLLISION_DIST_M) & mask
-    # Box overlap, tested only where the circumscribed circles touch.
-    reach_box = 0.5 * (np.hypot(a.length[I], a.width[I]) + np.hypot(b.length[J], b.width[J]))
-    p, t = np.nonzero(mask & (dist <= reach_box[:, None]))
-    if p.size:
-        box_i = box_corners(pi[p, t, 0], pi[p, t, 1], a.heading[I[p], t], a.length[I[p]], a.width[I[p]])
-        box_j = box_corners(pj[p, t, 0], pj[p, t, 1], b.heading[J[p], t], b.length[J[p]], b.width[J[p]])
-        overlap = boxes_overlap(box_i, box_j)
-        hit[p[overlap], t[overlap]] = True
-    # Motion segments can only cross if the centres are closer than the two step lengths together: test exactly
-    # only those (pair, step) candidates (few), not all P x T.
-    step_i = np.hypot(*(pi[:, 1:] - pi[:, :-1]).transpose(2, 0, 1))
-    step_j = np.hypot(*(pj[:, 1:] - pj[:, :-1]).transpose(2, 0, 1))
-    reach = step_i + step_j + 1e-6
-    cand = mask[:, 1:] & mask[:, :-1] & ((dist[:, 1:] <= reach) | (dist[:, :-1] <= reach))
-    p, t = np.nonzero(cand)
-    if p.size:
-        seg_hit = segments_intersect(pi[p, t], pi[p, t + 1], pj[p, t], pj[p, t + 1])
-        hit[p[seg_hit], t[seg_hit] + 1] = True
+def _collisions(ca: TrackContext, cb: TrackContext, I: np.ndarray, J: np.ndarray, mask: np.ndarray) -> np.ndarray:
     # Count contacts, not contact steps: an extrapolated track driving through a slower vehicle overlaps it for
-    # many steps, which as a step count would outweigh every other feature of the pair.
-    onsets = hit[:, :1].sum(1) + (hit[:, 1:] & ~hit[:, :-1]).sum(1)
-    return onsets.astype(np.float64)
+    # many steps, which as a step count would outweigh every other feature of the pair (compiled kernel;
+    # tests/scoring_reference.py keeps the numpy form).
+    return pair_contacts(
+        I.astype(np.int64), J.astype(np.int64), np.ascontiguousarray(mask),
+        ca.x, ca.y, ca.heading, ca.length, ca.width, cb.x, cb.y, cb.heading, cb.length, cb.width,
+        COLLISION_DIST_M,
+    )
 
 
 def _following(a, b, I, J, pi, pj, si, sj, dist, mask, index: RoadIndex):

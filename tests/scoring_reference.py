@@ -1,10 +1,10 @@
 """Numpy reference forms of the scoring's compiled kernels (`seal.scoring.kernels`), for the tests.
 
-`project_reference` is the vectorised numpy form of `seal.scoring.frenet.RoadIndex.project` (grid neighbour
-search with `close_pairs`, then the closest compatible candidate per point); `agent_mttcp_reference` is the
-vectorised numpy implementation of ``inv_mttcp_agents`` that the compiled kernel
-replaced (grid neighbour search over all agents' collapsed path points, per-row time differences bucketed by
-window length, positions in float32).
+* `project_reference`: `seal.scoring.frenet.RoadIndex.project` (grid neighbour search with `close_pairs`, then
+  the closest compatible candidate per point);
+* `collisions_reference`: the contact count of a pair (``collisions``), with `segments_intersect`;
+* `agent_mttcp_reference`: ``inv_mttcp_agents`` (grid neighbour search over all agents' collapsed path points,
+  per-row time differences bucketed by window length, positions in float32).
 """
 
 from __future__ import annotations
@@ -13,8 +13,16 @@ from collections.abc import Callable
 
 import numpy as np
 
+from seal.core.geometry import box_corners, boxes_overlap
 from seal.scoring.frenet import MAX_HEADING_DIFF_RAD, MAX_LANE_DIST_WIDTHS, Projection, RoadIndex
-from seal.scoring.social import AGENT_CP_DIST_M, TrackContext, _min_time_difference, _rows_min
+from seal.scoring.social import (
+    AGENT_CP_DIST_M,
+    COLLISION_DIST_M,
+    TrackContext,
+    _min_time_difference,
+    _rows_min,
+)
+from seal.scoring.tracks import AgentTracks
 
 
 def close_pairs(
@@ -159,3 +167,54 @@ def agent_mttcp_reference(ca: TrackContext, cb: TrackContext, I, J, st_i, st_j, 
             d_i, d_j, as32[a_, :hi], bs32[b_, :hi], st_i[r_], st_j[r_], window
         )
     return _rows_min(vals, rp, n)
+
+
+def segments_intersect(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
+    """Whether segments ``p0-p1`` and ``q0-q1`` (``[..., 2]``, broadcast) intersect (touching counts)."""
+
+    def orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+        return (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0])
+
+    def on_segment(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:  # c within the box of a-b
+        return (
+            (np.minimum(a[..., 0], b[..., 0]) <= c[..., 0]) & (c[..., 0] <= np.maximum(a[..., 0], b[..., 0]))
+            & (np.minimum(a[..., 1], b[..., 1]) <= c[..., 1]) & (c[..., 1] <= np.maximum(a[..., 1], b[..., 1]))
+        )
+
+    d1, d2 = orient(q0, q1, p0), orient(q0, q1, p1)
+    d3, d4 = orient(p0, p1, q0), orient(p0, p1, q1)
+    proper = (((d1 > 0) & (d2 < 0)) | ((d1 < 0) & (d2 > 0))) & (((d3 > 0) & (d4 < 0)) | ((d3 < 0) & (d4 > 0)))
+    touch = (
+        ((d1 == 0) & on_segment(q0, q1, p0)) | ((d2 == 0) & on_segment(q0, q1, p1))
+        | ((d3 == 0) & on_segment(p0, p1, q0)) | ((d4 == 0) & on_segment(p0, p1, q1))
+    )
+    return proper | touch
+
+
+def collisions_reference(
+    a: AgentTracks, b: AgentTracks, I: np.ndarray, J: np.ndarray, pi: np.ndarray, pj: np.ndarray,
+    dist: np.ndarray, mask: np.ndarray,
+) -> np.ndarray:
+    hit = (dist <= COLLISION_DIST_M) & mask
+    # Box overlap, tested only where the circumscribed circles touch.
+    reach_box = 0.5 * (np.hypot(a.length[I], a.width[I]) + np.hypot(b.length[J], b.width[J]))
+    p, t = np.nonzero(mask & (dist <= reach_box[:, None]))
+    if p.size:
+        box_i = box_corners(pi[p, t, 0], pi[p, t, 1], a.heading[I[p], t], a.length[I[p]], a.width[I[p]])
+        box_j = box_corners(pj[p, t, 0], pj[p, t, 1], b.heading[J[p], t], b.length[J[p]], b.width[J[p]])
+        overlap = boxes_overlap(box_i, box_j)
+        hit[p[overlap], t[overlap]] = True
+    # Motion segments can only cross if the centres are closer than the two step lengths together: test exactly
+    # only those (pair, step) candidates (few), not all P x T.
+    step_i = np.hypot(*(pi[:, 1:] - pi[:, :-1]).transpose(2, 0, 1))
+    step_j = np.hypot(*(pj[:, 1:] - pj[:, :-1]).transpose(2, 0, 1))
+    reach = step_i + step_j + 1e-6
+    cand = mask[:, 1:] & mask[:, :-1] & ((dist[:, 1:] <= reach) | (dist[:, :-1] <= reach))
+    p, t = np.nonzero(cand)
+    if p.size:
+        seg_hit = segments_intersect(pi[p, t], pi[p, t + 1], pj[p, t], pj[p, t + 1])
+        hit[p[seg_hit], t[seg_hit] + 1] = True
+    # Count contacts, not contact steps: an extrapolated track driving through a slower vehicle overlaps it for
+    # many steps, which as a step count would outweigh every other feature of the pair.
+    onsets = hit[:, :1].sum(1) + (hit[:, 1:] & ~hit[:, :-1]).sum(1)
+    return onsets.astype(np.float64)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scoring_reference import agent_mttcp_reference, project_reference
+from scoring_reference import agent_mttcp_reference, collisions_reference, project_reference
 
 from seal.core.scenario import HEADING, VALID, Scenario
 from seal.envs.generate import generate_dataset
@@ -15,7 +15,7 @@ from seal.scoring.extrapolation import future_extrapolate
 from seal.scoring.frenet import Polyline
 from seal.scoring.kernels import polyline_at, polyline_project, rank_by_dwell
 from seal.scoring.scores import road_index
-from seal.scoring.social import STATIONARY_MPS, TrackContext, _agent_mttcp
+from seal.scoring.social import STATIONARY_MPS, TrackContext, _agent_mttcp, _collisions
 from seal.scoring.tracks import from_tracks
 
 
@@ -89,3 +89,23 @@ def test_rank_by_dwell_orders_by_time_then_first_visit() -> None:
     lanes = np.array([-1, 3, 3, 1, 1, 1, 5, 5, 5, -1, 2], dtype=np.int64)
     assert rank_by_dwell(lanes).tolist() == [1, 5, 3, 2]
     assert rank_by_dwell(np.array([-1, -1], dtype=np.int64)).tolist() == []
+
+
+def test_contact_kernel_matches_the_numpy_reference(generated: list[Scenario]) -> None:
+    n_contacts = 0
+    for s in generated:
+        index = road_index(s.road)
+        gt = from_tracks(s.tracks, index)
+        fe = future_extrapolate(gt, index)
+        ctx_gt, ctx_fe = TrackContext(gt, index), TrackContext(fe, index)
+        i, j = np.triu_indices(gt.n_agents, 1)
+        variants = ((ctx_gt, ctx_gt, i, j), (ctx_fe, ctx_fe, i, j), (ctx_fe, ctx_gt, np.r_[i, j], np.r_[j, i]))
+        for ca, cb, pi, pj in variants:
+            mask = ca.tracks.valid[pi] & cb.tracks.valid[pj]
+            a, b = ca.tracks, cb.tracks
+            pos_i, pos_j = a.pos[pi], b.pos[pj]
+            dist = np.hypot(ca.x[pi] - cb.x[pj], ca.y[pi] - cb.y[pj])
+            ref = collisions_reference(a, b, pi, pj, pos_i, pos_j, dist, mask)
+            np.testing.assert_array_equal(_collisions(ca, cb, pi, pj, mask), ref)
+            n_contacts += int(ref.sum())
+    assert n_contacts > 0

@@ -5,10 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scoring_builders import LENGTH_M, cross_road, scenario, straight_road, straight_track, track
+from scoring_reference import segments_intersect
 
 from seal.core.scenario import DT_S, N_STEPS
+from seal.scoring.kernels import segments_cross
 from seal.scoring.scores import scene_score, score_scenario
-from seal.scoring.social import SOCIAL_FEATURES, segments_intersect, social_score
+from seal.scoring.social import SOCIAL_FEATURES, social_score
 
 
 def feature(res, name: str, variant: str = "gt", pair: tuple[int, int] = (0, 1)) -> float:
@@ -63,12 +65,18 @@ def test_collision_found_by_box_overlap() -> None:
         assert feature(res, "collisions") == contacts
 
 
-def test_segments_intersect() -> None:
-    p0, p1 = np.array([0.0, 0.0]), np.array([1.0, 0.0])
-    assert segments_intersect(p0, p1, np.array([0.5, -1.0]), np.array([0.5, 1.0]))
-    assert not segments_intersect(p0, p1, np.array([2.0, -1.0]), np.array([2.0, 1.0]))
-    assert segments_intersect(p0, p1, np.array([1.0, 0.0]), np.array([1.0, 3.0]))  # touching end points
-    assert not segments_intersect(p0, p1, np.array([0.0, 1.0]), np.array([1.0, 1.0]))  # parallel
+def test_segments_cross() -> None:
+    def cross(p0, p1, q0, q1) -> bool:  # the compiled test and the numpy reference agree on every case
+        got = segments_cross(*p0, *p1, *q0, *q1)
+        assert got == bool(segments_intersect(np.array(p0), np.array(p1), np.array(q0), np.array(q1)))
+        return got
+
+    p0, p1 = (0.0, 0.0), (1.0, 0.0)
+    assert cross(p0, p1, (0.5, -1.0), (0.5, 1.0))
+    assert not cross(p0, p1, (2.0, -1.0), (2.0, 1.0))
+    assert cross(p0, p1, (1.0, 0.0), (1.0, 3.0))  # touching end points
+    assert not cross(p0, p1, (0.0, 1.0), (1.0, 1.0))  # parallel
+    assert cross(p0, p1, (0.5, 0.0), (3.0, 0.0))  # collinear overlap
 
 
 def test_time_to_conflict_point_on_map_and_paths() -> None:

@@ -135,7 +135,8 @@ def test_report_and_bench(scored: Path, tmp_path: Path) -> None:
         if p.suffix == ".png":
             assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     bench = run_scoring_bench(scored, workers=1, limit=10)
-    assert bench["n_scenarios"] == 10 and bench["ms_per_scenario"] > 0
+    assert bench["scenarios"] == bench["n_scenarios"] == 10 and bench["ms_per_scenario"] > 0
+    assert bench["seconds"] >= bench["score_s"] > 0 and bench["cpu_s"] > 0
 
 
 def test_process_pool_matches_serial(scored: Path) -> None:
