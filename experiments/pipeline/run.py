@@ -56,6 +56,7 @@ from seal.adversaries.base import NO_ADVERSARY
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
 from seal.core.config import apply_overrides, check_keys, safe_load_file
 from seal.experiments.backends import Backend, InlineBackend, Job, JobResult, LocalBackend, make_backend
+from seal.experiments.pipeline.plan import check_plan
 from seal.experiments.pipeline.tasks import run_task
 
 logger = logging.getLogger(__name__)
@@ -290,6 +291,7 @@ def run_pipeline(
 
     config_path, out = Path(config_path).resolve(), Path(out).resolve()
     config = load_run_config(config_path)
+    check_plan(config, config_path, out, train_config_fn, FIT_OUTPUTS)  # every step's config, before any file
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(out / "config.yaml", yaml.safe_dump(config, sort_keys=False).encode())
     if backend is None:

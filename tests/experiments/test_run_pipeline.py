@@ -164,12 +164,16 @@ def test_existing_dataset_and_model_paths(tmp_path: Path) -> None:
     data = tmp_path / "data"
     FakeTasks()({"task": "generate", "dataset": str(data), "options": {}})
     FakeTasks()({"task": "split", "dataset": str(data), "options": {}})
+    model = tmp_path / "models" / "goose.zip"
+    model.parent.mkdir()
+    model.write_bytes(b"")  # the fake trainer never opens it; the plan check only needs it to exist
     preset = write_preset(tmp_path, data={"path": str(data)}, pipelines=["goose"],
-                          generators={"goose": {"model": "${fit.goose}"}}, eval={"settings": ["normal"], "limit": 1})
+                          generators={"goose": {"model": "${fit.goose}"}}, eval={"settings": ["normal"], "limit": 1},
+                          fit={"goose": {"path": str(model)}})
     commands = FakeTasks()
     summary = run(preset, tmp_path / "out", commands)
     assert commands.calls == []  # nothing generated, nothing fitted: goose's model is given as a path
-    assert summary["dataset"] == str(data.resolve()) and summary["models"] == {"goose": "/models/goose.zip"}
+    assert summary["dataset"] == str(data.resolve()) and summary["models"] == {"goose": str(model.resolve())}
 
 
 def test_config_errors(tmp_path: Path) -> None:
@@ -239,12 +243,12 @@ def test_split_task_is_the_split_command(tmp_path: Path) -> None:
     from seal.cli import main
 
     for name in ("a", "b"):
-        write_dataset(tmp_path / name, [sf.highway_scenario(i) for i in range(6)])
+        write_dataset(tmp_path / name, [sf.highway_scenario(i).with_metadata(group=f"run{i}") for i in range(6)])
         assert main(["data", "score", str(tmp_path / name), "--workers", "1", "--no-progress"]) == 0
     run_task({"task": "split", "dataset": str(tmp_path / "a"),
-              "options": {"n_train": 2, "n_eval": 2, "n_hard": 1, "seed": 3}})
+              "options": {"n_train": 2, "n_eval": 2, "n_hard": 1, "seed": 3, "hard_by": "scene"}})
     assert main(["data", "split", str(tmp_path / "b"), "--n-train", "2", "--n-eval", "2", "--n-hard", "1",
-                 "--seed", "3"]) == 0
+                 "--seed", "3", "--hard-by", "scene"]) == 0
     assert Dataset.open(tmp_path / "a").splits == Dataset.open(tmp_path / "b").splits
 
 

@@ -1,0 +1,179 @@
+"""Check a whole ``seal run`` plan before its first step: every step's options, types and ranges, the names of
+pipelines, generators and settings, and the paths that must already exist.
+
+`seal.experiments.pipeline.run.run_pipeline` calls `check_plan` before it creates the output folder, so a typo in
+the eval section fails in a second, not after hours of training. Each check builds the same typed config the step
+builds later (`seal.core.config` and the steps' own resolvers), with placeholder paths for what earlier steps will
+write (the dataset, the fitted models). Errors are `ValueError`s whose message starts with the preset section.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from seal.adversaries.base import NO_ADVERSARY, available_generators
+from seal.experiments.pipeline.tasks import FIT_DEFAULTS, OPTIONS
+
+RUN_EVAL_KEYS = ("settings", "replay_ego")
+"""Keys of a preset's ``eval`` section besides `seal.experiments.evaluation.evaluate.EvalRunsConfig`'s."""
+REPORT_KEYS = {"plots": bool, "videos": int, "video_format": str}
+BACKEND_KEYS = {"name": str, "workers": int, "address": str, "train_workers": int}
+DATA_TASKS = ("generate", "score", "split")
+
+
+def check_plan(
+    config: Mapping[str, Any], config_path: Path, out: Path,
+    train_config_fn: Callable[..., dict[str, Any]], fit_outputs: Mapping[str, str],
+) -> None:
+    """Raise ValueError naming the section and key of the first problem in ``config`` (a loaded preset)."""
+    from seal.experiments.pipeline.run import fits_needed, generators_in_use, substitute
+
+    dataset = _check_data(config.get("data") or {}, out)
+    _check_pipelines(config)
+    models = {name: str(out / "models" / fit_outputs.get(name, name)) for name in fits_needed(config)}
+    _check_fits(config.get("fit") or {}, models)
+    generators = {name: substitute(dict((config.get("generators") or {}).get(name) or {}), models)
+                  for name in generators_in_use(config)}
+    _check_eval(config.get("eval") or {}, dataset)
+    for pipeline in config["pipelines"]:
+        for seed in config["seeds"]:
+            try:
+                train_config_fn(config, config_path, pipeline, seed, dataset, generators)
+            except (ValueError, TypeError) as exc:
+                raise ValueError(f"train ({pipeline}, seed {seed}): {exc}") from None
+    _check_types("report", config.get("report") or {}, REPORT_KEYS)
+    _check_types("backend", config.get("backend") or {}, BACKEND_KEYS)
+    backend = (config.get("backend") or {}).get("name", "local")
+    if backend not in ("local", "ray"):
+        raise ValueError(f"backend.name must be local or ray, got {backend!r}")
+
+
+def _check_data(data: Mapping[str, Any], out: Path) -> str:
+    """The dataset the later steps will use (``data.path``, which must be a dataset, or OUT/data)."""
+    from seal.core.dataset import Dataset, DatasetError
+
+    if not isinstance(data, Mapping):
+        raise ValueError(f"data must be a mapping (path, or generate / score / split), got {data!r}")
+    unknown = sorted(set(data) - {"path", "generate", "score", "split"})
+    if unknown:
+        raise ValueError(f"data: unknown key(s) {unknown}; known: path, generate, score, split")
+    if data.get("path"):
+        root = Path(str(data["path"])).expanduser()
+        try:
+            ds = Dataset.open(root)
+        except DatasetError as exc:
+            raise ValueError(f"data.path: {exc}") from None
+        if not ds.splits.get("eval"):
+            raise ValueError(f"data.path: {root} has no eval split; run `seal data score` and `seal data split`")
+        return str(root.resolve())
+    for task in DATA_TASKS:
+        options = data.get(task) or {}
+        if not isinstance(options, Mapping):
+            raise ValueError(f"data.{task} must be a mapping of options, got {options!r}")
+        unknown = sorted(set(options) - set(OPTIONS[task]))
+        if unknown:
+            raise ValueError(f"data.{task}: unknown option(s) {unknown}; known: {list(OPTIONS[task])}")
+    _check_generate(data.get("generate") or {})
+    _check_split(data.get("split") or {})
+    return str(out / "data")
+
+
+def _check_generate(o: Mapping[str, Any]) -> None:
+    from seal.envs.generate import _check_args
+
+    if "n" not in o:
+        raise ValueError("data.generate.n: missing (the number of scenarios), or give data.path")
+    try:
+        _check_args(o["n"], o.get("seed", 0), o.get("layouts") or ["highway"], o.get("workers"),
+                    o.get("inattentive_share", 0.15), o.get("aggressive_share", 0.15))
+    except ValueError as exc:
+        raise ValueError(f"data.generate: {exc}") from None
+
+
+def _check_split(o: Mapping[str, Any]) -> None:
+    from seal.scoring.splits import SplitError, _check_options
+
+    for key in ("n_train", "n_eval", "n_hard", "seed"):
+        if key in o and (isinstance(o[key], bool) or not isinstance(o[key], int)):
+            raise ValueError(f"data.split.{key} must be an integer, got {o[key]!r}")
+    quantile = o.get("hard_quantile", 0.8)
+    if isinstance(quantile, bool) or not isinstance(quantile, int | float):
+        raise ValueError(f"data.split.hard_quantile must be a number, got {quantile!r}")
+    try:
+        _check_options(float(quantile), o.get("n_train", 400), o.get("n_eval", 100), o.get("n_hard", 100),
+                       o.get("score", "ac"), o.get("hard_by", "pair"))
+    except SplitError as exc:
+        raise ValueError(f"data.split: {exc}") from None
+
+
+def _check_pipelines(config: Mapping[str, Any]) -> None:
+    known = [NO_ADVERSARY, *available_generators()]
+    for pipeline in config["pipelines"]:
+        if pipeline not in known:
+            raise ValueError(f"pipelines: unknown pipeline {pipeline!r}; known: {', '.join(known)}")
+    for seed in config["seeds"]:
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise ValueError(f"seeds: every seed must be a non-negative integer, got {seed!r}")
+    for name in config.get("generators") or {}:
+        if name not in available_generators():
+            raise ValueError(f"generators: unknown generator {name!r}; known: {', '.join(available_generators())}")
+
+
+def _check_fits(fit: Mapping[str, Any], models: Mapping[str, str]) -> None:
+    for name in models:
+        spec = dict(fit.get(name) or {})
+        if spec.get("path"):
+            if not Path(str(spec["path"])).expanduser().exists():
+                raise ValueError(f"fit.{name}.path: {spec['path']} does not exist")
+            continue
+        if name not in OPTIONS or name in DATA_TASKS:
+            known = sorted(k for k in OPTIONS if k not in DATA_TASKS)
+            raise ValueError(f"fit: unknown model {name!r}; known: {', '.join(known)}")
+        unknown = sorted(set(spec) - set(OPTIONS[name]))
+        if unknown:
+            raise ValueError(f"fit.{name}: unknown option(s) {unknown}; known: {list(OPTIONS[name])}")
+        options = {**FIT_DEFAULTS.get(name, {}), **spec}
+        for key in ("epochs", "steps", "limit", "threads", "workers", "seed", "eval_limit", "candidates"):
+            value = options.get(key)
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 0):
+                raise ValueError(f"fit.{name}.{key} must be a non-negative integer, got {value!r}")
+        minutes = options.get("max_minutes")
+        if minutes is not None and (isinstance(minutes, bool) or not isinstance(minutes, int | float) or minutes <= 0):
+            raise ValueError(f"fit.{name}.max_minutes must be a positive number, got {minutes!r}")
+        config_file = options.get("config")
+        if config_file is not None and not Path(str(config_file)).expanduser().is_file():
+            raise ValueError(f"fit.{name}.config: {config_file} does not exist")
+
+
+def _check_eval(ev: Mapping[str, Any], dataset: str) -> None:
+    from seal.core.dataset import DatasetError
+    from seal.experiments.evaluation.evaluate import DEFAULTS, parse_settings, resolve_eval_config
+
+    if not isinstance(ev, Mapping):
+        raise ValueError(f"eval must be a mapping of options, got {ev!r}")
+    unknown = sorted(set(ev) - set(DEFAULTS) - set(RUN_EVAL_KEYS))
+    if unknown:
+        raise ValueError(f"eval: unknown key(s) {unknown}; known: {sorted({*DEFAULTS, *RUN_EVAL_KEYS})}")
+    if not isinstance(ev.get("replay_ego", True), bool):
+        raise ValueError(f"eval.replay_ego must be true or false, got {ev['replay_ego']!r}")
+    try:
+        resolve_eval_config(**{k: ev.get(k) for k in ("k", "limit", "seed", "prior", "candidates", "env")})
+        settings = ev.get("settings") or ["normal", "hard"]
+        if not isinstance(settings, list | str):
+            raise ValueError(f"settings must be a list, got {settings!r}")
+        parse_settings(settings, dataset)
+    except (ValueError, DatasetError) as exc:
+        raise ValueError(f"eval: {exc}") from None
+
+
+def _check_types(section: str, values: Mapping[str, Any], types: Mapping[str, type]) -> None:
+    if not isinstance(values, Mapping):
+        raise ValueError(f"{section} must be a mapping, got {values!r}")
+    for key, value in values.items():
+        if key not in types:
+            raise ValueError(f"{section}: unknown key {key!r}; known: {', '.join(types)}")
+        expected = types[key]
+        if value is not None and (not isinstance(value, expected) or (expected is int and isinstance(value, bool))):
+            raise ValueError(f"{section}.{key} must be {expected.__name__}, got {value!r}")
