@@ -29,6 +29,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from seal.core.errors import SealError
+
 SCHEMA_VERSION = 1
 BUSY_TIMEOUT_S = 120.0
 
@@ -95,7 +97,7 @@ SETTING_COLUMNS: dict[str, str] = {
 }
 
 
-class StoreError(RuntimeError):
+class StoreError(SealError, RuntimeError):
     """A results store that cannot be used (wrong schema version, not a results store)."""
 
 

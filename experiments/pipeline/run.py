@@ -112,6 +112,9 @@ def load_run_config(path: str | Path, sets: Sequence[str] = ()) -> dict[str, Any
     for key in ("pipelines", "seeds"):
         if not isinstance(config.get(key), list) or not config[key]:
             raise ValueError(f"{path}: '{key}' must be a non-empty list")
+    for key in ("data", "fit", "generators", "eval", "report", "backend", "train"):
+        if config.get(key) is not None and not isinstance(config[key], dict):
+            raise ValueError(f"{path}: '{key}' must be a mapping of options, got {config[key]!r}")
     config.setdefault("preset", path.stem)
     return config
 

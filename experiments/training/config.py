@@ -278,6 +278,16 @@ def _generator(config: EgoTrainConfig) -> dict[str, Any]:
     return {"name": spec.name, "kwargs": kwargs}
 
 
+def _check_env_keys(config: EgoTrainConfig) -> None:
+    """Unknown `ScenarioEnv` keys in ``env`` / ``eval_env`` fail here, before any run folder or env process exists."""
+    from seal.envs.scenario_env import DEFAULT_CONFIG
+
+    for section in ("env", "eval_env"):
+        unknown = sorted(set(getattr(config, section)) - set(DEFAULT_CONFIG))
+        if unknown:
+            raise ConfigError(f"train.{section}: unknown ScenarioEnv key(s) {unknown}; known: {sorted(DEFAULT_CONFIG)}")
+
+
 def resolve(config: EgoTrainConfig, preset: str) -> dict[str, Any]:
     """Validate a config and reduce it to the run's settings (module docstring)."""
     algo = config.algo.lower()
@@ -292,6 +302,7 @@ def resolve(config: EgoTrainConfig, preset: str) -> dict[str, Any]:
             raise ConfigError(f"train.{key} must be >= 0, got {getattr(config, key)}")
     if config.n_envs is not None and config.n_envs < 1:
         raise ConfigError(f"train.n_envs must be >= 1 or null (all cores), got {config.n_envs}")
+    _check_env_keys(config)
     plain = to_dict(config)
     out = {k: v for k, v in plain.items() if k not in ("pipelines", "hyperparams")}
     out.update(algo=algo, generator=generator, hyperparams=plain["hyperparams"][algo], preset=preset)

@@ -65,7 +65,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     configure_logging()
     import yaml
 
-    from seal.core.dataset import DatasetError
+    from seal.core.errors import SealError
     from seal.core.road import RoadError
     from seal.core.scenario import ScenarioError
 
@@ -75,7 +75,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         # The reader of stdout went away (`seal data info | head`): stop quietly, as other command-line tools do.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 1
-    except (CliError, DatasetError, ScenarioError, RoadError, OSError, ValueError, yaml.YAMLError) as exc:
+    except (CliError, SealError, ScenarioError, RoadError, OSError, ValueError, yaml.YAMLError) as exc:
         if os.environ.get("SEAL_DEBUG"):
             raise
         message = " ".join(str(exc).split())  # one line, whatever the exception's own layout (YAML marks, ...)

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from seal.core.atomic import atomic_write, atomic_write_json
+from seal.core.errors import SealError
 from seal.core.road import RoadDescription, RoadError
 from seal.core.scenario import GroupError, Scenario, ScenarioError, group_of
 
@@ -35,7 +36,7 @@ SHARD_DIR = "shards"
 FORMAT = "seal-dataset"
 
 
-class DatasetError(RuntimeError):
+class DatasetError(SealError, RuntimeError):
     """A dataset directory or file cannot be used; the message names the file and what to do."""
 
 
