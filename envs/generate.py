@@ -16,6 +16,7 @@ import math
 import multiprocessing as mp
 import os
 import platform
+import sys
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -235,6 +236,10 @@ def generate_dataset(
         "aggressive_share": float(aggressive_share),
     }
     builder = DatasetBuilder(out, params, overwrite=overwrite)
+    if builder.shards:
+        # Tell the user: a command that "starts" at 60 % is otherwise a surprise.
+        print(f"resuming the unfinished build in {out}: {len(builder.shards)} shard(s) with "
+              f"{builder.n_done_scenarios} scenarios already done", file=sys.stderr)
     workers = (os.cpu_count() or 1) if workers is None else workers
     n_chunks = _build_chunks(builder, n, seed, layouts, shares, workers, progress, _stop_after_chunks)
     provenance = {
