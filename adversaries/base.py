@@ -100,7 +100,8 @@ def _opts(*names: str, models: tuple[str, ...] = (), builtins: dict[str, tuple[s
     return tuple(GeneratorOption(n, model_file=n in models, builtins=(builtins or {}).get(n, ())) for n in names)
 
 
-_CANDIDATE_OPTIONS = ("prior", "candidates", "follow", "stride", "decay", "n_kept_modes")
+_CANDIDATE_OPTIONS = ("prior", "candidates", "follow", "stride", "decay", "n_kept_modes", "steer", "steer_vector",
+                      "steer_alpha")
 
 GENERATORS: dict[str, GeneratorSpec] = {
     "replay": GeneratorSpec("replay", "seal.adversaries.replay"),
@@ -108,11 +109,15 @@ GENERATORS: dict[str, GeneratorSpec] = {
                           _opts("max_accel_mps2", "max_lat_accel_mps2", "min_arrival_s")),
     "goose": GeneratorSpec("goose", "seal.adversaries.goose.generator",
                            _opts("model", "deterministic", "max_updates", models=("model",)), pipeline=True),
-    "cat": GeneratorSpec("cat", "seal.adversaries.cat.generator", _opts(*_CANDIDATE_OPTIONS, models=("prior",)),
-                         pipeline=True),
+    "cat": GeneratorSpec("cat", "seal.adversaries.cat.generator",
+                         _opts(*_CANDIDATE_OPTIONS, models=("prior",)), pipeline=True),
     "seal": GeneratorSpec("seal", "seal.adversaries.seal.generator", _opts(
         *_CANDIDATE_OPTIONS, "objective", "skills", "switch", "switch_offset_steps", "noise_scale",
         models=("prior", "objective", "skills"), builtins={"objective": ("cat",)}), pipeline=True),
+    # CAT / SEAL's optional `steer` is a plain option (checked when the generator loads it), so their pipelines'
+    # settings are unchanged; for `steered` it is a required model file.
+    "steered": GeneratorSpec("steered", "seal.adversaries.steered",
+                             _opts(*_CANDIDATE_OPTIONS, models=("prior",)), pipeline=True),
 }
 """The built-in generators, one entry each (add a line per new generator). Each module is imported on first lookup
 (so a name resolves without importing every generator, and even when ``adversaries/__init__.py`` did not run)."""

@@ -30,7 +30,13 @@ import numpy as np
 
 from seal.adversaries.base import AdversaryGenerator, Generation
 from seal.adversaries.candidate_path import candidate_track
-from seal.adversaries.candidate_sources import CandidateSource, adversary_candidates, make_candidate_source
+from seal.adversaries.candidate_sources import (
+    DEFAULT_STEER_ALPHA,
+    DEFAULT_STEER_VECTOR,
+    CandidateSource,
+    adversary_candidates,
+    make_candidate_source,
+)
 from seal.core.scenario import CURRENT_STEP, HEADING, LENGTH, VALID, WIDTH, Scenario, X, Y
 from seal.envs.behaviors import AdversaryBehavior, ReplayBehavior, TrackingBehavior
 from seal.envs.rollout import Rollout
@@ -124,6 +130,10 @@ class CandidateGenerator(AdversaryGenerator):
         prior: a trajectory prior file (`seal.adversaries.candidate_sources.prior_source`).
         candidates: a built-in candidate source name.
         follow: ``"replay"`` or ``"track"``.
+        steer: a steering file / folder (``seal fit probes``): the prior's candidates are decoded with the
+            adversary's latent moved by ``steer_alpha`` along ``steer_vector`` (needs ``prior``).
+        steer_vector: vector name (``FEATURE@SITE``, or a bare feature at its best probe site).
+        steer_alpha: steering strength.
     """
 
     def __init__(
@@ -132,9 +142,13 @@ class CandidateGenerator(AdversaryGenerator):
         prior: str | Path | None = None,
         candidates: str | None = None,
         follow: str = Follow.REPLAY,
+        steer: str | Path | None = None,
+        steer_vector: str = DEFAULT_STEER_VECTOR,
+        steer_alpha: float = DEFAULT_STEER_ALPHA,
     ) -> None:
         self.follow = check_follow(self.name, follow)
-        self.candidate_source = make_candidate_source(candidate_source, prior, candidates)
+        self.candidate_source = make_candidate_source(candidate_source, prior, candidates, steer, steer_vector,
+                                                      float(steer_alpha))
         self.prior_file = None if prior is None else Path(prior)
         """The trajectory prior file the candidates come from, if any (its process runs torch with
         `seal.adversaries.candidate_sources.PRIOR_THREADS`, set by the entry point)."""

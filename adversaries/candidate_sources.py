@@ -6,6 +6,8 @@ A candidate source is any ``Callable[[Scenario], Candidates]`` returning the adv
 * ``prior_source(path)``: the trained trajectory prior pi_gen (`seal.models.prior.TrajectoryPrior`, imported lazily).
 * ``"lanes"``: map-based heuristic futures (`seal.adversaries.lane_candidates`), no learning.
 * ``"constant_velocity"``: `seal.models.prior.constant_velocity_candidates`, a fan of 32 (imported lazily).
+* ``steered_prior_source(path, steer, vector, alpha)``: the prior's candidates decoded with the adversary's latent
+  steered along a fitted vector (``seal fit probes``; papers 000 / 002), e.g. toward risk.
 """
 
 from __future__ import annotations
@@ -52,6 +54,29 @@ def prior_source(path: str | Path) -> CandidateSource:
     return predict
 
 
+DEFAULT_STEER_VECTOR = "risk_proximity"
+"""Default steering vector: a bare feature name means that feature's vector at its best probe site."""
+DEFAULT_STEER_ALPHA = 1.5
+
+
+def steered_prior_source(path: str | Path, steer: str | Path, vector: str = DEFAULT_STEER_VECTOR,
+                         alpha: float = DEFAULT_STEER_ALPHA) -> CandidateSource:
+    """The trajectory prior at ``path`` with the adversary's latent steered by ``alpha`` along ``vector`` of the
+    steering file / folder ``steer`` (`seal.models.steering.bundle.SteeringBundle`). An adversary with too short a
+    history gets the prior's constant-velocity fallback, as `prior_source`."""
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"trajectory prior file {path} does not exist (fit one with the prior commands)")
+    from seal.models.prior import TrajectoryPrior
+    from seal.models.steering.steer import SteeredPrior
+
+    steered = SteeredPrior(TrajectoryPrior.load(path), steer, vector, float(alpha))
+
+    def predict(scenario: Scenario) -> Candidates:
+        return steered.predict(scenario, scenario.adv_index)
+
+    return predict
+
+
 def named_source(name: str) -> CandidateSource:
     """A built-in candidate source by name (one of `NAMED_SOURCES`)."""
     if name == "lanes":
@@ -73,8 +98,11 @@ def named_source(name: str) -> CandidateSource:
 
 def make_candidate_source(
     candidate_source: CandidateSource | None = None, prior: str | Path | None = None, candidates: str | None = None,
+    steer: str | Path | None = None, steer_vector: str = DEFAULT_STEER_VECTOR,
+    steer_alpha: float = DEFAULT_STEER_ALPHA,
 ) -> CandidateSource:
-    """Exactly one of: a callable, a prior file (`prior_source`), or a built-in name."""
+    """Exactly one of: a callable, a prior file (`prior_source`; `steered_prior_source` when ``steer`` names a
+    steering file or folder), or a built-in name."""
     given = [x is not None for x in (candidate_source, prior, candidates)]
     if sum(given) != 1:
         raise ValueError(
@@ -82,10 +110,13 @@ def make_candidate_source(
             f"'prior:' in configs) or a built-in source ({', '.join(NAMED_SOURCES)}: --candidates NAME); "
             f"got {sum(given)}"
         )
+    if steer is not None and prior is None:
+        raise ValueError(f"option 'steer' ({steer}) steers the trajectory prior's latents: give a prior file too "
+                         "(--prior FILE, 'prior:' in configs)")
     if candidate_source is not None:
         return candidate_source
     if prior is not None:
-        return prior_source(prior)
+        return prior_source(prior) if steer is None else steered_prior_source(prior, steer, steer_vector, steer_alpha)
     return named_source(str(candidates))
 
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from seal.adversaries.base import Generation, register
 from seal.adversaries.candidate_generator import CandidateContext, CandidateGenerator, Follow
-from seal.adversaries.candidate_sources import CandidateSource
+from seal.adversaries.candidate_sources import DEFAULT_STEER_ALPHA, DEFAULT_STEER_VECTOR, CandidateSource
 from seal.adversaries.cat.select import DECAY, N_KEPT_MODES, STRIDE_STEPS, cat_select
 
 
@@ -26,6 +26,7 @@ class CATGenerator(CandidateGenerator):
         stride: sub-sampling (steps), 5 = 0.5 s.
         decay: uncertainty factor per sample.
         n_kept_modes: modes below this rank share its score in P1.
+        steer, steer_vector, steer_alpha: latent steering of the prior's candidates (`CandidateGenerator`).
     """
 
     def __init__(
@@ -37,8 +38,11 @@ class CATGenerator(CandidateGenerator):
         stride: int = STRIDE_STEPS,
         decay: float = DECAY,
         n_kept_modes: int = N_KEPT_MODES,
+        steer: str | Path | None = None,
+        steer_vector: str = DEFAULT_STEER_VECTOR,
+        steer_alpha: float = DEFAULT_STEER_ALPHA,
     ) -> None:
-        super().__init__(candidate_source, prior, candidates, follow)
+        super().__init__(candidate_source, prior, candidates, follow, steer, steer_vector, steer_alpha)
         self.stride = int(stride)
         self.decay = float(decay)
         self.n_kept_modes = int(n_kept_modes)

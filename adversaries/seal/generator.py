@@ -27,7 +27,7 @@ import numpy as np
 from seal.adversaries.base import Generation, register
 from seal.adversaries.candidate_generator import CandidateContext, CandidateGenerator, Follow, check_follow
 from seal.adversaries.candidate_path import candidate_track
-from seal.adversaries.candidate_sources import CandidateSource
+from seal.adversaries.candidate_sources import DEFAULT_STEER_ALPHA, DEFAULT_STEER_VECTOR, CandidateSource
 from seal.adversaries.cat.select import DECAY, N_KEPT_MODES, STRIDE_STEPS
 from seal.adversaries.seal.contact import predict_contact
 from seal.adversaries.seal.objective import Objective, make_objective
@@ -79,6 +79,7 @@ class SEALGenerator(CandidateGenerator):
         noise_scale: standard deviation of the skill noise (1 = sample the prior).
         policy: a ready skill policy (``reset(seed)`` / ``act(obs)``) instead of loading ``skills``.
         stride, decay, n_kept_modes: CAT's selection options (``objective="cat"`` only).
+        steer, steer_vector, steer_alpha: latent steering of the prior's candidates (`CandidateGenerator`).
     """
 
     def __init__(
@@ -96,6 +97,9 @@ class SEALGenerator(CandidateGenerator):
         stride: int = STRIDE_STEPS,
         decay: float = DECAY,
         n_kept_modes: int = N_KEPT_MODES,
+        steer: str | Path | None = None,
+        steer_vector: str = DEFAULT_STEER_VECTOR,
+        steer_alpha: float = DEFAULT_STEER_ALPHA,
     ) -> None:
         check_follow(self.name, follow)
         if switch not in SWITCH_MODES:
@@ -107,7 +111,7 @@ class SEALGenerator(CandidateGenerator):
         self.switch_offset_steps = int(switch_offset_steps)
         self.policy = policy if policy is not None or switch == Switch.NONE else load_skill_policy(
             skills, switch, noise_scale)
-        super().__init__(candidate_source, prior, candidates, follow)
+        super().__init__(candidate_source, prior, candidates, follow, steer, steer_vector, steer_alpha)
 
     def _choose(self, context: CandidateContext, rng: np.random.Generator) -> Generation:
         cands, scenario = context.cands, context.scenario

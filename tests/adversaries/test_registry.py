@@ -16,7 +16,7 @@ from seal.adversaries.base import (
 
 
 def test_pipelines_come_from_the_registry() -> None:
-    assert pipeline_names() == (NO_ADVERSARY, "goose", "cat", "seal")
+    assert pipeline_names() == (NO_ADVERSARY, "goose", "cat", "seal", "steered")
     from seal.experiments.training.config import PIPELINES, EgoTrainConfig
 
     assert pipeline_names() == PIPELINES
@@ -34,6 +34,7 @@ def test_declared_options_are_constructor_arguments() -> None:
         params = inspect.signature(cls).parameters
         assert {o.name for o in spec.options} <= set(params), name
     assert model_file_options("seal") == {"prior": (), "objective": ("cat",), "skills": ()}
+    assert model_file_options("steered") == {"prior": (), "steer": ()}
     assert model_file_options("goose") == {"model": ()} and model_file_options("replay") == {}
 
 
