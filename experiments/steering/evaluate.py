@@ -83,6 +83,16 @@ class SteeringEvalConfig:
     risk: dict[str, float] = field(default_factory=dict)
     """`seal.models.steering.labels.RiskConfig` overrides."""
 
+    def __post_init__(self) -> None:
+        if not self.alphas or not self.taus_pct:
+            raise ValueError("steering eval config: alphas and taus_pct need at least one value each")
+        if not 0.0 < self.shift_factor < 1.0:
+            raise ValueError(f"steering eval config: shift_factor must be in (0, 1), got {self.shift_factor}")
+        if self.max_targets is not None and self.max_targets < 1:
+            raise ValueError(f"steering eval config: max_targets must be positive, got {self.max_targets}")
+        if self.n_boot < 100:
+            raise ValueError(f"steering eval config: n_boot must be >= 100, got {self.n_boot}")
+
 
 def _mean(a: np.ndarray) -> list[float]:
     return [float(v) for v in np.nanmean(a, axis=1)]

@@ -78,6 +78,16 @@ class ProbeFitConfig:
     seed: int = 0
     """Seed of the target draw, the held-out scenes, the pairing and the SAEs."""
 
+    def __post_init__(self) -> None:
+        if not 0.0 < self.held_out < 1.0:
+            raise ValueError(f"probes config: held_out must be in (0, 1), got {self.held_out}")
+        if not 0.0 < self.risk_quantile <= 0.5:
+            raise ValueError(f"probes config: risk_quantile must be in (0, 0.5], got {self.risk_quantile}")
+        if any(w <= 0 for w in self.sae_widths):
+            raise ValueError(f"probes config: sae_widths must be positive, got {list(self.sae_widths)}")
+        if self.max_targets is not None and self.max_targets < 10:
+            raise ValueError(f"probes config: max_targets must be >= 10 (or null), got {self.max_targets}")
+
 
 def _rows(labels: dict[str, np.ndarray], cls_set: str, classes: tuple[int, ...]) -> np.ndarray:
     return np.isin(labels[cls_set], classes)
