@@ -4,7 +4,7 @@ not trivially exact).
 
 Roads: `straight_road` (multi-lane, lane 0 rightmost at y = 0, lanes to the left at +y) and `curved_road`
 (straight, left-hand arc, straight). Agents: `simulate_track`. Scenarios: `highway_scenario` (random traffic),
-`lane_change_scenario`, `curve_scenario`, `stopped_adversary_scenario`.
+`lane_change_scenario`, `curve_scenario`, `stopped_adversary_scenario`, `mixed_speed_scenario`.
 
 Recordings for the importer tests: CommonRoad XML documents (`document`, `lanelet`, `obstacle`, `road_2020a`,
 `cut_in`) and ScenarioNet scenario dicts in the documented format (`scenarionet_scenario`, `dump_pickle`).
@@ -256,6 +256,23 @@ def highway_scenario(seed: int, n_lanes: int = 3, n_agents: int = 12, scenario_i
     adv = min(cands, key=lambda i: abs(tracks[i][CURRENT_STEP, 0] - ex)) if cands else (ego + 1) % len(tracks)
     order = [ego, adv] + [i for i in range(len(tracks)) if i not in (ego, adv)]
     return make_scenario(road, [tracks[i] for i in order], scenario_id or f"highway-{seed}")
+
+
+def mixed_speed_scenario(seed: int, scenario_id: str | None = None) -> Scenario:
+    """Three lanes with one speed profile each, so every motion class of paper 002 occurs: lane 0 slow and
+    accelerating (~3 m/s, +0.6 m/s^2), lane 1 moderate and steady (~10 m/s), lane 2 fast and braking (~22 m/s,
+    -1.2 m/s^2); three cars per lane 30-45 m apart, the ego first in lane 1, the adversary first in lane 2."""
+    rng = np.random.default_rng(seed)
+    road = straight_road(3, length_m=800.0)
+    tracks: list[np.ndarray] = []
+    for lane, (v, acc) in enumerate(((3.0, 0.6), (10.0, 0.0), (22.0, -1.2))):
+        v += float(rng.uniform(-0.5, 0.5))
+        s = float(rng.uniform(20.0, 40.0))
+        for _ in range(3):
+            tracks.append(simulate_track(_lane_path(road, lane), s, v, accel_fn=lambda t, a=acc: a, substeps=2))
+            s += float(rng.uniform(30.0, 45.0))
+    order = [3, 6] + [i for i in range(len(tracks)) if i not in (3, 6)]
+    return make_scenario(road, [tracks[i] for i in order], scenario_id or f"mixed-{seed}")
 
 
 # ------------------------------------------------------------------------------------------------ recordings

@@ -136,7 +136,7 @@ def _speed_section(prior: TrajectoryPrior, scenarios: Sequence[Scenario], target
     decoders: dict[str, Decoder] = {}
     for v in vectors:
         dec = decoders.setdefault(v.site, Decoder(prior, scenarios, targets, v.site))
-        speeds = speed_sweep(dec, v, taus)  # [taus, N]
+        speeds = speed_sweep(dec, v, taus.tolist())  # [taus, N]
         base = speeds[int(np.flatnonzero(taus == 0)[0])]
         moving = base > 0.5  # relative change of a near-still prediction is noise
         change = (speeds[:, moving] / base[moving] - 1.0).mean(1)

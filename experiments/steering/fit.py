@@ -142,6 +142,11 @@ def _vectors_site(site: str, z: np.ndarray, s: Samples, cfg: ProbeFitConfig, sae
     return vectors
 
 
+def _best_site(probes: dict[str, Any], key: str) -> str:
+    """The site whose probe ``key`` has the highest held-out value."""
+    return max(probes, key=lambda site: float(probes[site][key]["test"]))
+
+
 def fit_probes(prior: TrajectoryPrior, scenarios: Sequence[Scenario], out: str | Path, cfg: ProbeFitConfig,
                info: dict[str, Any] | None = None, progress: bool = False) -> dict[str, Any]:
     """Fit everything of the module docstring on ``scenarios`` and write ``out``; returns the report."""
@@ -156,7 +161,7 @@ def fit_probes(prior: TrajectoryPrior, scenarios: Sequence[Scenario], out: str |
         log.info("probes and vectors at site %s (%d targets)", site, len(z))
         probes[site] = _probe_site(z, samples, train, test, cfg.seed)
         vectors.update(_vectors_site(site, z, samples, cfg, sae_report))
-    best = {risk_name: max(probes, key=lambda k, r=risk_name: probes[k][f"r2_{r}"]["test"]) for risk_name in RISKS}
+    best = {r: _best_site(probes, f"r2_{r}") for r in RISKS}
     cosines = {n: float(v.direction @ vectors[n.split("_sae")[0] + "@" + v.site].direction)
                for n, v in vectors.items() if "_sae" in n and n.split("_sae")[0] + "@" + v.site in vectors}
     report: dict[str, Any] = {

@@ -42,7 +42,10 @@ class Decoder:
             self.sessions.append((lo, SteeringSession(self.prior, batch, self.site)))
 
     def decode(self, offsets: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-        """Candidates ``[N, K, 80, 2]`` and probabilities ``[N, K]`` with ``offsets [N, d]`` (None: unsteered)."""
+        """Candidates ``[N, K, 80, 2]`` and probabilities ``[N, K]`` with ``offsets`` ``[N, d]`` or ``[d]`` (the
+        same for every target; None: unsteered)."""
+        if offsets is not None and np.ndim(offsets) == 1:
+            offsets = np.broadcast_to(offsets, (len(self.targets), np.size(offsets)))
         xy, pr = [], []
         for lo, session in self.sessions:
             off = None if offsets is None else offsets[lo : lo + session.batch.size]

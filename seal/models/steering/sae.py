@@ -46,6 +46,10 @@ class SparseAutoencoder(nn.Module):
     """``d -> width -> d`` with ReLU codes (module docstring). ``centre [d]`` and ``scale`` map latents to its
     input space."""
 
+    # Buffers (`register_buffer`), declared so type checkers see tensors.
+    centre: torch.Tensor
+    scale: torch.Tensor
+
     def __init__(self, d: int, width: int) -> None:
         super().__init__()
         self.enc = nn.Linear(d, width)
