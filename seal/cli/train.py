@@ -19,6 +19,9 @@ def overrides_from_args(args: argparse.Namespace) -> dict[str, object]:
     if args.prior is not None:
         over["pipelines.cat.kwargs.prior"] = args.prior
         over["pipelines.seal.kwargs.prior"] = args.prior
+        over["pipelines.steered.kwargs.prior"] = args.prior
+    if args.steer is not None:
+        over["pipelines.steered.kwargs.steer"] = args.steer
     if args.goose_model is not None:
         over["pipelines.goose.kwargs.model"] = args.goose_model
     if args.objective is not None:
@@ -45,7 +48,7 @@ def cmd_train(args: argparse.Namespace) -> int:
                    ("--set", args.set or None), ("--steps", args.steps), ("--algo", args.algo),
                    ("--dataset", args.dataset),
                    ("--n-envs", args.n_envs), ("--prior", args.prior), ("--goose-model", args.goose_model),
-                   ("--objective", args.objective), ("--skills", args.skills))
+                   ("--objective", args.objective), ("--skills", args.skills), ("--steer", args.steer))
         given = [opt for opt, v in options if v is not None]
         if given:
             raise CliError(f"--resume continues with the run's recorded config.yaml; drop {', '.join(given)}")
@@ -98,7 +101,8 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--steps", type=positive_int("--steps"), default=None, help="total env steps (default: config)")
     p.add_argument("--n-envs", type=positive_int("--n-envs"), default=None,
                    help="env worker processes (default: the config's, or every core)")
-    p.add_argument("--prior", default=None, help="trajectory prior file for the cat and seal pipelines")
+    p.add_argument("--prior", default=None, help="trajectory prior file for the cat, seal and steered pipelines")
+    p.add_argument("--steer", default=None, help="steering folder (seal fit probes) for the steered pipeline")
     p.add_argument("--goose-model", default=None, help="GOOSE agent file for the goose pipeline")
     p.add_argument("--objective", default=None, help="SEAL objective network file for the seal pipeline")
     p.add_argument("--skills", default=None, help="SEAL skills folder (seal fit skills) for the seal pipeline")
