@@ -144,11 +144,11 @@ class CandidateGenerator(AdversaryGenerator):
         follow: str = Follow.REPLAY,
         steer: str | Path | None = None,
         steer_vector: str = DEFAULT_STEER_VECTOR,
-        steer_alpha: float = DEFAULT_STEER_ALPHA,
+        steer_alpha: float | Sequence[float] | str = DEFAULT_STEER_ALPHA,
     ) -> None:
         self.follow = check_follow(self.name, follow)
         self.candidate_source = make_candidate_source(candidate_source, prior, candidates, steer, steer_vector,
-                                                      float(steer_alpha))
+                                                      steer_alpha)
         self.prior_file = None if prior is None else Path(prior)
         """The trajectory prior file the candidates come from, if any (its process runs torch with
         `seal.adversaries.candidate_sources.PRIOR_THREADS`, set by the entry point)."""

@@ -12,7 +12,7 @@ A candidate source is any ``Callable[[Scenario], Candidates]`` returning the adv
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from seal.core.scenario import Scenario
@@ -60,7 +60,7 @@ DEFAULT_STEER_ALPHA = 1.5
 
 
 def steered_prior_source(path: str | Path, steer: str | Path, vector: str = DEFAULT_STEER_VECTOR,
-                         alpha: float = DEFAULT_STEER_ALPHA) -> CandidateSource:
+                         alpha: float | Sequence[float] | str = DEFAULT_STEER_ALPHA) -> CandidateSource:
     """The trajectory prior at ``path`` with the adversary's latent steered by ``alpha`` along ``vector`` of the
     steering file / folder ``steer`` (`seal.models.steering.bundle.SteeringBundle`). An adversary with too short a
     history gets the prior's constant-velocity fallback, as `prior_source`."""
@@ -69,7 +69,7 @@ def steered_prior_source(path: str | Path, steer: str | Path, vector: str = DEFA
     from seal.models.prior import TrajectoryPrior
     from seal.models.steering.steer import SteeredPrior
 
-    steered = SteeredPrior(TrajectoryPrior.load(path), steer, vector, float(alpha))
+    steered = SteeredPrior(TrajectoryPrior.load(path), steer, vector, alpha)
 
     def predict(scenario: Scenario) -> Candidates:
         return steered.predict(scenario, scenario.adv_index)
@@ -99,7 +99,7 @@ def named_source(name: str) -> CandidateSource:
 def make_candidate_source(
     candidate_source: CandidateSource | None = None, prior: str | Path | None = None, candidates: str | None = None,
     steer: str | Path | None = None, steer_vector: str = DEFAULT_STEER_VECTOR,
-    steer_alpha: float = DEFAULT_STEER_ALPHA,
+    steer_alpha: float | Sequence[float] | str = DEFAULT_STEER_ALPHA,
 ) -> CandidateSource:
     """Exactly one of: a callable, a prior file (`prior_source`; `steered_prior_source` when ``steer`` names a
     steering file or folder), or a built-in name."""

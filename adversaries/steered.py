@@ -9,6 +9,7 @@ and SEAL as their ``steer`` option; this generator is CAT with steering required
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 from seal.adversaries.base import register
@@ -41,11 +42,11 @@ class SteeredGenerator(CATGenerator):
         n_kept_modes: int = N_KEPT_MODES,
         steer: str | Path | None = None,
         steer_vector: str = DEFAULT_STEER_VECTOR,
-        steer_alpha: float = DEFAULT_STEER_ALPHA,
+        steer_alpha: float | Sequence[float] | str = DEFAULT_STEER_ALPHA,
     ) -> None:
         if candidate_source is None and steer is None:
             raise ValueError("steered: option 'steer' is required: the folder written by `seal fit probes` "
                              "(--gen-opt steered.steer=DIR, 'steer:' in configs)")
         super().__init__(candidate_source, prior, candidates, follow, stride, decay, n_kept_modes, steer,
                          steer_vector, steer_alpha)
-        self.steer_vector, self.steer_alpha = steer_vector, float(steer_alpha)
+        self.steer_vector, self.steer_alpha = steer_vector, steer_alpha

@@ -5,6 +5,7 @@ future followed by the adversary (``follow``, see `seal.adversaries.candidate_ge
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -40,7 +41,7 @@ class CATGenerator(CandidateGenerator):
         n_kept_modes: int = N_KEPT_MODES,
         steer: str | Path | None = None,
         steer_vector: str = DEFAULT_STEER_VECTOR,
-        steer_alpha: float = DEFAULT_STEER_ALPHA,
+        steer_alpha: float | Sequence[float] | str = DEFAULT_STEER_ALPHA,
     ) -> None:
         super().__init__(candidate_source, prior, candidates, follow, steer, steer_vector, steer_alpha)
         self.stride = int(stride)

@@ -18,6 +18,7 @@ deterministic ego) whatever the env's seed.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from enum import StrEnum
 from pathlib import Path
 from typing import Any
@@ -99,7 +100,7 @@ class SEALGenerator(CandidateGenerator):
         n_kept_modes: int = N_KEPT_MODES,
         steer: str | Path | None = None,
         steer_vector: str = DEFAULT_STEER_VECTOR,
-        steer_alpha: float = DEFAULT_STEER_ALPHA,
+        steer_alpha: float | Sequence[float] | str = DEFAULT_STEER_ALPHA,
     ) -> None:
         check_follow(self.name, follow)
         if switch not in SWITCH_MODES:

@@ -65,3 +65,28 @@ def test_seal_accepts_the_steer_option(files: tuple[Path, Path]) -> None:
     gen = make_generator("seal", prior=str(prior), objective="cat", switch="none", steer=str(steer), steer_alpha=4.0)
     out = _generate(gen, sf.highway_scenario(2))
     assert out.extra["n_candidates"] == 32 and out.extra["objective"] == "cat"
+
+
+def test_a_grid_of_vectors_and_alphas_keeps_every_decode(files: tuple[Path, Path], tmp_path: Path) -> None:
+    prior, _ = files
+    rng = np.random.default_rng(1)
+    vecs = {}
+    for name in ("lane_change@output", "acceleration@output"):
+        d = rng.standard_normal(64)
+        vecs[name] = SteeringVector(name, "output", d / np.linalg.norm(d), 2.0, "control")
+    SteeringBundle(vecs).save(tmp_path / "steering.pt")
+    scenario = sf.highway_scenario(1)
+    grid = make_generator("steered", prior=str(prior), steer=str(tmp_path), steer_alpha=[-1, 0, 1],
+                          steer_vector="lane_change@output,acceleration@output")
+    cands = grid.candidate_source(scenario)
+    assert cands.n_candidates == 9 * 32 and cands.probs.sum() == pytest.approx(1.0)
+    plain = make_generator("cat", prior=str(prior)).candidate_source(scenario)
+    # The (0, 0) decode is the prior's own: each of its candidates is in the grid with a ninth of its probability.
+    for k in range(32):
+        d = np.abs(cands.xy - plain.xy[k]).max(axis=(1, 2))
+        j = int(np.argmin(d))
+        assert d[j] < 1e-4 and cands.probs[j] == pytest.approx(plain.probs[k] / 9, rel=1e-4)  # float32, batched
+    assert _generate(grid, scenario).extra["n_candidates"] == 288
+    with pytest.raises(ValueError, match="steer_alpha"):
+        make_generator("steered", prior=str(prior), steer=str(tmp_path), steer_vector="lane_change@output",
+                       steer_alpha="fast")
