@@ -117,7 +117,8 @@ GENERATORS: dict[str, GeneratorSpec] = {
     # CAT / SEAL's optional `steer` is a plain option (checked when the generator loads it), so their pipelines'
     # settings are unchanged; for `steered` it is a required model file.
     "steered": GeneratorSpec("steered", "seal.adversaries.steered",
-                             _opts(*_CANDIDATE_OPTIONS, models=("prior",)), pipeline=True),
+                             _opts(*_CANDIDATE_OPTIONS, "steer_random_seed", models=("prior", "steer")),
+                             pipeline=True),
 }
 """The built-in generators, one entry each (add a line per new generator). Each module is imported on first lookup
 (so a name resolves without importing every generator, and even when ``adversaries/__init__.py`` did not run)."""

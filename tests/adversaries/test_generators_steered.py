@@ -34,9 +34,10 @@ def test_steered_at_alpha_zero_is_cat_and_steering_changes_the_candidates(files:
     prior, steer = files
     scenario = sf.highway_scenario(1)
     cat = _generate(make_generator("cat", prior=str(prior)), scenario)
-    same = _generate(make_generator("steered", prior=str(prior), steer=str(steer), steer_alpha=0.0), scenario)
+    same = _generate(make_generator("steered", prior=str(prior), steer=str(steer), steer_alpha=0.0,
+                                    steer_vector="risk_proximity"), scenario)
     assert same.chosen_candidate == cat.chosen_candidate and same.extra["score"] == pytest.approx(cat.extra["score"])
-    gen = make_generator("steered", prior=str(prior), steer=str(steer), steer_alpha=4.0)
+    gen = make_generator("steered", prior=str(prior), steer=str(steer), steer_alpha=4.0, steer_vector="risk_proximity")
     out = _generate(gen, scenario)
     assert out.extra["n_candidates"] == 32 and out.extra["candidate_fallback"] == ""
     assert CURRENT_STEP < out.predicted_step <= CURRENT_STEP + N_FUTURE
@@ -44,7 +45,8 @@ def test_steered_at_alpha_zero_is_cat_and_steering_changes_the_candidates(files:
     plain = make_generator("cat", prior=str(prior)).candidate_source(scenario)
     assert np.abs(steered.xy - plain.xy).max() > 0.01
     # CAT with the same steer option reads the same steered candidates.
-    cat_steered = make_generator("cat", prior=str(prior), steer=str(steer), steer_alpha=4.0)
+    cat_steered = make_generator("cat", prior=str(prior), steer=str(steer), steer_alpha=4.0,
+                                 steer_vector="risk_proximity")
     np.testing.assert_allclose(cat_steered.candidate_source(scenario).xy, steered.xy)
 
 
@@ -58,11 +60,14 @@ def test_steer_needs_a_prior_and_steered_needs_steer(files: tuple[Path, Path]) -
         make_generator("steered", prior=str(prior), steer=str(steer / "nope.pt"))
     with pytest.raises(SteeringFileError, match="no steering vector 'speed@output'"):
         make_generator("steered", prior=str(prior), steer=str(steer), steer_vector="speed")
+    with pytest.raises(SteeringFileError, match="no steering vector 'lane_change@output'"):
+        make_generator("steered", prior=str(prior), steer=str(steer))  # the default grid's vectors are missing
 
 
 def test_seal_accepts_the_steer_option(files: tuple[Path, Path]) -> None:
     prior, steer = files
-    gen = make_generator("seal", prior=str(prior), objective="cat", switch="none", steer=str(steer), steer_alpha=4.0)
+    gen = make_generator("seal", prior=str(prior), objective="cat", switch="none", steer=str(steer), steer_alpha=4.0,
+                         steer_vector="risk_proximity")
     out = _generate(gen, sf.highway_scenario(2))
     assert out.extra["n_candidates"] == 32 and out.extra["objective"] == "cat"
 
@@ -76,8 +81,7 @@ def test_a_grid_of_vectors_and_alphas_keeps_every_decode(files: tuple[Path, Path
         vecs[name] = SteeringVector(name, "output", d / np.linalg.norm(d), 2.0, "control")
     SteeringBundle(vecs).save(tmp_path / "steering.pt")
     scenario = sf.highway_scenario(1)
-    grid = make_generator("steered", prior=str(prior), steer=str(tmp_path), steer_alpha=[-1, 0, 1],
-                          steer_vector="lane_change@output,acceleration@output")
+    grid = make_generator("steered", prior=str(prior), steer=str(tmp_path))  # the default: this grid
     cands = grid.candidate_source(scenario)
     assert cands.n_candidates == 9 * 32 and cands.probs.sum() == pytest.approx(1.0)
     plain = make_generator("cat", prior=str(prior)).candidate_source(scenario)
@@ -87,6 +91,11 @@ def test_a_grid_of_vectors_and_alphas_keeps_every_decode(files: tuple[Path, Path
         j = int(np.argmin(d))
         assert d[j] < 1e-4 and cands.probs[j] == pytest.approx(plain.probs[k] / 9, rel=1e-4)  # float32, batched
     assert _generate(grid, scenario).extra["n_candidates"] == 288
+    # The baseline: random directions of the same norms; (0, 0) is still the prior's decode, the rest differ.
+    rand = make_generator("steered", prior=str(prior), steer=str(tmp_path), steer_random_seed=3).candidate_source(
+        scenario)
+    assert rand.n_candidates == 288 and np.abs(np.sort(rand.xy, axis=0) - np.sort(cands.xy, axis=0)).max() > 0.01
+    assert min(np.abs(rand.xy - plain.xy[0]).max(axis=(1, 2))) < 1e-4
     with pytest.raises(ValueError, match="steer_alpha"):
         make_generator("steered", prior=str(prior), steer=str(tmp_path), steer_vector="lane_change@output",
                        steer_alpha="fast")

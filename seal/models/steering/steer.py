@@ -6,6 +6,7 @@ from __future__ import annotations
 import itertools
 import os
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 import torch
@@ -16,6 +17,7 @@ from seal.models.prior.candidates import Candidates
 from seal.models.prior.prior import TrajectoryPrior
 from seal.models.steering.bundle import SteeringBundle, SteeringFileError, SteeringVector
 from seal.models.steering.latents import SceneBatch, decode_tokens, finish, prepare, site_names, tokens_at
+from seal.models.steering.linear import random_direction
 
 
 def resolve_vector(bundle: SteeringBundle, name: str) -> SteeringVector:
@@ -65,15 +67,21 @@ class SteeredPrior:
         steer: a steering file or folder (``seal fit probes``), or a loaded `SteeringBundle`.
         vector: vector name(s) (`resolve_vector`), comma-separated for a grid.
         alpha: steering strength(s) in the vectors' unit (alpha for risk vectors, tau / 100 for control vectors).
+        random_seed: the baseline: each vector's direction replaced by a random unit direction (seeded), its unit
+            kept, so every offset has the norm of the structured one.
     """
 
     def __init__(self, prior: TrajectoryPrior, steer: str | os.PathLike[str] | SteeringBundle, vector: str,
-                 alpha: SteerAlpha) -> None:
+                 alpha: SteerAlpha, random_seed: int | None = None) -> None:
         bundle = steer if isinstance(steer, SteeringBundle) else SteeringBundle.load(steer)
         self.prior = prior
         self.vectors = [resolve_vector(bundle, name.strip()) for name in str(vector).split(",") if name.strip()]
         if not self.vectors:
             raise ValueError(f"steer_vector: no vector name in {vector!r}")
+        if random_seed is not None:
+            rng = np.random.default_rng(random_seed)
+            self.vectors = [replace(v, name=f"random({v.name})", direction=random_direction(v.direction.size, rng))
+                            for v in self.vectors]
         for v in self.vectors:
             self._check(v)
         self.site = self.vectors[0].site
