@@ -26,7 +26,8 @@ def write_plots(report: dict[str, Any], out: Path) -> list[Path]:
         ax2.plot(sec["alphas"], sec["random"]["plausible"], "--", color=colour)
     for ax, title in zip(axes, ("activity risk (paper 000)", "proximity risk to the ego"), strict=True):
         ax.set(xlabel="alpha (latent std)", ylabel="prior-weighted risk", title=title)
-        ax.legend(fontsize=7)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
     ax2.axhline(0.94, color="grey", lw=0.8)
     ax2.set(xlabel="alpha (latent std)", ylabel="share of drivable candidates", title="plausibility (dashed: random)")
     ax2.legend(fontsize=7)
