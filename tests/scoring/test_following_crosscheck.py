@@ -253,8 +253,8 @@ def summarise(per_file: list[dict], files: list[str]) -> dict:
 
 @pytest.fixture(scope="module")
 def crime_run(tmp_path_factory: pytest.TempPathFactory) -> dict:
-    """Our samples and crime's values on the three US-101 recordings, in both frames (~2 min)."""
-    pytest.importorskip("commonroad_crime", reason="commonroad-crime not installed (pip install -e '.[crosscheck]')")
+    """Our samples and crime's values on the three US-101 recordings, in both frames (2-4 min)."""
+    pytest.importorskip("commonroad_crime", reason="commonroad-crime not installed (crosscheck extra, see README)")
     if not US101:
         pytest.skip(f"NGSIM US-101 CommonRoad files not found at {NGSIM} (shared data folder absent)")
     import crime_crosscheck as cc
