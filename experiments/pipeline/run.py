@@ -42,7 +42,6 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import re
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
@@ -52,11 +51,11 @@ from typing import Any
 
 import yaml
 
-from seal.adversaries.base import NO_ADVERSARY
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
 from seal.core.config import apply_overrides, check_keys, safe_load_file
 from seal.experiments.backends import Backend, InlineBackend, Job, JobResult, LocalBackend, make_backend
 from seal.experiments.pipeline.plan import check_plan
+from seal.experiments.pipeline.references import fits_needed, generator_of, generators_in_use, substitute
 from seal.experiments.pipeline.tasks import run_task
 
 logger = logging.getLogger(__name__)
@@ -93,9 +92,6 @@ class RunPreset:
 SECTIONS = tuple(f.name for f in fields(RunPreset))
 FIT_OUTPUTS = {"prior": "prior.pt", "goose": "goose.zip", "skills": "skills", "objective": "objective"}
 """Model name -> file or folder written under OUT/models by the fit of that model."""
-REF = re.compile(r"^\$\{fit\.(\w+)\}(.*)$")
-"""``"${fit.NAME}"`` or ``"${fit.NAME}/file inside it"`` in generator kwargs: a fitted model's path."""
-
 
 # ---------------------------------------------------------------------------------------------- config
 def load_run_config(path: str | Path, sets: Sequence[str] = ()) -> dict[str, Any]:
@@ -117,65 +113,6 @@ def load_run_config(path: str | Path, sets: Sequence[str] = ()) -> dict[str, Any
             raise ValueError(f"{path}: '{key}' must be a mapping of options, got {config[key]!r}")
     config.setdefault("preset", path.stem)
     return config
-
-
-def generator_of(pipeline: str) -> str | None:
-    """The adversary generator a training pipeline uses (None for ``noadv``)."""
-    return None if pipeline == NO_ADVERSARY else pipeline
-
-
-def generators_in_use(config: Mapping[str, Any]) -> list[str]:
-    """Generators of the training pipelines and of the eval settings, in order of first use."""
-    from seal.adversaries.base import available_generators
-
-    names = [generator_of(p) for p in config["pipelines"]]
-    names += [s for s in (config.get("eval") or {}).get("settings", []) if s in available_generators()]
-    return [n for n in dict.fromkeys(names) if n]
-
-
-def _refs(value: Any) -> list[str]:
-    """Names of the fitted models referenced (``"${fit.NAME}"``) anywhere in ``value``."""
-    if isinstance(value, dict):
-        return [r for v in value.values() for r in _refs(v)]
-    if isinstance(value, list):
-        return [r for v in value for r in _refs(v)]
-    m = REF.match(value) if isinstance(value, str) else None
-    return [m.group(1)] if m else []
-
-
-def fits_needed(config: Mapping[str, Any]) -> list[str]:
-    """Models referenced (``"${fit.NAME}"``) by the kwargs of the generators in use, plus the models those fits'
-    options reference in turn (e.g. ``objective: {prior: "${fit.prior}"}``); ordered so that every model comes
-    after the ones its fit uses."""
-    gens, fit = config.get("generators") or {}, config.get("fit") or {}
-    wanted = [r for name in generators_in_use(config) for r in _refs(gens.get(name) or {})]
-    order: list[str] = []
-
-    def visit(name: str, chain: tuple[str, ...]) -> None:
-        if name in order:
-            return
-        if name in chain:
-            raise ValueError(f"fit: circular references {' -> '.join((*chain, name))}")
-        if name not in fit:
-            raise ValueError(f"the preset references ${{fit.{name}}} but has no fit.{name} entry")
-        spec = fit[name] or {}
-        for dep in ([] if spec.get("path") else _refs(spec)):
-            visit(dep, (*chain, name))
-        order.append(name)
-
-    for name in dict.fromkeys(wanted):
-        visit(name, ())
-    return order
-
-
-def substitute(value: Any, models: Mapping[str, str]) -> Any:
-    """Replace ``"${fit.NAME}"`` strings (at any depth) by the fitted model paths."""
-    if isinstance(value, dict):
-        return {k: substitute(v, models) for k, v in value.items()}
-    if isinstance(value, list):
-        return [substitute(v, models) for v in value]
-    m = REF.match(value) if isinstance(value, str) else None
-    return models[m.group(1)] + m.group(2) if m else value
 
 
 # ---------------------------------------------------------------------------------------------- steps

@@ -14,7 +14,8 @@ from results_builders import episode
 from seal.core.dataset import Dataset, write_dataset
 from seal.experiments.backends import InlineBackend
 from seal.experiments.evaluation.results_store import ResultsStore
-from seal.experiments.pipeline.run import fits_needed, load_run_config, run_pipeline, substitute
+from seal.experiments.pipeline.references import fits_needed, substitute
+from seal.experiments.pipeline.run import load_run_config, run_pipeline
 from seal.experiments.pipeline.tasks import run_task
 
 CONFIGS = Path(__file__).resolve().parents[2] / "experiments" / "configs"
