@@ -18,7 +18,6 @@ import numpy as np
 from numba import float64, int64, njit, types
 
 
-
 @njit(types.UniTuple(float64, 3)(float64[:, ::1], float64[::1], float64[:, ::1], float64[::1], float64, float64),
       cache=True, nogil=True, error_model="numpy")
 def polyline_project(
