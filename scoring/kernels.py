@@ -49,7 +49,8 @@ def polyline_project(
 
 
 @njit(types.Tuple((float64[:, ::1], float64[::1], int64[::1]))(
-    float64[:, ::1], float64[::1], float64[:, ::1], float64[:, ::1], float64[::1], float64), cache=True, nogil=True, error_model="numpy")
+    float64[:, ::1], float64[::1], float64[:, ::1], float64[:, ::1], float64[::1], float64),
+    cache=True, nogil=True, error_model="numpy")
 def polyline_at(
     points: np.ndarray, cum: np.ndarray, tang: np.ndarray, vertex_tang: np.ndarray, s: np.ndarray, d: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -354,7 +355,8 @@ def segments_cross(
 @njit(float64[::1](
     int64[::1], int64[::1], types.boolean[:, ::1],
     float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], float64[::1],
-    float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], float64[::1], float64), cache=True, nogil=True, error_model="numpy")
+    float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], float64[::1], float64),
+    cache=True, nogil=True, error_model="numpy")
 def pair_contacts(
     I: np.ndarray, J: np.ndarray, mask: np.ndarray,
     ax: np.ndarray, ay: np.ndarray, ah: np.ndarray, alen: np.ndarray, awid: np.ndarray,
