@@ -23,6 +23,7 @@ import math
 import numpy as np
 from numba import float32, float64, int64, njit, void
 
+from seal.envs.kinematics import MAX_SPEED_MPS
 from seal.envs.rays import ray_angles
 
 N_EDGE_RAYS = 30
@@ -35,6 +36,12 @@ N_NEAREST = 3
 REL_SPEED_SCALE = 30.0
 NEAREST_SLOTS = 5
 OBS_DIM = 100
+VALID_COL = 7
+"""Column of the valid flag in the track layout (`seal.core.scenario.TRACK_FIELDS`)."""
+CHECKPOINT_SPACING_M = 8.0
+NAV_SCALE_M = 20.0
+LATERAL_SCALE_M = 10.0
+YAW_RATE_SCALE = 2.0
 
 # First slot of each array block (see `seal.envs.observation`).
 EDGE_START = 0
@@ -143,8 +150,8 @@ def vehicles_into(
     x: float, y: float, c: float, s: float, speed: float, boxes: np.ndarray, self_row: int, out: np.ndarray,
 ) -> None:
     """Box lidar and nearest vehicles of a viewer at (x, y) (m), heading cos / sin ``c, s``, speed (m/s), among
-    ``boxes [N, >=7]`` (track layout: x, y, heading, vx, vy, length, width; m, rad, m/s), row ``self_row`` (the
-    viewer's own box, or -1) left out.
+    ``boxes [N, >=7]`` (track layout: x, y, heading, vx, vy, length, width, valid; m, rad, m/s), row ``self_row``
+    (the viewer's own box, or -1) and, when there is a valid column, rows with valid < 0.5 (absent) left out.
 
     Writes the `N_LIDAR_RAYS` lidar readings (distance / `LIDAR_RANGE_M` to the first box hit along each of the edge
     rays' directions; 1 when none) and the `N_NEAREST` nearest vehicles with centres within `LIDAR_RANGE_M`, nearest
@@ -161,8 +168,9 @@ def vehicles_into(
         dys[k] = s * EDGE_COS[k] + c * EDGE_SIN[k]
     near_row = np.full(N_NEAREST, -1)
     near_d2 = np.full(N_NEAREST, math.inf)
+    has_valid = boxes.shape[1] > VALID_COL
     for i in range(boxes.shape[0]):
-        if i == self_row:
+        if i == self_row or (has_valid and not boxes[i, VALID_COL] > 0.5):
             continue
         rx = boxes[i, 0] - x
         ry = boxes[i, 1] - y
@@ -218,22 +226,73 @@ def clip_into_space(obs: np.ndarray) -> None:
             obs[i] = OBS_HIGH[i]
 
 
-@njit(void(float32[::1], float64, float64, float64, float64, float64, float64[:, ::1], float64[:, ::1],
-           float64[:, ::1], int64), **_OPTS)
-def observe_viewer(
-    obs: np.ndarray, x: float, y: float, c: float, s: float, speed: float, edges: np.ndarray, lines: np.ndarray,
-    boxes: np.ndarray, self_row: int,
+@njit(**_OPTS)
+def _route_at(nav: np.ndarray, s: float) -> tuple[float, float, float]:
+    """Position (m) and reference speed (m/s) at arc length ``s`` of a route's ``nav [4, P]`` (rows: arc length
+    of each extended vertex, x, y, speed), clamped to its ends (`seal.envs.route.Route.point_at` / ``speed_at``)."""
+    cum = nav[0]
+    i = min(max(np.searchsorted(cum, s, side="right") - 1, 0), cum.shape[0] - 2)
+    u = min(1.0, max(0.0, (s - cum[i]) / (cum[i + 1] - cum[i])))
+    xs, ys, vs = nav[1], nav[2], nav[3]
+    return xs[i] + u * (xs[i + 1] - xs[i]), ys[i] + u * (ys[i + 1] - ys[i]), vs[i] + u * (vs[i + 1] - vs[i])
+
+
+@njit(**_OPTS)
+def state_into(
+    obs: np.ndarray, x: float, y: float, c: float, s: float, heading: float, speed: float, steering: float,
+    accel: float, yaw_rate: float, proj_s: float, proj_lateral: float, proj_heading: float, nav: np.ndarray,
+    speed_limit: float,
 ) -> None:
-    """Every array slot of one viewer's observation ``obs [OBS_DIM]`` (edge rays, line rays, lidar, nearest
-    vehicles; `cast_rays_into`, `vehicles_into`), then the clip of the whole row (the caller writes the scalar slots
-    first).
+    """The scalar slots (30-35, 48-54): heading error, speed, steering, last action, yaw rate, lateral offset, the
+    two navigation checkpoints in the vehicle frame, speed limit and route reference speed (see
+    `seal.envs.observation`); ``c, s``: cos / sin of the heading."""
+    herr = (proj_heading - heading + math.pi) % (2 * math.pi) - math.pi
+    p1x, p1y, _ = _route_at(nav, proj_s + CHECKPOINT_SPACING_M)
+    p2x, p2y, _ = _route_at(nav, proj_s + 2 * CHECKPOINT_SPACING_M)
+    ref = _route_at(nav, proj_s)[2]
+    p1x, p1y, p2x, p2y = p1x - x, p1y - y, p2x - x, p2y - y
+    obs[30] = herr / math.pi
+    obs[31] = speed / MAX_SPEED_MPS
+    obs[32] = steering
+    obs[33] = steering
+    obs[34] = accel
+    obs[35] = yaw_rate / YAW_RATE_SCALE
+    obs[48] = proj_lateral / LATERAL_SCALE_M
+    obs[49] = (p1x * c + p1y * s) / NAV_SCALE_M
+    obs[50] = (p1y * c - p1x * s) / NAV_SCALE_M
+    obs[51] = (p2x * c + p2y * s) / NAV_SCALE_M
+    obs[52] = (p2y * c - p2x * s) / NAV_SCALE_M
+    obs[53] = speed_limit / MAX_SPEED_MPS
+    obs[54] = ref / MAX_SPEED_MPS
+
+
+_F8 = float64
+
+
+@njit(void(float32[::1], _F8, _F8, _F8, _F8, _F8, _F8, _F8, _F8, _F8, _F8, float64[:, ::1], _F8, float64[:, ::1],
+           float64[:, ::1], float64[:, ::1], int64), **_OPTS)
+def observe_viewer(
+    obs: np.ndarray, x: float, y: float, heading: float, speed: float, steering: float, accel: float,
+    yaw_rate: float, proj_s: float, proj_lateral: float, proj_heading: float, nav: np.ndarray, speed_limit: float,
+    edges: np.ndarray, lines: np.ndarray, boxes: np.ndarray, self_row: int,
+) -> None:
+    """One viewer's whole observation ``obs [OBS_DIM]`` (float32): the scalar slots (`state_into`), the edge and line
+    rays (`cast_rays_into`), the lidar and nearest vehicles (`vehicles_into`), then the clip of the row. Scalars, not
+    small arrays, carry the viewer: building an array costs more than passing ten floats.
 
     Args:
-        obs: the viewer's observation row (float32), scalar slots already written.
-        x, y, c, s, speed: the viewer's centre (m), heading cos / sin and speed (m/s).
+        x, y, heading, speed: the viewer's centre (m), heading (rad) and speed (m/s).
+        steering, accel: its last action (normalised); yaw_rate: rad/s.
+        proj_s, proj_lateral, proj_heading: its projection on its route (m, m, rad).
+        nav: ``[4, P]`` the route's arc length, x, y and reference speed per extended vertex (`_route_at`).
+        speed_limit: of the closest lane (m/s).
         edges, lines: ``[4, M]`` road-edge and lane-line segments near the viewer (`cast_rays_into`).
-        boxes: ``[N, >=7]`` other vehicles in track layout; ``self_row``: the viewer's own row in it, or -1.
+        boxes: ``[N, >=7]`` vehicles in track layout (`vehicles_into`); ``self_row``: the viewer's own row, or -1.
     """
+    c = math.cos(heading)
+    s = math.sin(heading)
+    state_into(obs, x, y, c, s, heading, speed, steering, accel, yaw_rate, proj_s, proj_lateral, proj_heading, nav,
+               speed_limit)
     cast_rays_into(x, y, c, s, EDGE_COS, EDGE_SIN, edges, EDGE_RANGE_M, obs, EDGE_START)
     cast_rays_into(x, y, c, s, LINE_COS, LINE_SIN, lines, LINE_RANGE_M, obs, LINE_START)
     vehicles_into(x, y, c, s, speed, boxes, self_row, obs)

@@ -48,8 +48,10 @@ import numpy as np
 from gymnasium import spaces
 
 from seal.envs.kinematics import MAX_SPEED_MPS, AgentState
-from seal.envs.obs_kernels import (
+from seal.envs.obs_kernels import (  # the layout's constants live with the kernels that compile them in
+    CHECKPOINT_SPACING_M,
     EDGE_RANGE_M,
+    LATERAL_SCALE_M,
     LIDAR_RANGE2,
     LIDAR_RANGE_M,
     LIDAR_REACH2,
@@ -58,11 +60,13 @@ from seal.envs.obs_kernels import (
     N_LIDAR_RAYS,
     N_LINE_RAYS,
     N_NEAREST,
+    NAV_SCALE_M,
     NEAREST_SLOTS,
     OBS_DIM,
     OBS_HIGH,
     OBS_LOW,
     REL_SPEED_SCALE,
+    YAW_RATE_SCALE,
     observe_viewer,
 )
 from seal.envs.rays import ray_angles
@@ -70,15 +74,11 @@ from seal.envs.road_geometry import RoadGeometry, SegmentGrid, Segments
 from seal.envs.route import Route, RouteProjection
 
 __all__ = [
-    "EDGE_RANGE_M", "LIDAR_RANGE2", "LIDAR_RANGE_M", "LIDAR_REACH2", "LINE_RANGE_M", "N_EDGE_RAYS", "N_LIDAR_RAYS",
-    "N_LINE_RAYS", "N_NEAREST", "NEAREST_SLOTS", "OBS_DIM", "OBS_HIGH", "OBS_LOW", "REL_SPEED_SCALE",
-    "ObservationBuilder", "observation_space",
+    "CHECKPOINT_SPACING_M", "EDGE_RANGE_M", "LATERAL_SCALE_M", "LIDAR_RANGE2", "LIDAR_RANGE_M", "LIDAR_REACH2",
+    "LINE_RANGE_M", "MAX_SPEED_MPS", "N_EDGE_RAYS", "N_LIDAR_RAYS", "N_LINE_RAYS", "N_NEAREST", "NAV_SCALE_M",
+    "NEAREST_SLOTS", "OBS_DIM", "OBS_HIGH", "OBS_LOW", "REL_SPEED_SCALE", "YAW_RATE_SCALE", "ObservationBuilder",
+    "observation_space",
 ]
-
-CHECKPOINT_SPACING_M = 8.0
-NAV_SCALE_M = 20.0
-LATERAL_SCALE_M = 10.0
-YAW_RATE_SCALE = 2.0
 
 # Slot indices (the array blocks' starts are the kernels' constants, `seal.envs.obs_kernels`).
 EDGE_RAYS = slice(0, 30)
@@ -187,8 +187,8 @@ class ObservationBuilder:
         Args:
             state: the viewer (its ``steering`` / ``accel`` are the last action, ``yaw_rate`` its yaw rate).
             route: the route the viewer follows.
-            others: ``[N, >=7]`` other present agents in the track layout (x, y, heading, vx, vy, length,
-                width, ...), the viewer excluded.
+            others: ``[N, >=7]`` other agents in the track layout (x, y, heading, vx, vy, length, width, valid),
+                the viewer excluded; with the valid column, rows with valid < 0.5 are left out.
             projection: the viewer's projection on ``route`` if already known (else computed, unhinted).
         """
         if projection is None:
@@ -207,7 +207,8 @@ class ObservationBuilder:
 
         Args:
             states, routes, projections: per viewer, as in `build` (projections required).
-            boxes: ``[N, >=7]`` every present agent in the track layout, the viewers included.
+            boxes: ``[N, >=7]`` every agent in the track layout, the viewers included; with the valid column
+                (the 8th), rows with valid < 0.5 (absent agents) are left out.
             self_rows: per viewer, its own row in ``boxes`` (left out of its lidar and nearest slots), or -1.
         """
         if not (len(states) == len(routes) == len(projections) == len(self_rows)) or not states:
@@ -222,37 +223,14 @@ class ObservationBuilder:
         boxes: np.ndarray,
         self_rows: Sequence[int],
     ) -> np.ndarray:
-        geom = self.geometry
+        speed_limit_at = self.geometry.speed_limit_at
         cell_of = self._road.cell
         boxes = np.ascontiguousarray(boxes, dtype=np.float64)
         obs = np.empty((len(states), OBS_DIM), dtype=np.float32)
-        for v, (state, route, projection) in enumerate(zip(states, routes, projections, strict=True)):
-            x, y, h = state.x, state.y, state.heading
-            c, s = math.cos(h), math.sin(h)
-            # Scalar slots (viewer state and route) in Python floats; the compiled kernel fills the array slots
-            # (rays, lidar, nearest vehicles) and clips the row.
-            herr = (projection.heading - h + math.pi) % (2 * math.pi) - math.pi
-            p1x, p1y = route.point_at(projection.s + CHECKPOINT_SPACING_M)
-            p2x, p2y = route.point_at(projection.s + 2 * CHECKPOINT_SPACING_M)
-            p1x, p1y, p2x, p2y = p1x - x, p1y - y, p2x - x, p2y - y
-            row = obs[v]
-            row[HEADING_ERROR : LINE_RAYS.start] = (
-                herr / math.pi,
-                state.speed / MAX_SPEED_MPS,
-                state.steering,
-                state.steering,
-                state.accel,
-                state.yaw_rate / YAW_RATE_SCALE,
-            )
-            row[LATERAL : LIDAR.start] = (
-                projection.lateral / LATERAL_SCALE_M,
-                (p1x * c + p1y * s) / NAV_SCALE_M,
-                (p1y * c - p1x * s) / NAV_SCALE_M,
-                (p2x * c + p2y * s) / NAV_SCALE_M,
-                (p2y * c - p2x * s) / NAV_SCALE_M,
-                geom.speed_limit_at(x, y) / MAX_SPEED_MPS,
-                route.speed_at(projection.s) / MAX_SPEED_MPS,
-            )
+        for v, (st, route, proj) in enumerate(zip(states, routes, projections, strict=True)):
+            x, y = st.x, st.y
             edges, lines = cell_of((math.floor(x / RAY_CELL_M), math.floor(y / RAY_CELL_M)))
-            observe_viewer(row, x, y, c, s, state.speed, edges, lines, boxes, self_rows[v])
+            observe_viewer(obs[v], x, y, st.heading, st.speed, st.steering, st.accel, st.yaw_rate, proj.s,
+                           proj.lateral, proj.heading, route.nav, speed_limit_at(x, y), edges, lines, boxes,
+                           self_rows[v])
         return obs

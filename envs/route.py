@@ -91,6 +91,9 @@ class Route:
         self._x_list, self._y_list = ext[:, 0].tolist(), ext[:, 1].tolist()
         self._spd = np.concatenate([spd[:1], spd, spd[-1:]])
         self._spd_list = self._spd.tolist()
+        self.nav = np.ascontiguousarray(np.vstack([cum, ext[:, 0], ext[:, 1], self._spd]))
+        """``[4, P]`` per extended vertex: arc length s (m), x, y (m), reference speed (m/s); what the compiled
+        observation (`seal.envs.obs_kernels`) reads `point_at` / `speed_at` from."""
         # Segment starts and vectors as contiguous rows ``ax, ay, ex, ey`` [4, n] (one slice per projection) and
         # per-segment scalars as lists: `project` runs every step for the ego and a reactive adversary.
         self._cols = np.ascontiguousarray(np.vstack([ext[:-1].T, seg.T]))
