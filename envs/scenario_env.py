@@ -176,6 +176,8 @@ class ScenarioEnv(gym.Env):
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
         self._adversary: AdversarySpec = adversary
         self._exempt_cache: dict[tuple[str, int], np.ndarray] = {}
+        self._route_cache: dict[int, tuple[Scenario, Route]] = {}
+        """Ego routes by scenario object identity (the entry keeps the object, so its id is not reused)."""
         self._renderer: Any = None
         self.scenario: Scenario | None = None
         self.rollout: Rollout | None = None
@@ -282,7 +284,7 @@ class ScenarioEnv(gym.Env):
         self._not_ego = idx != self._ego_idx
         self._not_ego_adv = self._not_ego & (idx != self._adv_idx)
         ego_track = self._log[self._ego_idx]
-        self._route = Route.from_track(ego_track, CURRENT_STEP)
+        self._route = self._ego_route(scenario, ego_track)
         self._exempt = self._exempt_for(scenario, ego_track) if self.config["check_continuous_lines"] else None
 
         self._behavior = behavior
@@ -312,6 +314,18 @@ class ScenarioEnv(gym.Env):
         self._success_step = None
         self._return = 0.0
         self._done = False
+
+    def _ego_route(self, scenario: Scenario, ego_track: np.ndarray) -> Route:
+        """The ego's route (its logged track from `CURRENT_STEP`), cached per scenario: a route is immutable and
+        building one walks the track in Python (most of a reset's cost otherwise)."""
+        key = id(scenario)
+        hit = self._route_cache.get(key)
+        if hit is None or hit[0] is not scenario:
+            if len(self._route_cache) > 4096:
+                self._route_cache.clear()
+            hit = (scenario, Route.from_track(ego_track, CURRENT_STEP))
+            self._route_cache[key] = hit
+        return hit[1]
 
     def _exempt_for(self, scenario: Scenario, ego_track: np.ndarray) -> np.ndarray | None:
         """Solid-line segments the logged ego box crosses (cached per scenario and road)."""
