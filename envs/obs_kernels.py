@@ -66,10 +66,9 @@ LIDAR_REACH2 = (LIDAR_RANGE_M + 8.0) ** 2
 """Vehicles whose centre is farther than this (squared, m^2) cannot reach into lidar range (8 m > half the
 diagonal of a 15 m truck)."""
 
-_OPTS = {"cache": True, "nogil": True, "error_model": "numpy"}
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def cast_rays_into(
     x: float, y: float, c: float, s: float, ray_cos: np.ndarray, ray_sin: np.ndarray, segments: np.ndarray,
     max_range: float, out: np.ndarray, start: int,
@@ -102,7 +101,7 @@ def cast_rays_into(
         out[start + k] = best / max_range
 
 
-@njit(inline="always", **_OPTS)
+@njit(inline="always", cache=True, nogil=True, error_model="numpy")
 def _fmin(a: float, b: float) -> float:
     """``np.minimum`` of two floats (NaN when either is NaN)."""
     if a != a or b != b:
@@ -110,7 +109,7 @@ def _fmin(a: float, b: float) -> float:
     return a if a <= b else b
 
 
-@njit(inline="always", **_OPTS)
+@njit(inline="always", cache=True, nogil=True, error_model="numpy")
 def _fmax(a: float, b: float) -> float:
     """``np.maximum`` of two floats (NaN when either is NaN)."""
     if a != a or b != b:
@@ -118,7 +117,7 @@ def _fmax(a: float, b: float) -> float:
     return a if a >= b else b
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def ray_box_distance(
     dx: float, dy: float, rx: float, ry: float, cos_h: float, sin_h: float, half_length: float, half_width: float,
 ) -> float:
@@ -145,7 +144,7 @@ def ray_box_distance(
     return math.inf
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def vehicles_into(
     x: float, y: float, c: float, s: float, speed: float, boxes: np.ndarray, self_row: int, out: np.ndarray,
 ) -> None:
@@ -215,7 +214,7 @@ def vehicles_into(
         out[o + 4] = (dvy * c - dvx * s) / REL_SPEED_SCALE
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def clip_into_space(obs: np.ndarray) -> None:
     """Clip an observation ``[OBS_DIM]`` in place to the observation space's bounds (NaN stays NaN)."""
     for i in range(OBS_DIM):
@@ -226,7 +225,7 @@ def clip_into_space(obs: np.ndarray) -> None:
             obs[i] = OBS_HIGH[i]
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _route_at(nav: np.ndarray, s: float) -> tuple[float, float, float]:
     """Position (m) and reference speed (m/s) at arc length ``s`` of a route's ``nav [4, P]`` (rows: arc length
     of each extended vertex, x, y, speed), clamped to its ends (`seal.envs.route.Route.point_at` / ``speed_at``)."""
@@ -237,7 +236,7 @@ def _route_at(nav: np.ndarray, s: float) -> tuple[float, float, float]:
     return xs[i] + u * (xs[i + 1] - xs[i]), ys[i] + u * (ys[i + 1] - ys[i]), vs[i] + u * (vs[i + 1] - vs[i])
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def state_into(
     obs: np.ndarray, x: float, y: float, c: float, s: float, heading: float, speed: float, steering: float,
     accel: float, yaw_rate: float, proj_s: float, proj_lateral: float, proj_heading: float, nav: np.ndarray,
@@ -270,7 +269,7 @@ _F8 = float64
 
 
 @njit(void(float32[::1], _F8, _F8, _F8, _F8, _F8, _F8, _F8, _F8, _F8, _F8, float64[:, ::1], _F8, float64[:, ::1],
-           float64[:, ::1], float64[:, ::1], int64), **_OPTS)
+           float64[:, ::1], float64[:, ::1], int64), cache=True, nogil=True, error_model="numpy")
 def observe_viewer(
     obs: np.ndarray, x: float, y: float, heading: float, speed: float, steering: float, accel: float,
     yaw_rate: float, proj_s: float, proj_lateral: float, proj_heading: float, nav: np.ndarray, speed_limit: float,

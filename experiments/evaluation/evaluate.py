@@ -246,7 +246,9 @@ def play_items(
     k, seed = int(config["k"]), int(config["seed"])
     by_name = {s.name: s for s in settings}
     written = {s.name: 0 for s in settings}
-    policy = cached_ego(ego.ego) if items else None
+    if not items:
+        return written
+    policy = cached_ego(ego.ego)
     for dataset, split, i, missing in items:
         scenarios = cached_split(dataset, split, config.get("limit"))
         env, scenario = cached_env(dataset, split, config), scenarios[i]

@@ -17,10 +17,9 @@ import math
 import numpy as np
 from numba import float64, int64, njit, types
 
-_OPTS = {"cache": True, "nogil": True, "error_model": "numpy"}
 
-
-@njit(int64[::1](float64, float64, float64, float64, float64, float64[:, ::1], int64[::1]), **_OPTS)
+@njit(int64[::1](float64, float64, float64, float64, float64, float64[:, ::1], int64[::1]), cache=True, nogil=True,
+      error_model="numpy")
 def box_hits_rows(
     x: float, y: float, heading: float, length: float, width: float, boxes: np.ndarray, rows: np.ndarray,
 ) -> np.ndarray:
@@ -63,7 +62,8 @@ def box_hits_rows(
     return out[:n]
 
 
-@njit(types.Tuple((int64, float64, float64))(float64[:, ::1], float64[::1], float64, float64, int64, int64), **_OPTS)
+@njit(types.Tuple((int64, float64, float64))(float64[:, ::1], float64[::1], float64, float64, int64, int64),
+      cache=True, nogil=True, error_model="numpy")
 def closest_segment(
     cols: np.ndarray, len2: np.ndarray, x: float, y: float, lo: int, hi: int,
 ) -> tuple[int, float, float]:

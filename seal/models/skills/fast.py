@@ -27,8 +27,8 @@ Layers = list[tuple[np.ndarray, np.ndarray]]
 _F4 = float32[::1]
 _I8 = int64[::1]
 _I8_2D = int64[:, ::1]
-# FMA contraction only: the outputs are independent, so no reassociation is needed to vectorise.
-_OPTS = {"cache": True, "nogil": True, "fastmath": {"contract"}}
+# Kernels take fastmath={"contract"} (FMA contraction) only: the outputs are independent, so no reassociation is
+# needed to vectorise.
 
 
 def _layers(seq: nn.Sequential) -> Layers:
@@ -48,7 +48,7 @@ def _pack(layers: Layers) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return w, b, dims
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, fastmath={"contract"})
 def _dense(x: np.ndarray, w: np.ndarray, w_off: int, b: np.ndarray, b_off: int, n_out: int, relu: bool
            ) -> np.ndarray:
     """``y = W x + b`` (then ReLU if ``relu``) for ``x [n_in]``, ``W`` transposed at ``w[w_off:]``, ``b`` at
@@ -70,7 +70,7 @@ def _dense(x: np.ndarray, w: np.ndarray, w_off: int, b: np.ndarray, b_off: int, 
     return y
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, fastmath={"contract"})
 def _mlp(x: np.ndarray, w: np.ndarray, w_off: int, b: np.ndarray, b_off: int, dims: np.ndarray) -> np.ndarray:
     """ReLU MLP forward (no output activation) of a `_pack`-ed MLP starting at ``w[w_off:]`` / ``b[b_off:]``."""
     h = x
@@ -83,7 +83,7 @@ def _mlp(x: np.ndarray, w: np.ndarray, w_off: int, b: np.ndarray, b_off: int, di
     return h
 
 
-@njit(_F4(_F4, _F4, _F4, _F4, _F4, _I8), **_OPTS)
+@njit(_F4(_F4, _F4, _F4, _F4, _F4, _I8), cache=True, nogil=True, fastmath={"contract"})
 def decode_action(obs: np.ndarray, w_obs: np.ndarray, bias: np.ndarray, w: np.ndarray, b: np.ndarray,
                   dims: np.ndarray) -> np.ndarray:
     """Action ``tanh(MLP(obs))``: first layer ``w_obs`` (transposed, flat) with the skill's ``bias``, then the
@@ -95,7 +95,8 @@ def decode_action(obs: np.ndarray, w_obs: np.ndarray, bias: np.ndarray, w: np.nd
     return out
 
 
-@njit(_F4(_F4, _F4, _F4, _F4, _F4, _F4, _I8, _I8_2D, _I8_2D, _F4, _F4, _I8_2D, _I8, _I8, _F4, _F4, _F4), **_OPTS)
+@njit(_F4(_F4, _F4, _F4, _F4, _F4, _F4, _I8, _I8_2D, _I8_2D, _F4, _F4, _I8_2D, _I8, _I8, _F4, _F4, _F4), cache=True,
+      nogil=True, fastmath={"contract"})
 def sample_latent(
     noise: np.ndarray, cond: np.ndarray, cond_mean: np.ndarray, cond_std: np.ndarray, e_w: np.ndarray,
     e_b: np.ndarray, e_dims: np.ndarray, keep: np.ndarray, change: np.ndarray, c_w: np.ndarray, c_b: np.ndarray,
