@@ -60,6 +60,22 @@ def _box_lidar(
     return np.where(hit, np.where(enter >= 0.0, enter, leave), max_range).min(axis=-1)
 
 
+def cast_rays(
+    dx: np.ndarray, dy: np.ndarray, ax: np.ndarray, ay: np.ndarray, ex: np.ndarray, ey: np.ndarray,
+    max_range: float,
+) -> np.ndarray:
+    """Distance (m) along each ray ``[K]`` (unit directions) to the first of the segments ``[M]`` (starts relative to
+    the ray origin ``ax, ay``, vectors ``ex, ey``) hit, ``max_range`` when none within it (the numpy ray caster)."""
+    if ax.shape[0] == 0:
+        return np.full(dx.shape[0], max_range)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / (np.multiply.outer(dx, ey) - np.multiply.outer(dy, ex))  # [K, M]
+        t = (ax * ey - ay * ex) * inv
+        u = (np.multiply.outer(dy, ax) - np.multiply.outer(dx, ay)) * inv
+    hit = (t >= 0.0) & (u >= 0.0) & (u <= 1.0)
+    return np.minimum(np.where(hit, t, max_range).min(axis=1), max_range)
+
+
 def reference_observation(
     geom: RoadGeometry, state: AgentState, route: Route, projection: RouteProjection, boxes: np.ndarray,
     self_row: int = -1,
