@@ -100,7 +100,7 @@ def register(tree: CommandTree) -> None:
     benv.add_argument("--seed", type=int, default=0, help="random seed")
     benv.add_argument("--adversary", choices=("replay", "seal"), default="replay",
                       help="replay: ScenarioEnv vs highway-v0 (default); seal: steps/s with the SEAL skill adversary "
-                      "vs the replayed adversary in the same run, and the cost ratio (target <= 1.5)")
+                      "vs the replayed adversary in the same run, and the cost ratio (target <= 1.2)")
     benv.add_argument("--skills", default=None,
                       help="with --adversary seal: skills folder from `seal fit skills` (default: untrained models)")
     benv.add_argument("--repeats", type=positive_int("--repeats"), default=3,
