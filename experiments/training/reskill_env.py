@@ -9,8 +9,9 @@ actor, copied in by `set_residual` with the current gate, plus Gaussian explorat
 The residual's transitions ``(x, r, reward, x', done)`` of the env steps played (``x`` = `residual_input`) come back
 in ``info["residual"]`` as arrays; each transition is completed by the next env step (after a skill's last step:
 in the next `step`, once the next skill, part of ``x'``, is known). ``info["env_steps"]`` is the number of env
-steps the skill played (the trainer counts env steps, not decisions). Only steps with an open gate produce residual transitions: with gate 0 the
-residual does not act, and its transitions would teach its critic that actions do not matter.
+steps the skill played (the trainer counts env steps, not decisions). Only steps with an open gate produce
+residual transitions: with gate 0 the residual does not act, and its transitions would teach its critic that
+actions do not matter.
 """
 
 from __future__ import annotations
