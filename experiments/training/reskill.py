@@ -183,13 +183,15 @@ class ReSkillRun:
     """What a ReSkill run adds to an SB3 run in `seal.experiments.training.train`: the residual learner, its
     callbacks, its checkpoint entries and final file, and the policy the evaluations play."""
 
-    def __init__(self, config: Mapping[str, Any], out: Path, build: Callable[..., Any]) -> None:
-        from stable_baselines3.common.logger import Logger, TensorBoardOutputFormat
+    def __init__(self, config: Mapping[str, Any], out: Path | None, build: Callable[..., Any]) -> None:
+        """``out``: the run folder (the residual's TensorBoard log goes to ``out/tb/residual``; None: no log)."""
+        from stable_baselines3.common.logger import KVWriter, Logger, TensorBoardOutputFormat
 
         self.config = config
         self.skills = load_skills(config["hyperparams"])
         self.residual = build_residual_model(config, self.skills, build)
-        self.logger = Logger(folder=str(out), output_formats=[TensorBoardOutputFormat(str(out / "tb" / RESIDUAL))])
+        formats: list[KVWriter] = [TensorBoardOutputFormat(str(out / "tb" / RESIDUAL))] if out is not None else []
+        self.logger = Logger(folder=str(out) if out is not None else None, output_formats=formats)
         self.trainer = ResidualTrainer(self.residual, config, self.logger)
 
     def restore(self, checkpoint: Path, state: Mapping[str, Any]) -> None:
