@@ -44,7 +44,7 @@ def load_skills(hyper: Mapping[str, Any]) -> BenignSkills:
     folder = hyper.get("skills")
     if not folder:
         raise ValueError("algo reskill: train.hyperparams.reskill.skills is not set (a `seal fit skills` folder; "
-                         "--set hyperparams.reskill.skills=PATH)")
+                         "--ego-skills PATH or --set hyperparams.reskill.skills=PATH)")
     if not Path(folder).is_dir():
         raise FileNotFoundError(f"train.hyperparams.reskill.skills = {folder!r} is not a folder (seal fit skills)")
     return BenignSkills(folder)
