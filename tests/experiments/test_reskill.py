@@ -227,3 +227,17 @@ def test_killed_reskill_run_resumes_both_agents_exactly(tmp_path: Path, skills_d
     ego.reset(sf.highway_scenario(4))
     action = ego.act(_obs(3), 0)
     assert action.shape == (2,) and np.all(np.abs(action) <= 1.0)
+
+
+def test_reskill_config_resolves_and_refuses_bad_values() -> None:
+    for preset in ("quick", "standard", "paper"):
+        config = load_train_config(CONFIG_DIR / f"{preset}.yaml", {"algo": "reskill", "pipeline": "noadv"})
+        h = config["hyperparams"]
+        assert config["algo"] == "reskill" and config["overlap_updates"] is True
+        assert set(h) >= {"skills", "noise_bound", "residual_bound", "residual_start", "residual_ramp", "high",
+                          "residual"}
+        assert h["high"]["gamma"] == pytest.approx(0.9) and h["residual"]["action_noise_std"] == 0.0
+    with pytest.raises(ValueError, match="noise_bound"):
+        load_train_config(CONFIG_DIR / "quick.yaml", {"algo": "reskill", "hyperparams.reskill.noise_bound": 0})
+    with pytest.raises(ValueError, match="train.algo"):
+        load_train_config(CONFIG_DIR / "quick.yaml", {"algo": "nope"})
