@@ -47,4 +47,8 @@ def test_every_recorded_case_is_covered() -> None:
 
 @pytest.mark.parametrize("key", sorted(RECORDED))
 def test_preset_resolves_to_recorded_values(key: str) -> None:
-    assert _resolved(key) == RECORDED[key]
+    resolved = _resolved(key)
+    if key.startswith("train/"):
+        # Added after the recording (issue 17): off-policy updates overlap env stepping by default.
+        assert resolved.pop("overlap_updates") is True
+    assert resolved == RECORDED[key]
