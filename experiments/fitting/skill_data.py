@@ -12,7 +12,7 @@ A file is reused when it was built from the same scenarios and settings (its rec
 from __future__ import annotations
 
 import logging
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +39,7 @@ class EgoRolloutConfig:
         limit: roll out only the first N scenarios of the split (None: as many as the demonstrations).
     """
 
-    egos: list[str] = field(default_factory=list)
+    egos: tuple[str, ...] = ()
     adversary: str = "cat"
     candidates: str | None = None
     passes: int = 3
@@ -58,7 +58,7 @@ class EgoRolloutConfig:
     @classmethod
     def from_dict(cls, d: dict[str, Any], where: str = "config key 'ego_rollouts'") -> EgoRolloutConfig:
         check_keys(cls, d, where)
-        return cls(**{k: list(v) if k == "egos" else v for k, v in d.items()})
+        return cls(**{k: tuple(str(e) for e in v) if k == "egos" else v for k, v in d.items()})
 
     def source_spec(self) -> str | None:
         """The candidate source as `seal.experiments.fitting.skill_rollouts` takes it (``prior:<abs path>``)."""
@@ -70,7 +70,7 @@ class EgoRolloutConfig:
         return f"prior:{Path(c).resolve()}"
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        return {**asdict(self), "egos": list(self.egos)}
 
 
 def _reuse(path: Path, params: dict[str, Any], ids: list[str]) -> Demonstrations | None:
