@@ -29,7 +29,11 @@ The preset's sections (all but ``train`` belong to this module; ``train`` is pas
 * ``generators``: generator name -> constructor kwargs for training and evaluation; a value ``"${fit.prior}"``
   becomes the fitted model's path.
 * ``pipelines``: training pipelines (``noadv`` = no adversary; ``goose``, ``cat``, ``seal``, ... = that
-  generator); ``seeds``: list of seeds.
+  generator; or a name of ``variants``); ``seeds``: list of seeds.
+* ``variants``: pipeline name -> ``{generator: NAME, kwargs: {...}, train: {...}}``: a training pipeline that uses
+  generator NAME with its ``generators`` kwargs updated by ``kwargs``, and the ``train`` section updated by
+  ``train`` (nested keys, e.g. ``{curriculum: {warmup: 0.0}}``): the training-pipeline ablations of thesis
+  Fig. 6.5 (``experiments/configs/quick_ablations.yaml``).
 * ``eval``: ``settings`` (list, as ``seal eval runs --settings``), ``k``, ``limit``, ``seed``, ``prior``,
   ``candidates``, ``env``, ``replay_ego`` (default true).
 * ``report``: ``plots`` (default true), ``videos`` (per generator, default 0), ``video_format``.
@@ -85,6 +89,8 @@ class RunPreset:
     """Backend options (name, workers, address)."""
     train: dict[str, Any] = field(default_factory=dict)
     """`seal.experiments.training.config.EgoTrainConfig` keys."""
+    variants: dict[str, Any] = field(default_factory=dict)
+    """Pipeline name -> ``{generator, kwargs, train}``: a variant of a generator's training pipeline."""
     preset: str = ""
     """The preset's name (default: the file name)."""
 
@@ -115,16 +121,45 @@ def load_run_config(path: str | Path, sets: Sequence[str] = ()) -> dict[str, Any
     return config
 
 
-def generator_of(pipeline: str) -> str | None:
-    """The adversary generator a training pipeline uses (None for ``noadv``)."""
-    return None if pipeline == NO_ADVERSARY else pipeline
+VARIANT_KEYS = ("generator", "kwargs", "train")
+
+
+def variant_of(config: Mapping[str, Any], pipeline: str) -> dict[str, Any]:
+    """The ``variants`` entry of ``pipeline`` (empty for a plain pipeline), its keys checked."""
+    variant = (config.get("variants") or {}).get(pipeline)
+    if variant is None:
+        return {}
+    if not isinstance(variant, Mapping) or not variant.get("generator"):
+        raise ValueError(f"variants.{pipeline}: expected a mapping with 'generator' (and optional 'kwargs', 'train')")
+    unknown = sorted(set(variant) - set(VARIANT_KEYS))
+    if unknown:
+        raise ValueError(f"variants.{pipeline}: unknown key(s) {unknown}; known: {list(VARIANT_KEYS)}")
+    for key in ("kwargs", "train"):
+        if not isinstance(variant.get(key) or {}, Mapping):
+            raise ValueError(f"variants.{pipeline}.{key}: expected a mapping, got {variant.get(key)!r}")
+    return dict(variant)
+
+
+def generator_of(pipeline: str, config: Mapping[str, Any] | None = None) -> str | None:
+    """The adversary generator a training pipeline uses (None for ``noadv``; a variant's ``generator``)."""
+    if pipeline == NO_ADVERSARY:
+        return None
+    variant = variant_of(config or {}, pipeline)
+    return str(variant["generator"]) if variant else pipeline
+
+
+def _dotted(prefix: str, value: Any) -> dict[str, Any]:
+    """Nested mapping -> ``{"a.b": leaf}`` (a variant's train overrides as `load_train_config` takes them)."""
+    if not isinstance(value, Mapping):
+        return {prefix: value}
+    return {k: v for key, sub in value.items() for k, v in _dotted(f"{prefix}.{key}" if prefix else key, sub).items()}
 
 
 def generators_in_use(config: Mapping[str, Any]) -> list[str]:
     """Generators of the training pipelines and of the eval settings, in order of first use."""
     from seal.adversaries.base import available_generators
 
-    names = [generator_of(p) for p in config["pipelines"]]
+    names = [generator_of(p, config) for p in config["pipelines"]]
     names += [s for s in (config.get("eval") or {}).get("settings", []) if s in available_generators()]
     return [n for n in dict.fromkeys(names) if n]
 
@@ -235,10 +270,13 @@ def train_config(config: Mapping[str, Any], preset_path: Path, pipeline: str, se
     ``generators`` kwargs, fitted model paths filled in, replace the train section's ``pipelines.<pipeline>``)."""
     from seal.experiments.training.train import load_train_config
 
-    gen = generator_of(pipeline)
-    overrides = {"pipeline": pipeline, "seed": int(seed), "dataset": dataset}
+    gen = generator_of(pipeline, config)
+    variant = variant_of(config, pipeline)
+    overrides: dict[str, Any] = {**_dotted("", variant.get("train") or {}), "pipeline": pipeline, "seed": int(seed),
+                                 "dataset": dataset}
     if gen:
-        overrides[f"pipelines.{pipeline}"] = {"name": gen, "kwargs": dict(generators.get(gen) or {})}
+        kwargs = {**dict(generators.get(gen) or {}), **dict(variant.get("kwargs") or {})}
+        overrides[f"pipelines.{pipeline}"] = {"name": gen, "kwargs": kwargs}
     return load_train_config(preset_path, overrides)
 
 
