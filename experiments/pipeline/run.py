@@ -272,8 +272,9 @@ def train_config(config: Mapping[str, Any], preset_path: Path, pipeline: str, se
 
     gen = generator_of(pipeline, config)
     variant = variant_of(config, pipeline)
-    overrides: dict[str, Any] = {**_dotted("", variant.get("train") or {}), "pipeline": pipeline, "seed": int(seed),
-                                 "dataset": dataset}
+    # The run config's train section (the preset's, with any --set train.* applied), then the variant's.
+    overrides: dict[str, Any] = {**_dotted("", config.get("train") or {}), **_dotted("", variant.get("train") or {}),
+                                 "pipeline": pipeline, "seed": int(seed), "dataset": dataset}
     if gen:
         kwargs = {**dict(generators.get(gen) or {}), **dict(variant.get("kwargs") or {})}
         overrides[f"pipelines.{pipeline}"] = {"name": gen, "kwargs": kwargs}
@@ -318,16 +319,17 @@ def run_pipeline(
     config_path: str | Path, out: str | Path, backend: Backend | None = None, workers: int | None = None,
     task_fn: Callable[[Job], Any] = run_task, train_fn: Callable[[Job], Any] = train_job,
     eval_fn: Callable[[Job], Any] | None = None, train_config_fn: Callable[..., dict[str, Any]] = train_config,
-    step_backend: Backend | None = None, progress: bool = True,
+    step_backend: Backend | None = None, progress: bool = True, sets: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Run the experiment of ``config_path`` into ``out`` (module docstring). ``task_fn`` runs the data / fit steps
     (on ``step_backend``, default: one fresh worker process per step, in this process with an inline
     ``backend``), ``train_fn`` / ``eval_fn`` are the per-job functions and ``train_config_fn`` builds a run's
-    trainer config (injectable for tests). Returns a summary; raises after the report if any job failed."""
+    trainer config (injectable for tests); ``sets`` are ``--set`` overrides of the preset (`load_run_config`).
+    Returns a summary; raises after the report if any job failed."""
     from seal.experiments.evaluation.evaluate import evaluate_job
 
     config_path, out = Path(config_path).resolve(), Path(out).resolve()
-    config = load_run_config(config_path)
+    config = load_run_config(config_path, sets)
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(out / "config.yaml", yaml.safe_dump(config, sort_keys=False).encode())
     if backend is None:

@@ -191,6 +191,21 @@ def test_set_overrides_the_preset(tmp_path: Path) -> None:
         load_run_config(path, ["evals.limit=3"])
 
 
+def test_set_reaches_the_steps_and_the_trainer_config(tmp_path: Path) -> None:
+    from seal.experiments.pipeline.run import train_config
+
+    preset, commands = write_preset(tmp_path), FakeTasks()
+    run_pipeline(preset, tmp_path / "out", backend=InlineBackend(), task_fn=commands, train_fn=fake_train,
+                 eval_fn=fake_eval, train_config_fn=fake_train_config, progress=False,
+                 sets=["fit.prior.epochs=7", "seeds=[4]"])
+    assert ("prior", str(tmp_path / "out" / "data"), str(tmp_path / "out" / "models" / "prior.pt"),
+            {"epochs": 7, "no_progress": True}) in commands.calls
+    assert sorted(p.name for p in (tmp_path / "out" / "runs").iterdir()) == ["cat-s4", "noadv-s4"]
+    # The trainer config follows the run config's train section (a --set there too), not only the file's.
+    config = load_run_config(CONFIGS / "quick.yaml", ["train.total_timesteps=1234"])
+    assert train_config(config, CONFIGS / "quick.yaml", "noadv", 0, "/d", {})["total_timesteps"] == 1234
+
+
 def test_fit_dependencies_come_first(tmp_path: Path) -> None:
     fit = {"objective": {"prior": "${fit.prior}"}, "prior": {"epochs": 1}, "skills": {}}
     config = load_run_config(write_preset(tmp_path, fit=fit, pipelines=["seal"],
