@@ -58,7 +58,8 @@ class EgoRolloutConfig:
     @classmethod
     def from_dict(cls, d: dict[str, Any], where: str = "config key 'ego_rollouts'") -> EgoRolloutConfig:
         check_keys(cls, d, where)
-        return cls(**{k: tuple(str(e) for e in v) if k == "egos" else v for k, v in d.items()})
+        values: dict[str, Any] = {k: tuple(str(e) for e in v) if k == "egos" else v for k, v in d.items()}
+        return cls(**values)
 
     def source_spec(self) -> str | None:
         """The candidate source as `seal.experiments.fitting.skill_rollouts` takes it (``prior:<abs path>``)."""

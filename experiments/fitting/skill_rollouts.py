@@ -135,7 +135,10 @@ def roll_out_against_egos(scenario: Scenario, egos: Sequence[str], config: DemoC
     docstring). ``source``: the ``cat`` adversary's candidate source (``prior:<file>`` or a built-in name)."""
     if adversary not in ADVERSARIES:
         raise ValueError(f"unknown roll-out adversary {adversary!r}; choose from {ADVERSARIES}")
-    obs_parts, act_parts, segs, ev_rows = [], [], [], []
+    obs_parts: list[np.ndarray] = []
+    act_parts: list[np.ndarray] = []
+    segs: list[tuple[int, ...]] = []
+    ev_rows: list[tuple[int, int, int, bool]] = []
     row = 0
     for k, spec in enumerate(egos):
         for rec, rollout in _episodes(scenario, spec, k, adversary, config, source, passes):

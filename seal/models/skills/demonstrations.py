@@ -238,7 +238,9 @@ def _simulate(scenario: Scenario, cfg: DemoConfig, act: Act, source: int, impair
             if end.row is not None:
                 tracks[end.index, end.end_step] = end.row
     events = find_events(tracks, cfg.event_spec())
-    obs_parts, act_parts, segs = [], [], []
+    obs_parts: list[np.ndarray] = []
+    act_parts: list[np.ndarray] = []
+    segs: list[tuple[int, ...]] = []
     seg_of: dict[int, int] = {}
     row = 0
     for end in sim.ends:
