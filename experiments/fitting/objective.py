@@ -166,6 +166,8 @@ def label_stats(labels: LabelSet) -> dict[str, Any]:
         "crash_share": round(float(labels.crashed.mean()), 4),
         "scenarios_with_a_crash": round(float(labels.crashed.any(axis=1).mean()), 4),
         "f_coll_mean": round(float(labels.f_coll.mean()), 4),
+        "f_coll_var": round(float(labels.f_coll.var()), 5),
+        "f_diff_var_all_prev": round(float(labels.f_diff.var()), 5),
         "f_diff_mean_all_prev": round(float(labels.f_diff.mean()), 4),
         "f_diff_mean_logged_prev": round(float(logged.mean()), 4),
         "share_f_diff_gt_0.5_logged_prev": round(float((logged > 0.5).mean()), 4),
@@ -360,6 +362,9 @@ def format_report(r: dict[str, Any]) -> str:
         f"{lab['f_diff_mean_logged_prev']:.3f} (logged previous roll-out) / {lab['f_diff_mean_all_prev']:.3f} (any).",
         "",
         "## MSE per head",
+        "",
+        f"Label variance (the MSE of predicting the mean): f_coll {lab.get('f_coll_var', float('nan')):.5f}, f_diff "
+        f"{lab.get('f_diff_var_all_prev', float('nan')):.5f} (all previous roll-outs).",
         "",
         "| previous roll-out | f_coll | f_diff | pairs |",
         "|---|---|---|---|",

@@ -119,6 +119,7 @@ def test_evaluate_reports_metrics_and_baselines(built) -> None:
     assert report["mse"]["logged_prev"]["pairs"] == labels.n_scenarios * N_CAND
     assert set(report["ranking_logged_prev"]) == {"pi_score", "closeness", "cat", "prior_probability"}
     assert report["ranking_k5_prev"]["pi_score"]["scenarios"] == 2
+    assert report["labels"]["f_diff_var_all_prev"] == pytest.approx(float(labels.f_diff.var()), abs=1e-5)
     # The closeness baseline with the logged roll-out as previous roll-out is f_coll of that roll-out.
     from seal.scoring.criticality import f_coll
 
