@@ -41,7 +41,7 @@ from seal.core.chunked import fingerprint
 from seal.core.config import load_config, overrides_field, to_dict
 from seal.experiments import presets
 from seal.experiments.fitting.skill_data import EgoRolloutConfig, Rows, cap, get_demonstrations, window_rows
-from seal.models.skills.demonstrations import DemoConfig
+from seal.models.skills.demonstrations import DEMO_SOURCES, DemoConfig
 from seal.models.skills.demos import Demonstrations, WindowSpec
 from seal.models.skills.realnvp import RealNVPConfig
 from seal.models.skills.train import SkillTrainConfig
@@ -106,6 +106,9 @@ class SkillsFitConfig:
         """Build every sub-config once, so a bad value fails here and names its section."""
         DemoConfig.from_dict(self.demos, "config key 'demos'")
         EgoRolloutConfig.from_dict(self.ego_rollouts)
+        bad = [s for s in self.sources if s not in DEMO_SOURCES]
+        if bad:
+            raise ValueError(f"config key 'sources': unknown source(s) {bad}; choose from {DEMO_SOURCES}")
         WindowSpec(**self.windows)
         VAEConfig.from_dict(self.vae, "config key 'vae'")
         RealNVPConfig.from_dict(self.prior, "config key 'prior'")

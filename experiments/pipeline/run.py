@@ -117,6 +117,10 @@ def load_run_config(path: str | Path, sets: Sequence[str] = ()) -> dict[str, Any
     for key in ("pipelines", "seeds"):
         if not isinstance(config.get(key), list) or not config[key]:
             raise ValueError(f"{path}: '{key}' must be a non-empty list")
+    if not isinstance(config.get("variants") or {}, dict):
+        raise ValueError(f"{path}: 'variants' must be a mapping of pipeline name -> {{generator, kwargs, train}}")
+    for name in config.get("variants") or {}:
+        variant_of(config, name)  # a malformed variant fails here, before any step runs
     config.setdefault("preset", path.stem)
     return config
 

@@ -302,6 +302,8 @@ def test_ablation_preset_trains_each_fig_6_5_variant_as_a_pipeline() -> None:
     assert all(r["pipeline"] == p for p, r in resolved.items())
     with pytest.raises(ValueError, match=r"variants\.x: unknown key\(s\) \['kwarg'\]"):
         variant_of({"variants": {"x": {"generator": "seal", "kwarg": {}}}}, "x")
+    with pytest.raises(ValueError, match=r"variants\.seal_traj_only: unknown key"):  # at load, before any step
+        load_run_config(path, ["variants.seal_traj_only.kwarg={}"])
 
 
 def test_non_reactive_start_keeps_p_at_zero_then_ramps() -> None:
