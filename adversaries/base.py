@@ -112,6 +112,7 @@ GENERATORS: dict[str, GeneratorSpec] = {
                          pipeline=True),
     "seal": GeneratorSpec("seal", "seal.adversaries.seal.generator", _opts(
         *_CANDIDATE_OPTIONS, "objective", "skills", "switch", "switch_offset_steps", "noise_scale",
+        "skill_horizon",
         models=("prior", "objective", "skills"), builtins={"objective": ("cat",)}), pipeline=True),
 }
 """The built-in generators, one entry each (add a line per new generator). Each module is imported on first lookup

@@ -25,10 +25,13 @@ TARGET_S = 2 * 3600.0
 """Target: a 1M-step run of the default preset in under 2 hours."""
 
 
-def mean_perturb_probability(slope: float, cap: float) -> float:
-    """Mean of p(t) = min(slope t / T, cap) over t in [0, T]."""
-    ramp_end = min(1.0, cap / slope) if slope > 0 else 1.0
-    return float(0.5 * slope * ramp_end**2 + cap * (1.0 - ramp_end)) if slope > 0 else 0.0
+def mean_perturb_probability(slope: float, cap: float, warmup: float = 0.0) -> float:
+    """Mean of p(t) = min(slope (t / T - warmup), cap) (0 before the warm-up ends) over t in [0, T]."""
+    if slope <= 0:
+        return 0.0
+    span = 1.0 - warmup  # the ramp and the plateau share what the warm-up leaves
+    ramp = min(span, cap / slope)
+    return float(0.5 * slope * ramp**2 + cap * (span - ramp))
 
 
 def gradient_steps_per_env_step(config: Mapping[str, Any], n_envs: int, horizon: int = 10) -> float:

@@ -108,7 +108,7 @@ def _check_split(o: Mapping[str, Any]) -> None:
 
 
 def _check_pipelines(config: Mapping[str, Any]) -> None:
-    known = [NO_ADVERSARY, *available_generators()]
+    known = [NO_ADVERSARY, *available_generators(), *(config.get("variants") or {})]
     for pipeline in config["pipelines"]:
         if pipeline not in known:
             raise ValueError(f"pipelines: unknown pipeline {pipeline!r}; known: {', '.join(known)}")

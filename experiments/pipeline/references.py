@@ -16,16 +16,45 @@ REF = re.compile(r"^\$\{fit\.(\w+)\}(.*)$")
 """``"${fit.NAME}"`` or ``"${fit.NAME}/file inside it"`` in generator kwargs: a fitted model's path."""
 
 
-def generator_of(pipeline: str) -> str | None:
-    """The adversary generator a training pipeline uses (None for ``noadv``)."""
-    return None if pipeline == NO_ADVERSARY else pipeline
+VARIANT_KEYS = ("generator", "kwargs", "train")
+
+
+def variant_of(config: Mapping[str, Any], pipeline: str) -> dict[str, Any]:
+    """The ``variants`` entry of ``pipeline`` (empty for a plain pipeline), its keys checked."""
+    variant = (config.get("variants") or {}).get(pipeline)
+    if variant is None:
+        return {}
+    if not isinstance(variant, Mapping) or not variant.get("generator"):
+        raise ValueError(f"variants.{pipeline}: expected a mapping with 'generator' (and optional 'kwargs', 'train')")
+    unknown = sorted(set(variant) - set(VARIANT_KEYS))
+    if unknown:
+        raise ValueError(f"variants.{pipeline}: unknown key(s) {unknown}; known: {list(VARIANT_KEYS)}")
+    for key in ("kwargs", "train"):
+        if not isinstance(variant.get(key) or {}, Mapping):
+            raise ValueError(f"variants.{pipeline}.{key}: expected a mapping, got {variant.get(key)!r}")
+    return dict(variant)
+
+
+def generator_of(pipeline: str, config: Mapping[str, Any] | None = None) -> str | None:
+    """The adversary generator a training pipeline uses (None for ``noadv``; a variant's ``generator``)."""
+    if pipeline == NO_ADVERSARY:
+        return None
+    variant = variant_of(config or {}, pipeline)
+    return str(variant["generator"]) if variant else pipeline
+
+
+def dotted(prefix: str, value: Any) -> dict[str, Any]:
+    """Nested mapping -> ``{"a.b": leaf}`` (a variant's train overrides as `load_train_config` takes them)."""
+    if not isinstance(value, Mapping):
+        return {prefix: value}
+    return {k: v for key, sub in value.items() for k, v in dotted(f"{prefix}.{key}" if prefix else key, sub).items()}
 
 
 def generators_in_use(config: Mapping[str, Any]) -> list[str]:
     """Generators of the training pipelines and of the eval settings, in order of first use."""
     from seal.adversaries.base import available_generators
 
-    names = [generator_of(p) for p in config["pipelines"]]
+    names = [generator_of(p, config) for p in config["pipelines"]]
     names += [s for s in (config.get("eval") or {}).get("settings", []) if s in available_generators()]
     return [n for n in dict.fromkeys(names) if n]
 

@@ -189,12 +189,14 @@ class Hyperparams:
 
 @dataclass(frozen=True)
 class Curriculum:
-    """CAT's perturbation probability p(t) = min(slope t / T, cap)."""
+    """CAT's perturbation probability p(t) = min(slope (t / T - warmup), cap), 0 before warmup T."""
 
     slope: float = 1.8
     """Growth of p over the run (per fraction of total_timesteps)."""
     cap: float = 0.9
     """Largest p."""
+    warmup: float = 0.0
+    """Share of the run with p = 0 before the ramp starts (SEAL's non-reactive start), in [0, 1)."""
 
 
 @dataclass(frozen=True)
