@@ -89,6 +89,8 @@ class AgentEnd:
     end_step: int
     end_reason: int
     """Index into `END_REASONS`."""
+    row: np.ndarray | None = None
+    """The agent's track row ``[8]`` at ``end_step`` (where it was when it ended; the simulation drops it)."""
 
 
 class MultiAgentSim:
@@ -227,7 +229,7 @@ class MultiAgentSim:
         return bool(log_on[max(0, k - 1) : k + 1].all())
 
     def _end(self, i: int, reason: int) -> AgentEnd:
-        end = AgentEnd(i, int(self.scenario.agent_ids[i]), self._start.pop(i), self.t, reason)
+        end = AgentEnd(i, int(self.scenario.agent_ids[i]), self._start.pop(i), self.t, reason, self._cur[i].copy())
         self.ends.append(end)
         self._cur[i] = 0.0
         self._states[i] = None

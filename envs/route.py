@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from seal.core.kernels import closest_segment
 from seal.core.scenario import CURRENT_STEP, VALID, VX, VY, X, Y
 
 EXTENSION_M = 50.0
@@ -90,10 +91,13 @@ class Route:
         self._x_list, self._y_list = ext[:, 0].tolist(), ext[:, 1].tolist()
         self._spd = np.concatenate([spd[:1], spd, spd[-1:]])
         self._spd_list = self._spd.tolist()
+        self.nav = np.ascontiguousarray(np.vstack([cum, ext[:, 0], ext[:, 1], self._spd]))
+        """``[4, P]`` per extended vertex: arc length s (m), x, y (m), reference speed (m/s); what the compiled
+        observation (`seal.envs.obs_kernels`) reads `point_at` / `speed_at` from."""
         # Segment starts and vectors as contiguous rows ``ax, ay, ex, ey`` [4, n] (one slice per projection) and
         # per-segment scalars as lists: `project` runs every step for the ego and a reactive adversary.
         self._cols = np.ascontiguousarray(np.vstack([ext[:-1].T, seg.T]))
-        self._len2 = seg_len**2
+        self._len2 = np.ascontiguousarray(seg_len**2)
         self._seg_s0 = cum[:-1].tolist()
         self._seg_len = seg_len.tolist()
         self._seg_heading = np.arctan2(seg[:, 1], seg[:, 0]).tolist()
@@ -128,30 +132,13 @@ class Route:
             lo, hi = 0, n
         else:
             lo, hi = max(0, hint - _WINDOW_BACK), min(n, hint + _WINDOW_AHEAD)
-        # In place where possible (few, small numpy calls); the same operations as the textbook form
-        # t = clip((p . e) / |e|^2, 0, 1), d = p - t e, argmin |d|^2.
-        ax, ay, ex, ey = self._cols[:, lo:hi]
-        px = x - ax
-        py = y - ay
-        t = px * ex
-        t += py * ey
-        t /= self._len2[lo:hi]
-        np.maximum(t, 0.0, out=t)
-        np.minimum(t, 1.0, out=t)
-        dx = t * ex
-        np.subtract(px, dx, out=dx)
-        dy = t * ey
-        np.subtract(py, dy, out=dy)
-        dx *= dx
-        dy *= dy
-        dx += dy
-        k = int(dx.argmin())
-        i = lo + k
+        # Compiled (`seal.core.kernels.closest_segment`): a dozen numpy calls on a few dozen segments cost more
+        # than the arithmetic.
+        i, t, cross = closest_segment(self._cols, self._len2, x, y, lo, hi)
         seg_len = self._seg_len[i]
-        lateral = (float(ex[k]) * float(py[k]) - float(ey[k]) * float(px[k])) / seg_len
         return RouteProjection(
-            s=self._seg_s0[i] + float(t[k]) * seg_len,
-            lateral=lateral,
+            s=self._seg_s0[i] + t * seg_len,
+            lateral=cross / seg_len,
             heading=self._seg_heading[i],
             segment=i,
         )

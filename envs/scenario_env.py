@@ -177,6 +177,8 @@ class ScenarioEnv(gym.Env):
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
         self._adversary: AdversarySpec = adversary
         self._exempt_cache: dict[tuple[str, int], np.ndarray] = {}
+        self._route_cache: dict[int, tuple[Scenario, Route]] = {}
+        """Ego routes by scenario object identity (the entry keeps the object, so its id is not reused)."""
         self._renderer: Any = None
         self.scenario: Scenario | None = None
         self.rollout: Rollout | None = None
@@ -227,7 +229,7 @@ class ScenarioEnv(gym.Env):
         self._ego, self._adv = ego, adv
         self._place_agents(t)
         crashed, crash_id = self._ego_collisions(t, ego)
-        adv_crashed, others_adv = self._adv_collisions(t, adv)
+        adv_crashed = self._adv_collisions(t, adv)
         progress, out_of_road = self._road_progress(ego)
         success = self._route.completion(self._proj.s) > cfg["success_completion"] and not crashed and not out_of_road
         events = StepEvents(crashed, crash_id, adv_crashed, out_of_road, success)
@@ -241,7 +243,7 @@ class ScenarioEnv(gym.Env):
         truncated = bool(not terminated and t - CURRENT_STEP >= cfg["horizon_steps"])
         self._return += reward
 
-        obs = self._observe(last=terminated or truncated, others_adv=others_adv)
+        obs = self._observe(last=terminated or truncated)
         info = self._info(events)
         info["reward_terms"] = terms
         if terminated or truncated:
@@ -282,9 +284,8 @@ class ScenarioEnv(gym.Env):
         idx = np.arange(n_agents)
         self._not_ego = idx != self._ego_idx
         self._not_ego_adv = self._not_ego & (idx != self._adv_idx)
-        self._viewer_idx = np.array([self._ego_idx, self._adv_idx])
         ego_track = self._log[self._ego_idx]
-        self._route = Route.from_track(ego_track, CURRENT_STEP)
+        self._route = self._ego_route(scenario, ego_track)
         self._exempt = self._exempt_for(scenario, ego_track) if self.config["check_continuous_lines"] else None
 
         self._behavior = behavior
@@ -314,6 +315,18 @@ class ScenarioEnv(gym.Env):
         self._success_step = None
         self._return = 0.0
         self._done = False
+
+    def _ego_route(self, scenario: Scenario, ego_track: np.ndarray) -> Route:
+        """The ego's route (its logged track from `CURRENT_STEP`), cached per scenario: a route is immutable and
+        building one walks the track in Python (most of a reset's cost otherwise)."""
+        key = id(scenario)
+        hit = self._route_cache.get(key)
+        if hit is None or hit[0] is not scenario:
+            if len(self._route_cache) > 4096:
+                self._route_cache.clear()
+            hit = (scenario, Route.from_track(ego_track, CURRENT_STEP))
+            self._route_cache[key] = hit
+        return hit[1]
 
     def _exempt_for(self, scenario: Scenario, ego_track: np.ndarray) -> np.ndarray | None:
         """Solid-line segments the logged ego box crosses (cached per scenario and road)."""
@@ -361,16 +374,14 @@ class ScenarioEnv(gym.Env):
         self._ego_crashes.extend((t, int(i)) for i in ids)
         return True, crash_id
 
-    def _adv_collisions(self, t: int, adv: AgentState | None) -> tuple[bool, np.ndarray | None]:
-        """(the adversary hit a third agent, the present agents other than the ego and the adversary: None
-        without an adversary); logs the hits."""
+    def _adv_collisions(self, t: int, adv: AgentState | None) -> bool:
+        """Whether the adversary hit a third agent (not the ego; never without an adversary); logs the hits."""
         if adv is None:
-            return False, None
-        others_adv = np.flatnonzero(self._present & self._not_ego_adv)
-        hits = box_hits(adv, self._cur, others_adv)
+            return False
+        hits = box_hits(adv, self._cur, np.flatnonzero(self._present & self._not_ego_adv))
         if hits.size:
             self._adv_crashes.extend((t, int(i)) for i in self._agent_ids[hits])
-        return bool(hits.size), others_adv
+        return bool(hits.size)
 
     def _road_progress(self, ego: AgentState) -> tuple[float, bool]:
         """(route progress of this step in m, out of road); advances the ego's route projection."""
@@ -402,38 +413,25 @@ class ScenarioEnv(gym.Env):
             adversary=self._behavior.name,
         )
 
-    def _observe(self, last: bool = False, others_adv: np.ndarray | None = None) -> np.ndarray:
+    def _observe(self, last: bool = False) -> np.ndarray:
         """The ego's observation of the current step; when the adversary will act on its own observation this
-        step (not on the ``last`` step of an episode), that one too, in the same pass (`build_many`: the two cost
-        about 1.4 builds), kept for `_move_adversary`. ``others_adv``: the present agents other than the ego and
-        the adversary, when `step` has found them (None at reset)."""
+        step (not on the ``last`` step of an episode), that one too, kept for `_move_adversary`. Both read the whole
+        box table (`build_many`: absent rows and each viewer's own row are left out)."""
         adv, behavior, adv_route = self._adv, self._behavior, self._adv_route
-        if adv is None or adv_route is None:  # no adversary, or one that does not observe (`_setup`)
-            return self._builder.build(self._ego, self._route, self._cur[self._others_ego, :7], self._proj)
-        # Project every step (cheap) so the hinted projection keeps up with the adversary even on steps that
-        # skip its observation.
-        proj = adv_route.project(adv.x, adv.y, self._adv_hint)
-        self._adv_hint = proj.segment
-        if last or not behavior.observes(self._t):
-            return self._builder.build(self._ego, self._route, self._cur[self._others_ego, :7], self._proj)
-        if others_adv is not None:
-            # After a step both are placed: the viewers' boxes first, then the other present agents.
-            boxes = self._cur[np.concatenate((self._viewer_idx, others_adv)), :7]
-            rows = [0, 1]
-        else:
-            # At reset: a viewer's row among the present agents is its rank among their indices (-1 if absent: an
-            # adversary may have no log row yet).
-            mask = self._present
-            present = np.flatnonzero(mask)
-            rows = present.searchsorted(self._viewer_idx).tolist()
-            if not (mask[self._ego_idx] and mask[self._adv_idx]):
-                rows = [r if mask[i] else -1 for r, i in zip(rows, (self._ego_idx, self._adv_idx), strict=True)]
-            boxes = self._cur[present, :7]
-        both = self._builder.build_many(
-            (self._ego, adv), (self._route, adv_route), (self._proj, proj), boxes, rows,
-        )
-        self._adv_obs = both[1]
-        return both[0]
+        builder, cur = self._builder, self._cur
+        if adv is not None and adv_route is not None:  # an adversary that observes (`_setup`)
+            # Project every step (cheap) so the hinted projection keeps up with the adversary even on steps that
+            # skip its observation.
+            proj = adv_route.project(adv.x, adv.y, self._adv_hint)
+            self._adv_hint = proj.segment
+            if not last and behavior.observes(self._t):
+                both = builder.build_many(
+                    (self._ego, adv), (self._route, adv_route), (self._proj, proj), cur,
+                    (self._ego_idx, self._adv_idx),
+                )
+                self._adv_obs = both[1]
+                return both[0]
+        return builder.build_many((self._ego,), (self._route,), (self._proj,), cur, (self._ego_idx,))[0]
 
     def _info(self, events: StepEvents) -> dict[str, Any]:
         return {

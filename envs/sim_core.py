@@ -4,8 +4,8 @@ collision test, the road checks, and the ego's reward terms and outcome.
 
 The per-step box table ``cur [A, 8]`` holds every agent's row in track layout (`seal.core.scenario.TRACK_FIELDS`):
 its logged row at the step for replayed agents, the simulated state for driven ones, zeros (``valid`` = 0) for
-absent ones. Collisions are oriented-box overlaps (`seal.core.geometry.overlaps_one` /
-`seal.core.geometry.pairwise_overlaps`, the same separating-axis kernel).
+absent ones. Collisions are oriented-box overlaps (`seal.core.kernels.box_hits_rows`, compiled, per step;
+`seal.core.geometry.pairwise_overlaps` for many driven agents: the same separating-axis test).
 
 Reward (CAT / MetaDrive defaults), as named terms (highway-env's ``_rewards``): ``progress`` (``progress_reward``
 = 1 per metre of route progress, negative when going back), ``out_of_road`` (``-out_of_road_penalty`` = -10),
@@ -16,12 +16,12 @@ its term replaces progress, in this priority: out of road, crash, arrival; the s
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from seal.core.geometry import corners_xy, overlaps_one
+from seal.core.geometry import corners_xy
+from seal.core.kernels import box_hits_rows
 from seal.core.outcome import Outcome
 from seal.core.scenario import N_STEPS
 from seal.envs.kinematics import AgentState
@@ -43,23 +43,10 @@ def logged_rows(log: np.ndarray, t: int) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------------------------ collisions
-def near(state: AgentState, cur: np.ndarray, idx: np.ndarray) -> np.ndarray:
-    """Indices in ``idx`` (rows of ``cur``) whose centre is close enough to ``state`` for their boxes to touch
-    (the cheap pre-filter of `box_hits`: half diagonals summed)."""
-    if idx.size == 0:
-        return idx
-    b = cur[idx]
-    reach = 0.5 * (math.hypot(state.length, state.width) + np.hypot(b[:, 5], b[:, 6]))
-    d2 = (b[:, 0] - state.x) ** 2 + (b[:, 1] - state.y) ** 2
-    return idx[d2 < reach * reach]
-
-
 def box_hits(state: AgentState, cur: np.ndarray, idx: np.ndarray) -> np.ndarray:
-    """Indices in ``idx`` (rows of ``cur``, ascending as given) whose boxes overlap ``state``'s box."""
-    cand = near(state, cur, idx)
-    if not cand.size:
-        return cand
-    return cand[overlaps_one(state.x, state.y, state.heading, state.length, state.width, cur[cand])]
+    """Indices in ``idx`` (rows of ``cur``, ascending as given) whose boxes overlap ``state``'s box (one compiled
+    call, `seal.core.kernels.box_hits_rows`: the half-diagonal pre-filter, then the separating-axis test)."""
+    return box_hits_rows(state.x, state.y, state.heading, state.length, state.width, cur, idx)
 
 
 # ------------------------------------------------------------------------------------------------ road checks

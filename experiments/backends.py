@@ -42,9 +42,25 @@ class JobResult:
 class Backend(Protocol):
     name: str
 
-    def map(self, fn: JobFn, jobs: Sequence[Job], desc: str = "jobs") -> list[JobResult]:
-        """Run ``fn(job)`` for every job; results in job order."""
+    def map(
+        self, fn: JobFn, jobs: Sequence[Job], desc: str = "jobs", unit: str = "job",
+        sizes: Sequence[int] | None = None, progress: bool = True,
+    ) -> list[JobResult]:
+        """Run ``fn(job)`` for every job; results in job order. The progress bar (``progress``) advances by
+        ``sizes[i]`` when job ``i`` finishes (default 1 each), so its rate reads in ``unit`` per second."""
         ...
+
+
+def _bar(jobs: Sequence[Job], desc: str, unit: str, sizes: Sequence[int] | None, progress: bool) -> Any:
+    """The tqdm bar of a `Backend.map` (on stderr; ``disable`` when not ``progress``)."""
+    from tqdm import tqdm
+
+    total = len(jobs) if sizes is None else int(sum(sizes))
+    return tqdm(total=total, desc=desc, unit=unit, disable=not progress, smoothing=0.1)
+
+
+def _step(sizes: Sequence[int] | None, i: int) -> int:
+    return 1 if sizes is None else int(sizes[i])
 
 
 def _call(fn: JobFn, job: Job) -> JobResult:
@@ -74,8 +90,16 @@ class InlineBackend:
 
     name = "inline"
 
-    def map(self, fn: JobFn, jobs: Sequence[Job], desc: str = "jobs") -> list[JobResult]:
-        return [_call(fn, job) for job in jobs]
+    def map(
+        self, fn: JobFn, jobs: Sequence[Job], desc: str = "jobs", unit: str = "job",
+        sizes: Sequence[int] | None = None, progress: bool = False,
+    ) -> list[JobResult]:
+        results = []
+        with _bar(jobs, desc, unit, sizes, progress) as bar:
+            for i, job in enumerate(jobs):
+                results.append(_call(fn, job))
+                bar.update(_step(sizes, i))
+        return results
 
 
 class LocalBackend:
@@ -86,11 +110,12 @@ class LocalBackend:
     def __init__(self, workers: int | None = None) -> None:
         self.workers = max(1, int(workers or os.cpu_count() or 1))
 
-    def map(self, fn: JobFn, jobs: Sequence[Job], desc: str = "jobs") -> list[JobResult]:
+    def map(
+        self, fn: JobFn, jobs: Sequence[Job], desc: str = "jobs", unit: str = "job",
+        sizes: Sequence[int] | None = None, progress: bool = True,
+    ) -> list[JobResult]:
         import multiprocessing as mp
         from concurrent.futures import ProcessPoolExecutor, as_completed
-
-        from tqdm import tqdm
 
         if not jobs:
             return []
@@ -101,12 +126,14 @@ class LocalBackend:
         with ProcessPoolExecutor(min(self.workers, len(jobs)), mp_context=mp.get_context("spawn"), initializer=init,
                                  initargs=init_args) as pool:
             futures = {pool.submit(_worker_call, fn, job): i for i, job in enumerate(jobs)}
-            for fut in tqdm(as_completed(futures), total=len(jobs), desc=desc, unit="job"):
-                i = futures[fut]
-                try:
-                    results[i] = fut.result()
-                except Exception as exc:  # the worker process died (e.g. out of memory)
-                    results[i] = JobResult(jobs[i], error=f"worker process failed: {type(exc).__name__}: {exc}")
+            with _bar(jobs, desc, unit, sizes, progress) as bar:
+                for fut in as_completed(futures):
+                    i = futures[fut]
+                    try:
+                        results[i] = fut.result()
+                    except Exception as exc:  # the worker process died (e.g. out of memory)
+                        results[i] = JobResult(jobs[i], error=f"worker process failed: {type(exc).__name__}: {exc}")
+                    bar.update(_step(sizes, i))
         return [r for r in results if r is not None]
 
 
@@ -145,9 +172,10 @@ class RayBackend:
                         "(or set RAY_ADDRESS / the preset's backend.address), or use --backend local"
                     ) from None
 
-    def map(self, fn: JobFn, jobs: Sequence[Job], desc: str = "jobs") -> list[JobResult]:
-        from tqdm import tqdm
-
+    def map(
+        self, fn: JobFn, jobs: Sequence[Job], desc: str = "jobs", unit: str = "job",
+        sizes: Sequence[int] | None = None, progress: bool = True,
+    ) -> list[JobResult]:
         if not jobs:
             return []
         task = self._ray.remote(num_cpus=self.cpus_per_job)(_worker_call)
@@ -155,7 +183,7 @@ class RayBackend:
         index = {ref: i for i, ref in enumerate(refs)}
         results: list[JobResult | None] = [None] * len(jobs)
         pending = list(refs)
-        with tqdm(total=len(jobs), desc=desc, unit="job") as bar:
+        with _bar(jobs, desc, unit, sizes, progress) as bar:
             while pending:
                 ready, pending = self._ray.wait(pending, num_returns=1)
                 i = index[ready[0]]
@@ -163,7 +191,7 @@ class RayBackend:
                     results[i] = self._ray.get(ready[0])
                 except Exception as exc:  # the task or its worker died
                     results[i] = JobResult(jobs[i], error=f"ray task failed: {type(exc).__name__}: {exc}")
-                bar.update(1)
+                bar.update(_step(sizes, i))
         return [r for r in results if r is not None]
 
     def shutdown(self) -> None:

@@ -52,12 +52,12 @@ def future_extrapolate(gt: AgentTracks, index: RoadIndex, current: int = CURRENT
     t = np.arange(1, n_fut + 1, dtype=np.float64) * dt
     fut = slice(current + 1, n_steps)
     cartesian: list[int] = []
-    for a in np.flatnonzero(gt.valid[:, current]):
+    for a in (int(k) for k in np.flatnonzero(gt.valid[:, current])):
         p0, v0 = gt.pos[a, current], gt.vel[a, current]
         lane0 = int(gt.lane[a, current])
         valid[a, fut] = True
         if lane0 < 0:
-            cartesian.append(int(a))
+            cartesian.append(a)
             continue
         # The chain starts at the start of the agent's lane, so it must cover the lane plus the drive.
         speed = float(np.hypot(v0[0], v0[1]))

@@ -17,11 +17,9 @@ import math
 import numpy as np
 from numba import float64, int64, njit, types
 
-_OPTS = {"cache": True, "nogil": True, "error_model": "numpy"}
-
 
 @njit(types.UniTuple(float64, 3)(float64[:, ::1], float64[::1], float64[:, ::1], float64[::1], float64, float64),
-      **_OPTS)
+      cache=True, nogil=True, error_model="numpy")
 def polyline_project(
     points: np.ndarray, cum: np.ndarray, tang: np.ndarray, seg_len: np.ndarray, x: float, y: float,
 ) -> tuple[float, float, float]:
@@ -51,7 +49,8 @@ def polyline_project(
 
 
 @njit(types.Tuple((float64[:, ::1], float64[::1], int64[::1]))(
-    float64[:, ::1], float64[::1], float64[:, ::1], float64[:, ::1], float64[::1], float64), **_OPTS)
+    float64[:, ::1], float64[::1], float64[:, ::1], float64[:, ::1], float64[::1], float64),
+    cache=True, nogil=True, error_model="numpy")
 def polyline_at(
     points: np.ndarray, cum: np.ndarray, tang: np.ndarray, vertex_tang: np.ndarray, s: np.ndarray, d: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -95,7 +94,7 @@ def polyline_at(
     return out, heading, seg
 
 
-@njit(int64[::1](int64[::1]), **_OPTS)
+@njit(int64[::1](int64[::1]), cache=True, nogil=True, error_model="numpy")
 def rank_by_dwell(lanes: np.ndarray) -> np.ndarray:
     """The distinct non-negative values of ``lanes`` ordered by how often they occur (most first), ties by first
     occurrence."""
@@ -123,7 +122,7 @@ def rank_by_dwell(lanes: np.ndarray) -> np.ndarray:
     int64[::1], int64[::1],
     float64[:, ::1], float64[:, ::1], float64[:, ::1], int64[::1], int64[::1], int64[::1], float64[::1],
     int64[::1], int64[::1], int64[::1],
-    float64, float64, float64), **_OPTS)
+    float64, float64, float64), cache=True, nogil=True, error_model="numpy")
 def agent_mttcp(
     I: np.ndarray, J: np.ndarray, st_i: np.ndarray, st_j: np.ndarray, mask: np.ndarray,
     ax: np.ndarray, ay: np.ndarray, aspeed: np.ndarray, a_runs: np.ndarray, a_step: np.ndarray,
@@ -210,7 +209,7 @@ def cell_keys(xy: np.ndarray, origin: np.ndarray, cell_m: float) -> np.ndarray:
     float64[:, ::1], float64[::1], types.boolean, float64[::1], float64,
     int64[::1], int64[::1], int64[::1],
     float64[:, ::1], float64[:, ::1], float64[::1], float64[::1], float64[::1], float64[::1], float64,
-    int64[::1], float64[::1], float64[::1], float64), **_OPTS)
+    int64[::1], float64[::1], float64[::1], float64), cache=True, nogil=True, error_model="numpy")
 def project_points(
     xy: np.ndarray, heading: np.ndarray, use_heading: bool, origin: np.ndarray, cell_m: float,
     cells: np.ndarray, cell_start: np.ndarray, cell_seg: np.ndarray,
@@ -290,7 +289,7 @@ _CORNER_SIGNS = ((0.5, 0.5), (0.5, -0.5), (-0.5, -0.5), (-0.5, 0.5))
 """Corner order of `seal.core.geometry.box_corners` (front left, front right, rear right, rear left)."""
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _corners(x: float, y: float, heading: float, length: float, width: float, out: np.ndarray) -> None:
     """Corners ``out [4, 2]`` (m) of a box, as `seal.core.geometry.box_corners`."""
     c = math.cos(heading)
@@ -302,7 +301,7 @@ def _corners(x: float, y: float, heading: float, length: float, width: float, ou
         out[k, 1] = y + dl * s + dw * c
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _boxes_overlap(a: np.ndarray, b: np.ndarray) -> bool:
     """Separating-axis test of two rectangles given by corners ``[4, 2]`` (`seal.core.geometry.boxes_overlap`)."""
     for k in range(4):
@@ -324,17 +323,17 @@ def _boxes_overlap(a: np.ndarray, b: np.ndarray) -> bool:
     return True
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _orient(ax: float, ay: float, bx: float, by: float, cx: float, cy: float) -> float:
     return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _on_segment(ax: float, ay: float, bx: float, by: float, cx: float, cy: float) -> bool:
     return min(ax, bx) <= cx <= max(ax, bx) and min(ay, by) <= cy <= max(ay, by)
 
 
-@njit(**_OPTS)
+@njit(cache=True, nogil=True, error_model="numpy")
 def segments_cross(
     p0x: float, p0y: float, p1x: float, p1y: float, q0x: float, q0y: float, q1x: float, q1y: float,
 ) -> bool:
@@ -356,7 +355,8 @@ def segments_cross(
 @njit(float64[::1](
     int64[::1], int64[::1], types.boolean[:, ::1],
     float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], float64[::1],
-    float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], float64[::1], float64), **_OPTS)
+    float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1], float64[::1], float64),
+    cache=True, nogil=True, error_model="numpy")
 def pair_contacts(
     I: np.ndarray, J: np.ndarray, mask: np.ndarray,
     ax: np.ndarray, ay: np.ndarray, ah: np.ndarray, alen: np.ndarray, awid: np.ndarray,

@@ -4,6 +4,8 @@
   rate (rad/s), acceleration (m/s^2, time derivative of the speed) and out-of-road rate (share of an episode's
   steps off the road, or a 0/1 flag per episode) and those of the original (logged) adversary, on fixed bins;
   ``realism`` is their mean (lower = more realistic). Values outside the bin range count in the edge bins.
+* Smoothness (reported next to realism, not in it): the jerk profile (m/s^3, second difference of the speed)
+  against the logged adversary's, as a Wasserstein-1 distance and the 95th percentile of |jerk|.
 * Collisions: for every episode the first step where the ego and adversary boxes overlap; the relative speed
   along the contact normal there (the separating axis of least penetration, as a physics engine's contact
   normal), head-on collisions (headings more than 135 deg apart and each vehicle's centre ahead of the other:
@@ -25,6 +27,7 @@ from seal.core.scenario import DT_S, HEADING, VALID, VX, VY, X, Y
 
 YAW_RATE_BINS = np.linspace(-1.5, 1.5, 61)
 ACC_BINS = np.linspace(-10.0, 10.0, 81)
+JERK_BINS = np.linspace(-100.0, 100.0, 201)
 OFFROAD_BINS = np.linspace(-0.05, 1.05, 12)  # centres 0.0, 0.1, ..., 1.0: a 0/1 flag sits exactly on 0 or 1
 HEAD_ON_ANGLE_RAD = np.deg2rad(135.0)
 SEVERE_SPEED_MPS = 5.0
@@ -54,6 +57,23 @@ def accelerations(tracks: TrackBatch, dt: float = DT_S) -> np.ndarray:
         ok = (t[1:, VALID] > 0.5) & (t[:-1, VALID] > 0.5)
         out.append((np.diff(np.hypot(t[:, VX], t[:, VY])) / dt)[ok])
     return np.concatenate(out) if out else np.zeros(0)
+
+
+def jerks(tracks: TrackBatch, dt: float = DT_S) -> np.ndarray:
+    """All jerks (m/s^3, change of `accelerations` per second) over three consecutive valid steps, concatenated."""
+    out = []
+    for t in _episodes(tracks):
+        ok = (t[2:, VALID] > 0.5) & (t[1:-1, VALID] > 0.5) & (t[:-2, VALID] > 0.5)
+        out.append((np.diff(np.hypot(t[:, VX], t[:, VY]), n=2) / dt**2)[ok])
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def jerk_stats(generated: TrackBatch, original: TrackBatch) -> dict[str, float]:
+    """Smoothness of generated vs original adversaries (not part of ``realism``): ``jerk_wd`` (Wasserstein-1 of the
+    jerk profiles on `JERK_BINS`), the 95th percentile of |jerk| of both (m/s^3)."""
+    g, o = jerks(generated), jerks(original)
+    p95 = lambda x: float(np.percentile(np.abs(x), 95)) if x.size else float("nan")  # noqa: E731
+    return {"jerk_wd": histogram_wasserstein(g, o, JERK_BINS), "jerk_abs_p95": p95(g), "logged_jerk_abs_p95": p95(o)}
 
 
 def offroad_rates(offroad: np.ndarray | Sequence[np.ndarray]) -> np.ndarray:

@@ -28,6 +28,8 @@ Features (larger = more safety-relevant; the inverse of a time is 0 when the tim
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from seal.core.geometry import wrap_angle
@@ -165,16 +167,56 @@ def _collisions(ca: TrackContext, cb: TrackContext, I: np.ndarray, J: np.ndarray
     )
 
 
-def _following(a, b, I, J, pi, pj, si, sj, dist, mask, index: RoadIndex):
-    n = I.size
+@dataclass(frozen=True)
+class FollowingSteps:
+    """Per-step car-following measures of the pairs that follow each other at least once.
+
+    Attributes:
+        rows: ``[R]`` indices into the pairs given to `following_per_step` (pairs with no following step are left
+            out: most pairs never share a lane).
+        ok: ``[R, T]`` both valid, in the same or directly connected lanes, headings within 45 deg.
+        j_leads: ``[R, T]`` agent j is ahead along i's heading (j leads, i follows); else i leads.
+        gap: ``[R, T]`` bumper gap (m): centre distance - half of both lengths, floored at `MIN_GAP_M`.
+        v_follow, v_lead: ``[R, T]`` speeds of the follower and the leader (m/s).
+        inv_thw: ``[R, T]`` 1/THW = follower speed / gap (1/s).
+        inv_ttc: ``[R, T]`` 1/TTC = closing speed / gap (1/s), 0 when the gap opens.
+        drac: ``[R, T]`` closing speed^2 / (2 gap) (m/s^2), the deceleration that stops the closing before contact.
+    The measures are computed at every step; they mean something only where ``ok``.
+    """
+
+    rows: np.ndarray
+    ok: np.ndarray
+    j_leads: np.ndarray
+    gap: np.ndarray
+    v_follow: np.ndarray
+    v_lead: np.ndarray
+    inv_thw: np.ndarray
+    inv_ttc: np.ndarray
+    drac: np.ndarray
+
+
+def following_per_step(
+    a: AgentTracks, b: AgentTracks, I: np.ndarray, J: np.ndarray, index: RoadIndex,
+) -> FollowingSteps:
+    """Per-step THW / TTC / DRAC (`FollowingSteps`) of pairs ``(I[p] in a, J[p] in b)`` (``[P]`` each).
+
+    The same numbers `social_features` reduces over the steps (it also skips pairs that are far apart or both
+    stationary, which this function does not); for cross-checks against other implementations.
+    """
+    pi, pj = a.pos[I], b.pos[J]
+    dist = np.hypot(pi[..., 0] - pj[..., 0], pi[..., 1] - pj[..., 1])
+    return _following_steps(a, b, I, J, pi, pj, a.speed[I], b.speed[J], dist, a.valid[I] & b.valid[J], index)
+
+
+def _following_steps(
+    a: AgentTracks, b: AgentTracks, I: np.ndarray, J: np.ndarray, pi: np.ndarray, pj: np.ndarray,
+    si: np.ndarray, sj: np.ndarray, dist: np.ndarray, mask: np.ndarray, index: RoadIndex,
+) -> FollowingSteps:
     n_lanes = index.n_lanes
     li = np.where(a.lane[I] >= 0, a.lane[I], n_lanes)
     lj = np.where(b.lane[J] >= 0, b.lane[J], n_lanes)
     ok = mask & index.connected[li, lj]
-    out = np.zeros((3, n))
     rows = np.flatnonzero(ok.any(1))  # most pairs never share a lane: skip them early
-    if rows.size == 0:
-        return out
     ok, pi, pj, si, sj, dist = ok[rows], pi[rows], pj[rows], si[rows], sj[rows], dist[rows]
     hi, hj = a.heading[I[rows]], b.heading[J[rows]]
     ok &= np.abs(wrap_angle(hi - hj)) < HEADING_MAX_RAD
@@ -184,9 +226,21 @@ def _following(a, b, I, J, pi, pj, si, sj, dist, mask, index: RoadIndex):
     v_l = np.where(j_leads, sj, si)
     gap = np.maximum(dist - 0.5 * (a.length[I[rows]] + b.length[J[rows]])[:, None], MIN_GAP_M)
     closing = np.maximum(v_f - v_l, 0.0)
-    out[0, rows] = np.where(ok, v_f / gap, 0.0).max(1)
-    out[1, rows] = np.where(ok, closing / gap, 0.0).max(1)
-    out[2, rows] = np.where(ok, closing**2 / (2.0 * gap), 0.0).max(1)
+    return FollowingSteps(rows, ok, j_leads, gap, v_f, v_l, v_f / gap, closing / gap, closing**2 / (2.0 * gap))
+
+
+def _following(
+    a: AgentTracks, b: AgentTracks, I: np.ndarray, J: np.ndarray, pi: np.ndarray, pj: np.ndarray,
+    si: np.ndarray, sj: np.ndarray, dist: np.ndarray, mask: np.ndarray, index: RoadIndex,
+) -> np.ndarray:
+    """``[3, P]``: max over the steps of 1/THW, 1/TTC and DRAC (0 for pairs that never follow)."""
+    out = np.zeros((3, I.size))
+    st = _following_steps(a, b, I, J, pi, pj, si, sj, dist, mask, index)
+    if st.rows.size == 0:
+        return out
+    out[0, st.rows] = np.where(st.ok, st.inv_thw, 0.0).max(1)
+    out[1, st.rows] = np.where(st.ok, st.inv_ttc, 0.0).max(1)
+    out[2, st.rows] = np.where(st.ok, st.drac, 0.0).max(1)
     return out
 
 

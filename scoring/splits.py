@@ -92,7 +92,6 @@ def make_splits(
     group_sets = {name: {groups[k] for k in rows[name]} for name in SPLIT_NAMES}
     shared = shared_groups(group_sets)
     roles = {ids[k]: list(ranked_pairs[k]) for k in rows["hard"]} if hard_by == "pair" else {}
-    swapped = sum(1 for k in rows["hard"] if hard_by == "pair" and ranked_pairs[k][0] != scenarios[k].ego_id)
     params = {
         "method": "safeshift",
         "hard_by": hard_by,
@@ -116,7 +115,7 @@ def make_splits(
         **{name: len(splits[name]) for name in SPLIT_NAMES},
         "groups": params["groups"],
         "threshold": threshold,
-        "roles_exchanged": swapped,
+        "roles_exchanged": sum(1 for sid, (ego, _) in roles.items() if ego != scenarios[ids.index(sid)].ego_id),
         "mean_score": {name: float(np.mean(rank_score[rows[name]])) if rows[name] else float("nan")
                        for name in SPLIT_NAMES},
         "close_calls": {name: split_close_calls(members[name]) for name in SPLIT_NAMES},

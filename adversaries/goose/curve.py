@@ -5,11 +5,15 @@ Fit: the logged adversary path from the current step to the end of its (contiguo
 origin at the adversary's current position and +x along its current heading, gets a least-squares NURBS with
 unit weights (`seal.adversaries.goose.nurbs.fit_nurbs`). Control points 0 and 4 are pinned to the path's ends: point 0
 must stay at the adversary's current position (the episode starts there), and pinning point 4 makes the fitted
-curve end where the log ends, so the zero action reproduces the logged path and its length.
+curve end where the log ends, so the zero action reproduces the logged path and its length. Point 1 lies on the
++x axis: the curve leaves the current pose along the current heading (GOOSE's trajectories start from the
+vehicle's state; without this the replay turned from the logged heading to the fit's tangent within one 0.1 s
+step, a yaw-rate spike of ~1-3 rad/s that broke the goal's 0.7 rad/s bound in most roll-outs whatever the agent did).
 
 Edit (one GOOSE action, 12-d in [-1, 1]): control point ``i`` = 1..4 moves by ``a[2i-2], a[2i-1]`` x ``shift_m``
 x ``point_scale[i-1]`` (x, y) and its weight scales by ``weight_factor ** a[7 + i]``; totals stay within
-``max_offset_m`` x ``point_scale[i-1]`` of the fitted points and within the weight bounds. Point 0 never moves.
+``max_offset_m`` x ``point_scale[i-1]`` of the fitted points and within the weight bounds. Point 0 never moves;
+point 1 moves along the heading only (``a[1]`` has no effect), keeping the start tangent.
 
 Timing: the logged speed profile is kept and re-mapped to the new curve length ``L`` (logged length ``L0``,
 ratio ``r = L / L0``). With ``x = s0 / L0`` the logged share of the path covered at a step, the distance along
@@ -41,6 +45,9 @@ POS_SCALE_M = 50.0
 """Position scale of the observation features (m)."""
 MIN_PATH_M = 1.0
 """Logged paths shorter than this are treated as this long when computing the length ratio."""
+START_DIRECTION = np.array([1.0, 0.0])
+"""The adversary's heading in its initial frame: the curve leaves the current pose along it (tangent continuity;
+control point 1 stays on this ray, in the fit and in every edit)."""
 N_CURVE_FEATURES = 22
 """Length of `GooseCurve.features`."""
 
@@ -116,7 +123,8 @@ class GooseCurve:
         s_log = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))])
         v_log = np.hypot(rows[:, VX], rows[:, VY])
         # No logged future: a 1 m stub along the heading gives the curve a shape; nothing is replayed on it.
-        fitted = fit_nurbs(path if n_future > 0 else np.array([[0.0, 0.0], [MIN_PATH_M, 0.0]]))
+        fitted = fit_nurbs(path if n_future > 0 else np.array([[0.0, 0.0], [MIN_PATH_M, 0.0]]),
+                           start_direction=START_DIRECTION)
         fit_error = float(distance_to_curve(path, fitted).max())
         return cls(scenario.scenario_id, frame, track, n_future, s_log, v_log, fitted, fit_error,
                    fitted.ctrl.copy(), fitted.weights.copy())
@@ -136,6 +144,10 @@ class GooseCurve:
         lo = self.fitted.ctrl[1:] - spec.max_offset_m * scale
         hi = self.fitted.ctrl[1:] + spec.max_offset_m * scale
         ctrl[1:] = np.clip(ctrl[1:] + a[:8].reshape(4, 2) * spec.shift_m * scale, lo, hi)
+        # Point 1 slides along the start heading only (a[1] has no effect): a sideways move would turn the adversary
+        # within its first 0.1 s, a yaw-rate step no vehicle makes (and one the goal's bound then always fails).
+        ctrl[1, 1] = self.fitted.ctrl[1, 1]
+        ctrl[1, 0] = max(float(ctrl[1, 0]), 1e-3)
         weights = self.weights.copy()
         weights[1:] = np.clip(weights[1:] * spec.weight_factor ** a[8:], spec.weight_min, spec.weight_max)
         return replace(self, ctrl=ctrl, weights=weights)

@@ -192,8 +192,29 @@ def distance_to_curve(points: np.ndarray, curve: NurbsCurve) -> np.ndarray:
     return np.hypot(*(q - curve.points(closest_params(q, curve))).T)
 
 
+def _solve_interior(nb: np.ndarray, rhs: np.ndarray, start_direction: np.ndarray | None,
+                    start: np.ndarray) -> np.ndarray:
+    """Interior control points ``[n_ctrl - 2, 2]`` minimising ``|N[:, 1:-1] P_mid - rhs|``; with
+    ``start_direction`` (unit ``[2]``) control point 1 is ``start + t d`` with ``t >= 0`` the only free value of it."""
+    if start_direction is None:
+        mid, *_ = np.linalg.lstsq(nb[:, 1:-1], rhs, rcond=None)
+        return np.asarray(mid)
+    d = np.asarray(start_direction, dtype=np.float64)
+    rest = nb[:, 2:-1]
+    k, n = len(nb), rest.shape[1]
+    # Unknowns [t, x_2.., y_2..]; x rows then y rows of the stacked residual.
+    a = np.zeros((2 * k, 1 + 2 * n))
+    a[:k, 0], a[k:, 0] = nb[:, 1] * d[0], nb[:, 1] * d[1]
+    a[:k, 1 : 1 + n], a[k:, 1 + n :] = rest, rest
+    b = np.concatenate([rhs[:, 0] - nb[:, 1] * start[0], rhs[:, 1] - nb[:, 1] * start[1]])
+    sol, *_ = np.linalg.lstsq(a, b, rcond=None)
+    t = max(float(sol[0]), 1e-3)  # never behind the start (a reversing tangent)
+    return np.vstack([start + t * d, np.stack([sol[1 : 1 + n], sol[1 + n :]], axis=-1)])
+
+
 def fit_nurbs(
-    path: np.ndarray, n_ctrl: int = N_CTRL, degree: int = DEGREE, refine_iters: int = 3
+    path: np.ndarray, n_ctrl: int = N_CTRL, degree: int = DEGREE, refine_iters: int = 3,
+    start_direction: np.ndarray | None = None,
 ) -> NurbsCurve:
     """Least-squares NURBS (unit weights) through a polyline, end control points pinned to the path ends.
 
@@ -205,6 +226,9 @@ def fit_nurbs(
         path: ``[P, 2]`` points in driving order (m); at least 2.
         n_ctrl, degree: control point count and degree (GOOSE: 5, 3).
         refine_iters: parameter-correction rounds.
+        start_direction: unit ``[2]``: control point 1 is kept on the ray from the start along it, so the curve
+            leaves the start in that direction (``C'(0)`` is parallel to ``P1 - P0``): a vehicle's path starts
+            along its current heading.
     """
     q = np.asarray(path, dtype=np.float64)
     if q.ndim != 2 or q.shape[1] != 2 or len(q) < 2:
@@ -216,12 +240,16 @@ def fit_nurbs(
         # Too short / too few points to pin the interior: control points evenly along the chord (a straight
         # line through both ends, by the linear precision of B-splines at the Greville abscissae).
         greville = np.convolve(knots[1:-1], np.ones(degree) / degree, mode="valid")
-        return NurbsCurve(q[0] + greville[:, None] * (q[-1] - q[0]), np.ones(n_ctrl), degree)
+        ctrl = q[0] + greville[:, None] * (q[-1] - q[0])
+        if start_direction is not None:  # keep the start tangent even on a stub
+            d = np.asarray(start_direction, dtype=np.float64)
+            ctrl[1] = q[0] + max(float((ctrl[1] - q[0]) @ d), 1e-3) * d
+        return NurbsCurve(ctrl, np.ones(n_ctrl), degree)
     curve = None
     for _ in range(refine_iters + 1):
         nb = basis_functions(u, knots, degree)
         rhs = q - nb[:, [0, -1]] @ ends
-        mid, *_ = np.linalg.lstsq(nb[:, 1:-1], rhs, rcond=None)
+        mid = _solve_interior(nb, rhs, start_direction, q[0])
         curve = NurbsCurve(np.vstack([ends[:1], mid, ends[1:]]), np.ones(n_ctrl), degree)
         u = closest_params(q, curve, newton_iters=1)
         u[0], u[-1] = 0.0, 1.0

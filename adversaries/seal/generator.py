@@ -47,9 +47,10 @@ class Switch(StrEnum):
 SWITCH_MODES = tuple(m.value for m in Switch)
 
 
-def load_skill_policy(skills: str | Path | None, switch: str, noise_scale: float = 1.0) -> Any:
-    """The `seal.models.skills.policy.SkillPolicy` of folder ``skills`` with prior ``switch``; None for
-    ``switch="none"``."""
+def load_skill_policy(skills: str | Path | None, switch: str, noise_scale: float = 1.0,
+                      horizon: int | None = None) -> Any:
+    """The `seal.models.skills.policy.SkillPolicy` of folder ``skills`` with prior ``switch`` (a new skill every
+    ``horizon`` steps, default the VAE's window; noise std ``noise_scale``); None for ``switch="none"``."""
     if switch not in SWITCH_MODES:
         raise ValueError(f"seal: switch must be one of {', '.join(SWITCH_MODES)}, got {switch!r}")
     if switch == Switch.NONE:
@@ -61,7 +62,7 @@ def load_skill_policy(skills: str | Path | None, switch: str, noise_scale: float
         raise ValueError(f"seal: skills folder {skills} does not exist (train one with `seal fit skills`)")
     from seal.models.skills.policy import SkillPolicy
 
-    return SkillPolicy.load(skills, prior=switch, noise_scale=noise_scale)
+    return SkillPolicy.load(skills, prior=switch, noise_scale=noise_scale, horizon=horizon)
 
 
 @register("seal")
@@ -77,7 +78,9 @@ class SEALGenerator(CandidateGenerator):
         switch: ``"adversarial"`` (SEAL), ``"benign"`` or ``"none"`` (trajectory only).
         switch_offset_steps: steps between the switch and the predicted collision / closest approach (10 = 1 s).
         follow: ``"replay"`` or ``"track"``: how the candidate is followed before the switch.
-        noise_scale: standard deviation of the skill noise (1 = sample the prior).
+        noise_scale: standard deviation of the skill noise (1 = sample the prior; < 1 keeps to its likelier skills).
+        skill_horizon: steps per skill (a new skill is drawn every ``skill_horizon`` steps; None: the VAE's window,
+            10 = 1 s).
         policy: a ready skill policy (``reset(seed)`` / ``act(obs)``) instead of loading ``skills``.
         stride, decay, n_kept_modes: CAT's selection options (``objective="cat"`` only).
         steer, steer_vector, steer_alpha: latent steering of the prior's candidates (`CandidateGenerator`).
@@ -94,6 +97,7 @@ class SEALGenerator(CandidateGenerator):
         switch_offset_steps: int = SWITCH_OFFSET_STEPS,
         follow: str = Follow.REPLAY,
         noise_scale: float = 1.0,
+        skill_horizon: int | None = None,
         policy: Any = None,
         stride: int = STRIDE_STEPS,
         decay: float = DECAY,
@@ -107,11 +111,15 @@ class SEALGenerator(CandidateGenerator):
             raise ValueError(f"seal: switch must be one of {', '.join(SWITCH_MODES)}, got {switch!r}")
         if int(switch_offset_steps) < 0:
             raise ValueError(f"seal: switch_offset_steps must be >= 0, got {switch_offset_steps}")
+        if float(noise_scale) < 0:
+            raise ValueError(f"seal: noise_scale must be >= 0, got {noise_scale}")
+        if skill_horizon is not None and int(skill_horizon) < 1:
+            raise ValueError(f"seal: skill_horizon must be >= 1, got {skill_horizon}")
         self.objective = make_objective(objective, stride=stride, decay=decay, n_kept=n_kept_modes)
         self.switch = Switch(switch)
         self.switch_offset_steps = int(switch_offset_steps)
         self.policy = policy if policy is not None or switch == Switch.NONE else load_skill_policy(
-            skills, switch, noise_scale)
+            skills, switch, noise_scale, None if skill_horizon is None else int(skill_horizon))
         super().__init__(candidate_source, prior, candidates, follow, steer, steer_vector, steer_alpha)
 
     def _choose(self, context: CandidateContext, rng: np.random.Generator) -> Generation:

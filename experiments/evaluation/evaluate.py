@@ -196,20 +196,16 @@ def _base_row(ego: EgoSpec, setting: Setting, scenario_id: str, k: int) -> dict[
     }
 
 
-def evaluate_ego(
-    store: ResultsStore, ego: EgoSpec, settings: Sequence[Setting], config: Mapping[str, Any],
-    progress: bool = True,
-) -> dict[str, int]:
-    """Evaluate one ego on ``settings`` (module docstring), skipping scenarios already in ``store``; returns
-    the number of episode rows written per setting."""
-    from tqdm import tqdm
+WorkItem = tuple[str, "str | None", int, list[str]]
+"""One scenario of an ego's evaluation still to play: (dataset, split, index in the split, names of the settings
+missing for it). Settings sharing the (dataset, split) share the scenario's normal episode."""
 
+
+def plan_ego(store: ResultsStore, ego: EgoSpec, settings: Sequence[Setting], config: Mapping[str, Any]
+             ) -> list[WorkItem]:
+    """Record the ego and the settings in ``store`` and list the scenarios still to play (in split order), each
+    with the settings it is missing (scenarios already in the store are skipped)."""
     from seal.core.dataset import load_split
-    from seal.envs.scenario_env import ScenarioEnv
-    from seal.experiments.evaluation import protocol
-    from seal.experiments.evaluation.generator_metrics import LoggedAdversary
-    from seal.experiments.evaluation.metrics import episode_metrics
-    from seal.experiments.training.egos import make_ego
 
     k, seed = int(config["k"]), int(config["seed"])
     shared = {"prior": config.get("prior"), "candidates": config.get("candidates")}
@@ -218,54 +214,82 @@ def evaluate_ego(
         kwargs = dict(config["generators"].get(s.generator, {})) if s.generator else {}
         store.upsert_setting(s.dataset, s.name, s.kind, s.split, s.generator, {**_shared_for(s, shared), **kwargs},
                              k if s.generator else 0, seed)
-
-    # Settings sharing scenarios (normal + every generator setting on the same split) share the normal episode.
     groups: dict[tuple[str, str | None], list[Setting]] = {}
     for s in settings:
         groups.setdefault((s.dataset, s.split), []).append(s)
-    todo = []
+    todo: list[WorkItem] = []
     for (dataset, split), members in groups.items():
         scenarios = load_split(dataset, split, config.get("limit"))
         done = {s.name: store.done_scenarios(ego.run, s.dataset, s.name) for s in members}
         for i, sc in enumerate(scenarios):
-            missing = [s for s in members if sc.scenario_id not in done[s.name]]
+            missing = [s.name for s in members if sc.scenario_id not in done[s.name]]
             if missing:
-                todo.append(((dataset, split), scenarios, i, missing))
-    written = {s.name: 0 for s in settings}
-    total = sum(len(m) for *_, m in todo)
-    if not total:
-        return written
+                todo.append((dataset, split, i, missing))
+    return todo
 
-    policy = make_ego(ego.ego)
-    generators = {
-        s.generator: protocol.build_generator(s.generator, config["generators"].get(s.generator, {}), shared)
-        for s in settings if s.generator
-    }
-    envs: dict[tuple[str, str | None], Any] = {}  # one env per (dataset, split)
-    bar = tqdm(total=total, desc=f"eval {Path(ego.run).name}", unit="episode", disable=not progress)
-    for key, scenarios, i, missing in todo:
-        if key not in envs:
-            envs[key] = ScenarioEnv(list(scenarios), config=dict(config.get("env") or {}))
-        env, scenario = envs[key], scenarios[i]
+
+def play_items(
+    store: ResultsStore, ego: EgoSpec, settings: Sequence[Setting], config: Mapping[str, Any],
+    items: Sequence[WorkItem], on_scenario: Any = None,
+) -> dict[str, int]:
+    """Play the scenarios ``items`` (`plan_ego`) for ``ego`` and write one row per missing setting, one transaction
+    per scenario (an interrupted evaluation resumes there); returns the rows written per setting.
+    ``on_scenario(n_rows)`` is called after each scenario (progress).
+
+    The ego, the generators (one per ego and setting), the splits and the envs come from this process's session
+    cache (`seal.experiments.evaluation.worker_cache`), so the chunks of one ego that a worker plays reuse them."""
+    from seal.experiments.evaluation import protocol
+    from seal.experiments.evaluation.generator_metrics import LoggedAdversary
+    from seal.experiments.evaluation.metrics import episode_metrics
+    from seal.experiments.evaluation.worker_cache import cached_ego, cached_env, cached_generator, cached_split
+
+    k, seed = int(config["k"]), int(config["seed"])
+    by_name = {s.name: s for s in settings}
+    written = {s.name: 0 for s in settings}
+    if not items:
+        return written
+    policy = cached_ego(ego.ego)
+    for dataset, split, i, missing in items:
+        scenarios = cached_split(dataset, split, config.get("limit"))
+        env, scenario = cached_env(dataset, split, config), scenarios[i]
         logged = LoggedAdversary.of(scenario)
         normal = protocol.normal_episode(env, scenario, i, policy, seed)
         rows = []
-        for s in missing:
+        for name in missing:
+            s = by_name[name]
             row = _base_row(ego, s, scenario.scenario_id, k if s.generator else 0)
             if s.generator is None:
                 row.update(episode_metrics(scenario, normal, (), logged))
             else:
-                generator = generators[s.generator]
+                generator = cached_generator(ego.run, s.generator, config)
                 rollout, times = protocol.scored_pass(env, scenario, i, policy, generator, k, seed, normal)
                 row.update(episode_metrics(scenario, rollout, times, logged))
             rows.append(row)
-            written[s.name] += 1
-        store.upsert_episodes(rows)  # one transaction per scenario: an interrupted evaluation resumes here
-        bar.update(len(missing))
-    bar.close()
-    for env in envs.values():
-        env.close()
+            written[name] += 1
+        store.upsert_episodes(rows)
+        if on_scenario is not None:
+            on_scenario(len(rows))
     return written
+
+
+def evaluate_ego(
+    store: ResultsStore, ego: EgoSpec, settings: Sequence[Setting], config: Mapping[str, Any],
+    progress: bool = True,
+) -> dict[str, int]:
+    """Evaluate one ego on ``settings`` (module docstring) in this process, skipping scenarios already in
+    ``store``; returns the number of episode rows written per setting."""
+    import uuid
+
+    from tqdm import tqdm
+
+    from seal.experiments.evaluation.worker_cache import use_session
+
+    use_session(uuid.uuid4().hex)  # a fresh ego, generators and envs, as before the session caches
+    items = plan_ego(store, ego, settings, config)
+    total = sum(len(m) for *_, m in items)
+    with tqdm(total=total, desc=f"eval {Path(ego.run).name}", unit="episode", disable=not progress or not total
+              ) as bar:
+        return play_items(store, ego, settings, config, items, on_scenario=bar.update)
 
 
 def _shared_for(setting: Setting, shared: Mapping[str, Any]) -> dict[str, Any]:
@@ -302,42 +326,7 @@ def evaluate_job(job: Mapping[str, Any]) -> dict[str, Any]:
     return {"run": ego.run, "written": written}
 
 
-def evaluate_runs(
-    runs: Sequence[str], settings_spec: str | Sequence[str], store_path: str | Path, dataset: str | Path | None = None,
-    config: Mapping[str, Any] | None = None, replay_ego: bool = True, workers: int = 1, progress: bool = True,
-    backend: Any = None,
-) -> list[dict[str, Any]]:
-    """Evaluate every run (plus the Replay ego unless ``replay_ego`` is False) on the settings; returns one
-    ``{"run", "written"}`` per ego. ``workers`` > 1 evaluates egos in parallel processes (or pass a
-    `seal.experiments.backends` backend)."""
-    egos = [read_run(r) for r in runs]
-    if replay_ego and not any(e.run == "replay" for e in egos):
-        egos.append(read_run("replay"))
-    if not egos:
-        raise ValueError("nothing to evaluate: give run folders (or keep the Replay ego)")
-    dataset = dataset or default_dataset(egos)
-    settings = parse_settings(settings_spec, dataset)
-    config = dict(config) if config is not None else resolve_eval_config(run_configs=[e.config for e in egos])
-    for s in settings:
-        if s.generator:
-            _check_generator_config(s.generator, config)
-    jobs = [
-        {"store": str(store_path), "run": e.ego if e.path else e.run,
-         "settings": [vars(s) for s in settings], "config": config, "progress": progress and workers <= 1}
-        for e in egos
-    ]
-    if backend is None and workers <= 1:
-        return [evaluate_job(job) for job in jobs]
-    from seal.experiments.backends import LocalBackend
-
-    results = (backend or LocalBackend(workers)).map(evaluate_job, jobs, desc="egos")
-    failed = [r for r in results if not r.ok]
-    if failed:
-        raise RuntimeError("; ".join(f"{r.job['run']}: {r.error}" for r in failed))
-    return [r.value for r in results]
-
-
-def _check_generator_config(name: str, config: Mapping[str, Any]) -> None:
+def check_generator_config(name: str, config: Mapping[str, Any]) -> None:
     """Build the generator once up front, so a missing model file fails before any episode runs."""
     from seal.experiments.evaluation.protocol import build_generator
 

@@ -82,6 +82,17 @@ class ObjectiveFitConfig:
     """Processes simulating the labels."""
     chunk_size: int = 10
     """Scenarios per resumable label chunk."""
+    behavior: str = "replay"
+    """How the adversary drives each candidate in the label roll-outs: ``replay`` (CAT's way) or ``seal`` (follow
+    the candidate, then SEAL's skill switch; needs ``skills``), `seal.experiments.fitting.objective_labels`."""
+    skills: Path | None = None
+    """Skills folder (`seal fit skills`) of the ``seal`` label behaviour."""
+    egos: tuple[str, ...] = ("heuristic",)
+    """Egos of the label roll-outs: ``heuristic`` and / or `seal train` run folders; one label row per ego."""
+    switch_offset_steps: int = 10
+    """``seal`` behaviour: steps between the skill switch and the predicted contact (as the generator)."""
+    noise_scale: float = 1.0
+    """``seal`` behaviour: skill noise scale (as the generator)."""
     model: dict[str, Any] = overrides_field(ObjectiveConfig)
     """`seal.models.objective.ObjectiveConfig` overrides."""
     train: dict[str, Any] = overrides_field(ObjectiveTrainConfig)
@@ -96,9 +107,20 @@ class ObjectiveFitConfig:
         for key in ("limit", "eval_limit"):
             if getattr(self, key) is not None and int(getattr(self, key)) < 1:
                 raise ValueError(f"config key {key!r} must be >= 1 or null, got {getattr(self, key)}")
+        self.label_behavior()
+        if not self.egos:
+            raise ValueError("config key 'egos' is empty: give at least one ego (heuristic or a run folder)")
         if (self.prior is None) == (self.candidates is None):
             raise ValueError("give exactly one candidate source: --prior FILE (config key 'prior') or --candidates "
                              "NAME (config key 'candidates', e.g. lanes or constant_velocity)")
+
+    def label_behavior(self) -> Any:
+        """The `seal.experiments.fitting.objective_labels.LabelBehavior` of these settings."""
+        from seal.experiments.fitting.objective_labels import LabelBehavior
+
+        return LabelBehavior(kind=self.behavior, skills=None if self.skills is None else str(self.skills),
+                             switch_offset_steps=int(self.switch_offset_steps), noise_scale=float(self.noise_scale),
+                             seed=int(self.seed))
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (the prior path as a string), as recorded in ``config.yaml``."""
@@ -130,7 +152,7 @@ def labels_for_split(
     start = time.perf_counter()
     labels = build_labels(scenarios, folder, spec, n_candidates=config.n_candidates,
                           workers=config.workers, chunk_size=config.chunk_size, progress=progress,
-                          desc=f"labels {split}")
+                          desc=f"labels {split}", egos=config.egos, behavior=config.label_behavior())
     return labels, round(time.perf_counter() - start, 1)
 
 
@@ -144,6 +166,8 @@ def label_stats(labels: LabelSet) -> dict[str, Any]:
         "crash_share": round(float(labels.crashed.mean()), 4),
         "scenarios_with_a_crash": round(float(labels.crashed.any(axis=1).mean()), 4),
         "f_coll_mean": round(float(labels.f_coll.mean()), 4),
+        "f_coll_var": round(float(labels.f_coll.var()), 5),
+        "f_diff_var_all_prev": round(float(labels.f_diff.var()), 5),
         "f_diff_mean_all_prev": round(float(labels.f_diff.mean()), 4),
         "f_diff_mean_logged_prev": round(float(logged.mean()), 4),
         "share_f_diff_gt_0.5_logged_prev": round(float((logged > 0.5).mean()), 4),
@@ -338,6 +362,9 @@ def format_report(r: dict[str, Any]) -> str:
         f"{lab['f_diff_mean_logged_prev']:.3f} (logged previous roll-out) / {lab['f_diff_mean_all_prev']:.3f} (any).",
         "",
         "## MSE per head",
+        "",
+        f"Label variance (the MSE of predicting the mean): f_coll {lab.get('f_coll_var', float('nan')):.5f}, f_diff "
+        f"{lab.get('f_diff_var_all_prev', float('nan')):.5f} (all previous roll-outs).",
         "",
         "| previous roll-out | f_coll | f_diff | pairs |",
         "|---|---|---|---|",

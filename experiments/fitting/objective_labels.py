@@ -1,5 +1,12 @@
-"""Simulated labels for pi_score (thesis 6.3.1): every candidate adversary future rolled out against the reactive
-heuristic ego.
+"""Simulated labels for pi_score (thesis 6.3.1): every candidate adversary future rolled out against an ego.
+
+Two label behaviours (`LabelBehavior`, issue 16): ``replay`` (below: the adversary replays the candidate, as CAT
+does) and ``seal``: the adversary does what SEAL does with a chosen candidate (`seal.adversaries.seal.generator`):
+it follows the candidate and, ``switch_offset_steps`` before the contact predicted against the previous roll-out
+(the logged-adversary episode, `seal.adversaries.seal.contact.predict_contact`), hands over to the adversarial skill
+policy (`SkillSwitchBehavior`, noise seeded per scenario, ego and candidate). So the learned objective predicts the
+outcome of the behaviour it selects. Every ego in ``egos`` (the heuristic driver and `seal train` checkpoints) gives
+its own row of the `LabelSet` (the scenario id repeated), so the labels cover egos that brake, stop or weave.
 
 Per scenario: the candidate source (the trajectory prior pi_gen) gives N = 32 candidates for the adversary. The
 heuristic ego (`seal.experiments.training.egos.HeuristicEgo`) plays one episode against the logged adversary and one
@@ -28,7 +35,9 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import zlib
 from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -42,7 +51,7 @@ logger = logging.getLogger(__name__)
 
 N_CANDIDATES = 32
 """Candidates per scenario (pi_gen's mode count)."""
-LABEL_FORMAT = 1
+LABEL_FORMAT = 2
 """Bumped when the label definition changes (invalidates finished chunks)."""
 
 _SOURCE_CACHE: dict[str, Any] = {}
@@ -94,16 +103,90 @@ def hold_last(xy: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return np.take_along_axis(xy, src[..., None].repeat(2, axis=-1), axis=-2)
 
 
-def label_scenario(scenario: Scenario, source: Callable[[Scenario], Any], n_candidates: int = N_CANDIDATES,
-                   n_steps: int = N_FUTURE) -> LabelSet:
-    """Roll out the logged adversary and every candidate against the heuristic ego; a `LabelSet` of one row."""
+LABEL_BEHAVIORS = ("replay", "seal")
+"""How the adversary drives each candidate in the label roll-outs (module docstring)."""
+
+
+@dataclass(frozen=True)
+class LabelBehavior:
+    """The adversary behaviour and the ego of the label roll-outs.
+
+    Attributes:
+        kind: ``replay`` or ``seal`` (`LABEL_BEHAVIORS`).
+        skills: skills folder of the ``seal`` behaviour (`seal fit skills`).
+        switch_offset_steps: steps between the switch to the skill policy and the predicted contact.
+        noise_scale: skill noise scale of the ``seal`` behaviour.
+        seed: base seed of the skill noise.
+    """
+
+    kind: str = "replay"
+    skills: str | None = None
+    switch_offset_steps: int = 10
+    noise_scale: float = 1.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.kind not in LABEL_BEHAVIORS:
+            raise ValueError(f"objective labels: behavior must be one of {LABEL_BEHAVIORS}, got {self.kind!r}")
+        if self.kind == "seal" and not self.skills:
+            raise ValueError("objective labels: behavior 'seal' needs a skills folder (config key 'skills')")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+_POLICY_CACHE: dict[tuple[str, float], Any] = {}
+
+
+def _skill_policy(behavior: LabelBehavior) -> Any:
+    key = (str(behavior.skills), behavior.noise_scale)
+    if key not in _POLICY_CACHE:
+        from seal.adversaries.seal.generator import load_skill_policy
+
+        _POLICY_CACHE[key] = load_skill_policy(behavior.skills, "adversarial", behavior.noise_scale)
+    return _POLICY_CACHE[key]
+
+
+def _candidate_behaviors(scenario: Scenario, cands: Any, cand_xy: np.ndarray, logged: Any, behavior: LabelBehavior,
+                         ego_index: int) -> list[Any]:
+    """The adversary behaviour of every candidate: its replay, or SEAL's follow-then-switch (module docstring)."""
     from seal.adversaries.candidate_path import candidate_track
+    from seal.adversaries.seal.contact import predict_contact
+    from seal.envs.behaviors import ReplayBehavior
+    from seal.envs.skill_behavior import SkillSwitchBehavior, switch_step_for
+
+    adv = scenario.adv_index
+    tracks = [candidate_track(scenario, adv, xy) for xy in cand_xy]
+    if behavior.kind == "replay":
+        return [ReplayBehavior(t) for t in tracks]
+    policy = _skill_policy(behavior)
+    ego = logged.ego_track.astype(np.float64)
+    now = scenario.tracks[:, CURRENT_STEP]
+    out = []
+    for j, track in enumerate(tracks):
+        contact = predict_contact(
+            cand_xy[j], cands.heading[j, : cand_xy.shape[1]], (float(now[adv, LENGTH]), float(now[adv, WIDTH])),
+            ego[None, :, [X, Y]], ego[None, :, HEADING], ego[None, :, VALID] > 0.5,
+            (float(now[scenario.ego_index, LENGTH]), float(now[scenario.ego_index, WIDTH])))
+        seed = zlib.crc32(f"{scenario.scenario_id}/{ego_index}/{j}/{behavior.seed}".encode())
+        out.append(SkillSwitchBehavior(policy.clone(), track=track,
+                                       switch_step=switch_step_for(contact.step, behavior.switch_offset_steps),
+                                       seed=seed))
+    return out
+
+
+def label_scenario(scenario: Scenario, source: Callable[[Scenario], Any], n_candidates: int = N_CANDIDATES,
+                   n_steps: int = N_FUTURE, ego_spec: str = "heuristic", behavior: LabelBehavior | None = None,
+                   ego_index: int = 0) -> LabelSet:
+    """Roll out the logged adversary and every candidate (`LabelBehavior`) against the ego ``ego_spec``
+    (``heuristic`` or a `seal train` run folder); a `LabelSet` of one row."""
     from seal.adversaries.cat.select import cat_select
     from seal.envs.behaviors import ReplayBehavior
     from seal.envs.scenario_env import ScenarioEnv
     from seal.experiments.evaluation.episodes import run_episode
-    from seal.experiments.training.egos import HeuristicEgo
     from seal.scoring.criticality import f_coll, f_diff
+
+    behavior = behavior or LabelBehavior()
 
     adv = scenario.adv_index
     cands = source(scenario)
@@ -115,9 +198,10 @@ def label_scenario(scenario: Scenario, source: Callable[[Scenario], Any], n_cand
                          f"{cands.n_steps} steps; need {n_candidates} x {n_steps} (set n_candidates lower)")
     cand_xy = cands.xy[:n_candidates, :n_steps]
     env = ScenarioEnv(scenario)
-    ego = HeuristicEgo()
-    behaviors = [ReplayBehavior()] + [ReplayBehavior(candidate_track(scenario, adv, xy)) for xy in cand_xy]
-    rollouts = [run_episode(env, scenario, ego, b) for b in behaviors]
+    ego = _ego(ego_spec)
+    logged_rollout = run_episode(env, scenario, ego, ReplayBehavior())
+    behaviors = _candidate_behaviors(scenario, cands, cand_xy, logged_rollout, behavior, ego_index)
+    rollouts = [logged_rollout] + [run_episode(env, scenario, ego, b) for b in behaviors]
     env.close()
 
     m = n_candidates + 1
@@ -152,25 +236,53 @@ def label_scenario(scenario: Scenario, source: Callable[[Scenario], Any], n_cand
     )
 
 
-def _run_chunk(args: tuple[int, list[Scenario], str, int]) -> tuple[int, LabelSet]:
-    index, scenarios, spec, n_candidates = args
+_EGO_CACHE: dict[str, Any] = {}
+
+
+def _ego(spec: str) -> Any:
+    """The ego of ``spec`` (`seal.experiments.training.egos.make_ego`), loaded once per process."""
+    if spec not in _EGO_CACHE:
+        from seal.experiments.training.egos import make_ego
+
+        _EGO_CACHE[spec] = make_ego(spec)
+    return _EGO_CACHE[spec]
+
+
+def _run_chunk(args: tuple[int, list[Scenario], str, int, list[str], dict[str, Any]]) -> tuple[int, LabelSet]:
+    index, scenarios, spec, n_candidates, egos, behavior = args
     import torch
 
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # one thread per chunk worker; restored for a chunk run in the calling process
     try:
         source = _candidate_source(spec)
-        return index, LabelSet.concat([label_scenario(s, source, n_candidates) for s in scenarios])
+        b = LabelBehavior(**behavior)
+        return index, LabelSet.concat([label_scenario(s, source, n_candidates, ego_spec=e, behavior=b, ego_index=k)
+                                       for s in scenarios for k, e in enumerate(egos)])
     finally:
         torch.set_num_threads(threads)
 
 
-def _fingerprint(spec: str, ids: Sequence[str], chunk_size: int, n_candidates: int) -> str:
+def _content(path: str) -> str:
+    """sha256 of a file, or of every file of a folder (sorted by name), so a retrained model invalidates labels."""
+    p = Path(path)
+    h = hashlib.sha256()
+    for f in sorted(p.rglob("*.pt")) if p.is_dir() else [p]:
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+def _fingerprint(spec: str, ids: Sequence[str], chunk_size: int, n_candidates: int, egos: Sequence[str],
+                 behavior: LabelBehavior) -> str:
     source = spec
     if spec.startswith("prior:"):  # the prior's content, not just its path
-        source = hashlib.sha256(Path(spec[len("prior:"):]).read_bytes()).hexdigest()
+        source = _content(spec[len("prior:"):])
+    b = behavior.to_dict()
+    if behavior.skills:
+        b["skills"] = _content(behavior.skills)
     return fingerprint({"source": source, "ids": list(ids), "chunk": chunk_size, "n": n_candidates,
-                        "format": LABEL_FORMAT})
+                        "format": LABEL_FORMAT, "egos": list(egos), "behavior": b})
 
 
 def build_labels(
@@ -182,6 +294,8 @@ def build_labels(
     chunk_size: int = 10,
     progress: bool = True,
     desc: str = "objective labels",
+    egos: Sequence[str] = ("heuristic",),
+    behavior: LabelBehavior | None = None,
 ) -> LabelSet:
     """Label ``scenarios`` in ``workers`` processes into chunk files ``out/part_NNNNN.npz`` (resumable, see the
     module docstring) and return all of them as one `LabelSet`, in scenario order.
@@ -195,19 +309,26 @@ def build_labels(
         chunk_size: scenarios per chunk file.
         progress: show a tqdm bar.
         desc: the bar's label.
+        egos: ego specs; each scenario gives one row per ego (in this order).
+        behavior: the adversary behaviour of the candidates (default: replay).
 
     Resuming / restarting is reported through this module's logger.
     """
     if not scenarios:
         raise ValueError("build_labels: no scenarios")
     out = Path(out)
+    behavior = behavior or LabelBehavior()
+    egos = [str(e) for e in egos]
+    if not egos:
+        raise ValueError("objective labels: no egos (config key 'egos')")
     ids = [s.scenario_id for s in scenarios]
     path = run_chunked(
-        scenarios, out, _fingerprint(spec, ids, chunk_size, n_candidates),
-        {"n_candidates": n_candidates, "source": spec}, _run_chunk, (spec, n_candidates),
+        scenarios, out, _fingerprint(spec, ids, chunk_size, n_candidates, egos, behavior),
+        {"n_candidates": n_candidates, "source": spec, "egos": egos, "behavior": behavior.to_dict()}, _run_chunk,
+        (spec, n_candidates, egos, behavior.to_dict()),
         lambda labels, file: labels.save(file), workers, chunk_size, progress, desc,
     )
     merged = LabelSet.concat([LabelSet.load(p) for p in path])
-    if list(merged.scenario_ids) != ids:
+    if list(merged.scenario_ids) != [i for i in ids for _ in egos]:
         raise ValueError(f"{desc}: chunk files in {out} do not match the scenarios; delete the folder and re-run")
     return merged

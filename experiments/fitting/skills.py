@@ -1,23 +1,24 @@
 """``seal fit skills``: SEAL's skill models (thesis 6.3.2) from a dataset split.
 
-1. Demonstrations (`seal.models.skills.demonstrations`): every vehicle of every scenario driven by the noisy heuristic,
-   (own observation, action) recorded per step; built in parallel and resumable, reused when the file exists
-   with the same settings.
-2. Windows (`seal.models.skills.demos.label_windows`): 10-step windows, adversarial = ending within the last 20 steps
-   before that agent's collision, dropped = ending within 20 steps of an out-of-road end, the rest benign; a
-   share of the scenarios is held out for validation and the reported metrics.
+1. Demonstrations (`seal.experiments.fitting.skill_data`): per source one file, built in parallel and resumably,
+   reused when it exists with the same settings: the logged traffic's own drivers (``log``: clean driving, the
+   benign windows), the noisy heuristic drivers (``heuristic``) and, with ``ego_rollouts.egos``, an adversary
+   in closed loop against egos (heuristic and `seal train` checkpoints).
+2. Windows (`seal.models.skills.demos.WindowSpec`): H-step windows; adversarial = starting within 2H before a
+   collision or near miss (box gap < 0.5 m while closing) that the agent struck (`seal.models.skills.events`: the
+   vehicle whose own motion closes the gap, not the one hit from behind); benign = the other windows of the ``log``
+   source; the rest unused; a share of the scenarios is held out for validation and the reported metrics.
 3. The skill VAE on benign (capped at ``max_benign_windows``) and adversarial training windows.
-4. Two state-conditioned RealNVP priors on the VAE's posterior means: benign and adversarial windows. By default
-   (``adversarial_init: benign``) the adversarial prior starts from the trained benign prior and is fine-tuned on
-   the adversarial windows, early-stopped on their held-out NLL (epoch 0 included, so it is never worse than the
-   benign prior there): the adversarial windows are ~40x fewer, and from scratch their prior overfits (held-out
-   NLL ~1.5 nats worse than the benign prior's on the same windows in our runs). ``scratch`` trains it alone.
+4. Two state-conditioned RealNVP priors on the VAE's posterior means, each trained on its own windows (by default
+   the adversarial one from scratch, ``adversarial_init: scratch``; ``benign`` fine-tunes it from the benign
+   prior, early-stopped on the held-out adversarial NLL, epoch 0 included).
 5. Metrics on held-out windows (``metrics.json``): reconstruction error, prior NLL per class for both priors
-   (the cross terms too) against an unconditional Gaussian reference, and the skill-space plot
-   (``embedding.png``, thesis Fig. 6.2).
+   (the cross terms too, and the separation: how many nats each prior is better on its own class) against an
+   unconditional Gaussian reference, the jerk of decoded skill roll-outs is measured separately
+   (`seal.experiments.bench.skills`), and the skill-space plot (``embedding.png``, thesis Fig. 6.2).
 
 Outputs in ``--out``: ``vae.pt``, ``prior_benign.pt``, ``prior_adversarial.pt`` (`seal.models.skills.io`),
-``demos.npz`` (unless ``--demos`` puts it elsewhere), ``config.yaml`` (resolved), ``metrics.json``,
+``demos_<source>.npz`` (unless ``--demos`` puts them elsewhere), ``config.yaml`` (resolved), ``metrics.json``,
 ``embedding.png`` and per-model CSV logs. Each model stage is skipped when its file exists and was trained from
 the same data and settings (its recorded fingerprint), so an interrupted run resumes after its last finished
 stage.
@@ -39,8 +40,9 @@ from seal.core.atomic import atomic_write_bytes, atomic_write_json
 from seal.core.chunked import fingerprint
 from seal.core.config import load_config, overrides_field, to_dict
 from seal.experiments import presets
-from seal.models.skills.demonstrations import DemoConfig
-from seal.models.skills.demos import ADVERSARIAL, BENIGN, Demonstrations, WindowSpec, label_windows, split_by_scenario
+from seal.experiments.fitting.skill_data import EgoRolloutConfig, Rows, cap, get_demonstrations, window_rows
+from seal.models.skills.demonstrations import DEMO_SOURCES, DemoConfig
+from seal.models.skills.demos import Demonstrations, WindowSpec
 from seal.models.skills.realnvp import RealNVPConfig
 from seal.models.skills.train import SkillTrainConfig
 from seal.models.skills.vae import VAEConfig
@@ -66,8 +68,14 @@ class SkillsFitConfig:
     """Processes building the demonstrations."""
     chunk_size: int = 10
     """Scenarios per resumable demonstration chunk."""
+    sources: tuple[str, ...] = ("log", "heuristic")
+    """Simulated demonstration sources (`seal.models.skills.demonstrations.DEMO_SOURCES`): ``log`` (the logged
+    traffic's own drivers: the benign windows) and ``heuristic`` (noisy drivers: adversarial windows only)."""
     demos: dict[str, Any] = overrides_field(DemoConfig)
-    """`seal.models.skills.demonstrations.DemoConfig` overrides (the seed defaults to ``seed``)."""
+    """`seal.models.skills.demonstrations.DemoConfig` overrides (the seed defaults to ``seed``; ``source`` is set
+    per entry of ``sources``)."""
+    ego_rollouts: dict[str, Any] = overrides_field(EgoRolloutConfig)
+    """`seal.experiments.fitting.skill_data.EgoRolloutConfig` overrides: closed-loop roll-outs against egos."""
     windows: dict[str, Any] = overrides_field(WindowSpec)
     """`seal.models.skills.demos.WindowSpec` overrides."""
     val_fraction: float = 0.1
@@ -86,8 +94,9 @@ class SkillsFitConfig:
     prior_train: dict[str, Any] = overrides_field(
         SkillTrainConfig, batch_size=512, lr=1e-3, max_epochs=60, patience=6, max_minutes=1.5)
     """`SkillTrainConfig` of both priors (the seed defaults to ``seed``)."""
-    adversarial_init: Literal["benign", "scratch"] = "benign"
-    """``benign``: fine-tune the adversarial prior from the benign one; ``scratch``: train it alone."""
+    adversarial_init: Literal["benign", "scratch"] = "scratch"
+    """``scratch``: the adversarial prior is trained on its own data only; ``benign``: fine-tuned from the benign
+    prior (early-stopped; epoch 0 allowed, so it can stay the benign prior)."""
     plot_states: int = 300
     """Held-out states of the embedding plot."""
     plot_samples_per_state: int = 10
@@ -96,6 +105,10 @@ class SkillsFitConfig:
     def __post_init__(self) -> None:
         """Build every sub-config once, so a bad value fails here and names its section."""
         DemoConfig.from_dict(self.demos, "config key 'demos'")
+        EgoRolloutConfig.from_dict(self.ego_rollouts)
+        bad = [s for s in self.sources if s not in DEMO_SOURCES]
+        if bad:
+            raise ValueError(f"config key 'sources': unknown source(s) {bad}; choose from {DEMO_SOURCES}")
         WindowSpec(**self.windows)
         VAEConfig.from_dict(self.vae, "config key 'vae'")
         RealNVPConfig.from_dict(self.prior, "config key 'prior'")
@@ -120,63 +133,6 @@ def resolve_config(preset: str | None = "standard", config_file: str | Path | No
     sub-configs are checked by building each once."""
     return load_config(SkillsFitConfig, preset=None if preset is None else preset_file(preset), file=config_file,
                        values=values, overrides=sets)
-
-
-def get_demonstrations(dataset: str | Path, config: SkillsFitConfig, path: Path,
-                       progress: bool) -> tuple[Demonstrations, bool]:
-    """The demonstrations of the configured split and whether they were reused from ``path`` (same scenarios and
-    settings) rather than built (resumably) and written there."""
-    from seal.core.dataset import load_split
-    from seal.models.skills.demonstrations import build_demonstrations
-
-    split = config.split
-    scenarios = load_split(dataset, split, config.limit)
-    if len(scenarios) < 2:
-        raise ValueError(f"dataset {dataset}: split {split!r} has {len(scenarios)} scenario(s); need at least 2")
-    demo_cfg = DemoConfig.from_dict({"seed": config.seed, **config.demos}, "config key 'demos'")
-    ids = [s.scenario_id for s in scenarios]
-    if path.exists():
-        demos = Demonstrations.load(path)
-        if demos.params == demo_cfg.to_dict() and list(demos.scenario_ids) == ids:
-            logger.info(f"demonstrations: reusing {path} ({demos.n_segments} agents, {demos.n_rows} steps)")
-            return demos, True
-        logger.info(f"demonstrations: {path} was built from other scenarios or settings; rebuilding")
-    logger.info(f"demonstrations: simulating {len(scenarios)} scenarios of split {split!r} with {config.workers} "
-                "processes")
-    demos = build_demonstrations(scenarios, path, demo_cfg, workers=config.workers, chunk_size=config.chunk_size,
-                                 progress=progress)
-    return demos, False
-
-
-def _cap(rows: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
-    return rows if rows.size <= n else np.sort(rng.choice(rows, n, replace=False))
-
-
-Rows = dict[tuple[str, str], np.ndarray]
-"""Window start rows per (``train`` | ``val``, ``benign`` | ``adversarial``)."""
-
-_CLASSES = ((BENIGN, "benign"), (ADVERSARIAL, "adversarial"))
-
-
-def _window_rows(demos: Demonstrations, spec: WindowSpec, config: SkillsFitConfig) -> tuple[Rows, dict[str, int]]:
-    """Windows held out by scenario; per class capped for training (benign) and validation (both); the counts."""
-    seed = config.seed
-    rng = np.random.default_rng(seed)
-    windows = label_windows(demos.seg_row, demos.seg_len, demos.seg_end_reason, spec)
-    train_w, val_w = split_by_scenario(windows, demos.seg_scenario, len(demos.scenario_ids),
-                                       float(config.val_fraction), seed)
-    rows = {("train", name): train_w.row[train_w.label == label] for label, name in _CLASSES}
-    rows.update({("val", name): val_w.row[val_w.label == label] for label, name in _CLASSES})
-    rows["train", "benign"] = _cap(rows["train", "benign"], config.max_benign_windows, rng)
-    for name in ("benign", "adversarial"):
-        rows["val", name] = _cap(rows["val", name], config.max_val_windows, rng)
-    counts = {f"{split}_{name}": int(r.size) for (split, name), r in rows.items()}
-    logger.info("windows used: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
-    for key, n in counts.items():
-        if n == 0:
-            raise ValueError(f"no {key.replace('_', ' ')} windows: simulate more scenarios (--limit) or raise the "
-                             "demonstration noise (config key 'demos')")
-    return rows, counts
 
 
 def _fit_vae(demos: Demonstrations, rows: Rows, counts: dict[str, int], vae_cfg: VAEConfig, data_fp: str,
@@ -265,7 +221,7 @@ def _held_out_metrics(vae: Any, priors: dict[str, Any], demos: Demonstrations, r
         for cname in ("benign", "adversarial")
     }
     # The picture: both priors over the same held-out states (drawn from both classes).
-    state_rows = _cap(val_all, config.plot_states, np.random.default_rng(seed + 1))
+    state_rows = cap(val_all, config.plot_states, np.random.default_rng(seed + 1))
     states = obs[state_rows].astype(np.float32)
     samples = {name: prior_samples(p, states, config.plot_samples_per_state, seed + k)
                for k, (name, p) in enumerate(priors.items())}
@@ -276,6 +232,14 @@ def _held_out_metrics(vae: Any, priors: dict[str, Any], demos: Demonstrations, r
                            for k, r in recon.items()},
         "action_std_train": [round(float(v), 5) for v in vae.act_std.tolist()],
         "prior_nll_nats": nll,
+        # How much better each prior is on its own class (positive = better), by the mean and by the median NLL
+        # (a flow's NLL of latents far outside its training data can be huge, so a few windows can carry the mean).
+        "prior_separation_nats": {
+            f"{c}_windows{suffix}": round(nll[f"{other}_prior"][f"{c}_windows"][stat]
+                                          - nll[f"{c}_prior"][f"{c}_windows"][stat], 4)
+            for c, other in (("adversarial", "benign"), ("benign", "adversarial"))
+            for stat, suffix in (("mean", ""), ("median", "_median"))
+        },
         "embedding": embedding,
     }
 
@@ -287,18 +251,17 @@ def fit_skills(dataset: str | Path, out: str | Path, config: SkillsFitConfig, de
     The caller sets torch's threads (the CLI: ``config.threads``)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    demos_file = Path(demos_path) if demos_path is not None else out / "demos.npz"
+    demos_dir = Path(demos_path) if demos_path is not None else out
     atomic_write_bytes(out / "config.yaml", yaml.safe_dump(
-        {**to_dict(config), "dataset": str(dataset), "out": str(out), "demos_path": str(demos_file)},
+        {**to_dict(config), "dataset": str(dataset), "out": str(out), "demos_path": str(demos_dir)},
         sort_keys=True).encode())
     timings: dict[str, float] = {}
     reused: list[str] = []
 
     t = time.perf_counter()
-    demos, demos_reused = get_demonstrations(dataset, config, demos_file, progress)
+    demos, demos_reused = get_demonstrations(dataset, config, demos_dir, progress)
     timings["demonstrations_s"] = round(time.perf_counter() - t, 1)
-    if demos_reused:
-        reused.append("demonstrations")
+    reused += demos_reused
     spec = WindowSpec(**config.windows)
     vae_cfg = VAEConfig.from_dict({"obs_dim": demos.obs_dim, "horizon": spec.horizon, **config.vae})
     if vae_cfg.horizon != spec.horizon:
@@ -306,7 +269,7 @@ def fit_skills(dataset: str | Path, out: str | Path, config: SkillsFitConfig, de
     stats = demos.stats(spec)
     logger.info("demonstrations: " + ", ".join(f"{k} {v}" for k, v in stats.items() if not isinstance(v, dict))
                 + f", end reasons {stats['end_reasons']}")
-    rows, counts = _window_rows(demos, spec, config)
+    rows, counts = window_rows(demos, spec, config)
     data_fp = fingerprint((demos.params, list(demos.scenario_ids), spec.to_dict(), config.val_fraction,
                            config.max_benign_windows, config.seed))
 
@@ -331,7 +294,7 @@ def fit_skills(dataset: str | Path, out: str | Path, config: SkillsFitConfig, de
     held_out = _held_out_metrics(vae, priors, demos, rows, z, cond, config, out)
     timings["metrics_s"] = round(time.perf_counter() - t, 1)
     metrics = {
-        "dataset": str(dataset), "split": config.split, "out": str(out), "demos_path": str(demos_file),
+        "dataset": str(dataset), "split": config.split, "out": str(out), "demos_path": str(demos_dir),
         "demonstrations": stats, "windows_used": counts, "window_spec": spec.to_dict(),
         **held_out,
         "models": {"vae": vae_cfg.to_dict(), "prior": prior_cfg.to_dict()},
@@ -363,11 +326,11 @@ def format_summary(m: dict[str, Any]) -> str:
     d, r, nll = m["demonstrations"], m["reconstruction"], m["prior_nll_nats"]
     lines = [
         f"skills written to {m['out']} (demonstrations: {m['demos_path']})",
-        f"demonstrations: {d['scenarios']} scenarios, {d['agents']} agents, {d['agent_steps']} agent-steps; "
-        f"end reasons {d['end_reasons']}; collision share {d['collision_share_agents']:.3f} of agents "
-        f"({d['collision_share_scenarios']:.2f} of scenarios)",
-        f"windows: benign {d['windows_benign']}, adversarial {d['windows_adversarial']}, dropped "
-        f"{d['windows_dropped']}; used {m['windows_used']}",
+        f"demonstrations: {d['scenarios']} scenarios, {d['agents']} segments, {d['agent_steps']} agent-steps; "
+        f"segments per source {d['agents_per_source']}; end reasons {d['end_reasons']}; events {d['events']}",
+        f"windows: benign {d['windows_benign']}, adversarial {d['windows_adversarial']} (per source "
+        f"{d['windows_adversarial_per_source']}), dropped {d['windows_dropped']}, unused {d['windows_unused']}; "
+        f"used {m['windows_used']}",
         "held-out reconstruction (std-units MSE | shuffled-z MSE | RMSE steering, accel):",
     ]
     for k, v in r.items():
@@ -378,6 +341,11 @@ def format_summary(m: dict[str, Any]) -> str:
         cells = [f"{c['mean']:.3f}" + (f" ({c['median']:.3f})" if "median" in c else "")
                  for c in (v["benign_windows"], v["adversarial_windows"])]
         lines.append(f"  {k:>18}: {cells[0]} | {cells[1]}")
+    sep = m["prior_separation_nats"]
+    lines.append(f"separation (mean, median NLL): on adversarial windows the adversarial prior is "
+                 f"{sep['adversarial_windows']:+.3f}, {sep['adversarial_windows_median']:+.3f} nats better than the "
+                 f"benign prior; on benign windows the benign prior is {sep['benign_windows']:+.3f}, "
+                 f"{sep['benign_windows_median']:+.3f} nats better than the adversarial prior")
     e = m["embedding"]
     lines.append(f"embedding: PCA variance {e['explained_variance']}, prior mean distance "
                  f"{e.get('mean_distance_pooled_std')} pooled std; timings {m['timings']}")

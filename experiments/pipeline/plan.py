@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from seal.adversaries.base import NO_ADVERSARY, available_generators
+from seal.experiments.pipeline.references import fits_needed, generators_in_use, substitute
 from seal.experiments.pipeline.tasks import FIT_DEFAULTS, OPTIONS
 
 RUN_EVAL_KEYS = ("settings", "replay_ego")
@@ -28,8 +29,6 @@ def check_plan(
     train_config_fn: Callable[..., dict[str, Any]], fit_outputs: Mapping[str, str],
 ) -> None:
     """Raise ValueError naming the section and key of the first problem in ``config`` (a loaded preset)."""
-    from seal.experiments.pipeline.run import fits_needed, generators_in_use, substitute
-
     dataset = _check_data(config.get("data") or {}, out)
     _check_pipelines(config)
     models = {name: str(out / "models" / fit_outputs.get(name, name)) for name in fits_needed(config)}
@@ -109,7 +108,7 @@ def _check_split(o: Mapping[str, Any]) -> None:
 
 
 def _check_pipelines(config: Mapping[str, Any]) -> None:
-    known = [NO_ADVERSARY, *available_generators()]
+    known = [NO_ADVERSARY, *available_generators(), *(config.get("variants") or {})]
     for pipeline in config["pipelines"]:
         if pipeline not in known:
             raise ValueError(f"pipelines: unknown pipeline {pipeline!r}; known: {', '.join(known)}")
@@ -159,7 +158,8 @@ def _check_eval(ev: Mapping[str, Any], dataset: str) -> None:
     if not isinstance(ev.get("replay_ego", True), bool):
         raise ValueError(f"eval.replay_ego must be true or false, got {ev['replay_ego']!r}")
     try:
-        resolve_eval_config(**{k: ev.get(k) for k in ("k", "limit", "seed", "prior", "candidates", "env")})
+        resolve_eval_config(k=ev.get("k"), limit=ev.get("limit"), seed=ev.get("seed"), prior=ev.get("prior"),
+                            candidates=ev.get("candidates"), env=ev.get("env"))
         settings = ev.get("settings") or ["normal", "hard"]
         if not isinstance(settings, list | str):
             raise ValueError(f"settings must be a list, got {settings!r}")

@@ -29,7 +29,11 @@ The preset's sections (all but ``train`` belong to this module; ``train`` is pas
 * ``generators``: generator name -> constructor kwargs for training and evaluation; a value ``"${fit.prior}"``
   becomes the fitted model's path.
 * ``pipelines``: training pipelines (``noadv`` = no adversary; ``goose``, ``cat``, ``seal``, ... = that
-  generator); ``seeds``: list of seeds.
+  generator; or a name of ``variants``); ``seeds``: list of seeds.
+* ``variants``: pipeline name -> ``{generator: NAME, kwargs: {...}, train: {...}}``: a training pipeline that uses
+  generator NAME with its ``generators`` kwargs updated by ``kwargs``, and the ``train`` section updated by
+  ``train`` (nested keys, e.g. ``{curriculum: {warmup: 0.0}}``): the training-pipeline ablations of thesis
+  Fig. 6.5 (``experiments/configs/quick_ablations.yaml``).
 * ``eval``: ``settings`` (list, as ``seal eval runs --settings``), ``k``, ``limit``, ``seed``, ``prior``,
   ``candidates``, ``env``, ``replay_ego`` (default true).
 * ``report``: ``plots`` (default true), ``videos`` (per generator, default 0), ``video_format``.
@@ -42,7 +46,6 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import re
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
@@ -52,11 +55,18 @@ from typing import Any
 
 import yaml
 
-from seal.adversaries.base import NO_ADVERSARY
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
 from seal.core.config import apply_overrides, check_keys, safe_load_file
 from seal.experiments.backends import Backend, InlineBackend, Job, JobResult, LocalBackend, make_backend
 from seal.experiments.pipeline.plan import check_plan
+from seal.experiments.pipeline.references import (
+    dotted,
+    fits_needed,
+    generator_of,
+    generators_in_use,
+    substitute,
+    variant_of,
+)
 from seal.experiments.pipeline.tasks import run_task
 
 logger = logging.getLogger(__name__)
@@ -86,6 +96,8 @@ class RunPreset:
     """Backend options (name, workers, address)."""
     train: dict[str, Any] = field(default_factory=dict)
     """`seal.experiments.training.config.EgoTrainConfig` keys."""
+    variants: dict[str, Any] = field(default_factory=dict)
+    """Pipeline name -> ``{generator, kwargs, train}``: a variant of a generator's training pipeline."""
     preset: str = ""
     """The preset's name (default: the file name)."""
 
@@ -93,9 +105,6 @@ class RunPreset:
 SECTIONS = tuple(f.name for f in fields(RunPreset))
 FIT_OUTPUTS = {"prior": "prior.pt", "goose": "goose.zip", "skills": "skills", "objective": "objective"}
 """Model name -> file or folder written under OUT/models by the fit of that model."""
-REF = re.compile(r"^\$\{fit\.(\w+)\}(.*)$")
-"""``"${fit.NAME}"`` or ``"${fit.NAME}/file inside it"`` in generator kwargs: a fitted model's path."""
-
 
 # ---------------------------------------------------------------------------------------------- config
 def load_run_config(path: str | Path, sets: Sequence[str] = ()) -> dict[str, Any]:
@@ -115,67 +124,12 @@ def load_run_config(path: str | Path, sets: Sequence[str] = ()) -> dict[str, Any
     for key in ("data", "fit", "generators", "eval", "report", "backend", "train"):
         if config.get(key) is not None and not isinstance(config[key], dict):
             raise ValueError(f"{path}: '{key}' must be a mapping of options, got {config[key]!r}")
+    if not isinstance(config.get("variants") or {}, dict):
+        raise ValueError(f"{path}: 'variants' must be a mapping of pipeline name -> {{generator, kwargs, train}}")
+    for name in config.get("variants") or {}:
+        variant_of(config, name)  # a malformed variant fails here, before any step runs
     config.setdefault("preset", path.stem)
     return config
-
-
-def generator_of(pipeline: str) -> str | None:
-    """The adversary generator a training pipeline uses (None for ``noadv``)."""
-    return None if pipeline == NO_ADVERSARY else pipeline
-
-
-def generators_in_use(config: Mapping[str, Any]) -> list[str]:
-    """Generators of the training pipelines and of the eval settings, in order of first use."""
-    from seal.adversaries.base import available_generators
-
-    names = [generator_of(p) for p in config["pipelines"]]
-    names += [s for s in (config.get("eval") or {}).get("settings", []) if s in available_generators()]
-    return [n for n in dict.fromkeys(names) if n]
-
-
-def _refs(value: Any) -> list[str]:
-    """Names of the fitted models referenced (``"${fit.NAME}"``) anywhere in ``value``."""
-    if isinstance(value, dict):
-        return [r for v in value.values() for r in _refs(v)]
-    if isinstance(value, list):
-        return [r for v in value for r in _refs(v)]
-    m = REF.match(value) if isinstance(value, str) else None
-    return [m.group(1)] if m else []
-
-
-def fits_needed(config: Mapping[str, Any]) -> list[str]:
-    """Models referenced (``"${fit.NAME}"``) by the kwargs of the generators in use, plus the models those fits'
-    options reference in turn (e.g. ``objective: {prior: "${fit.prior}"}``); ordered so that every model comes
-    after the ones its fit uses."""
-    gens, fit = config.get("generators") or {}, config.get("fit") or {}
-    wanted = [r for name in generators_in_use(config) for r in _refs(gens.get(name) or {})]
-    order: list[str] = []
-
-    def visit(name: str, chain: tuple[str, ...]) -> None:
-        if name in order:
-            return
-        if name in chain:
-            raise ValueError(f"fit: circular references {' -> '.join((*chain, name))}")
-        if name not in fit:
-            raise ValueError(f"the preset references ${{fit.{name}}} but has no fit.{name} entry")
-        spec = fit[name] or {}
-        for dep in ([] if spec.get("path") else _refs(spec)):
-            visit(dep, (*chain, name))
-        order.append(name)
-
-    for name in dict.fromkeys(wanted):
-        visit(name, ())
-    return order
-
-
-def substitute(value: Any, models: Mapping[str, str]) -> Any:
-    """Replace ``"${fit.NAME}"`` strings (at any depth) by the fitted model paths."""
-    if isinstance(value, dict):
-        return {k: substitute(v, models) for k, v in value.items()}
-    if isinstance(value, list):
-        return [substitute(v, models) for v in value]
-    m = REF.match(value) if isinstance(value, str) else None
-    return models[m.group(1)] + m.group(2) if m else value
 
 
 # ---------------------------------------------------------------------------------------------- steps
@@ -239,10 +193,14 @@ def train_config(config: Mapping[str, Any], preset_path: Path, pipeline: str, se
     ``generators`` kwargs, fitted model paths filled in, replace the train section's ``pipelines.<pipeline>``)."""
     from seal.experiments.training.train import load_train_config
 
-    gen = generator_of(pipeline)
-    overrides = {"pipeline": pipeline, "seed": int(seed), "dataset": dataset}
+    gen = generator_of(pipeline, config)
+    variant = variant_of(config, pipeline)
+    # The run config's train section (the preset's, with any --set train.* applied), then the variant's.
+    overrides: dict[str, Any] = {**dotted("", config.get("train") or {}), **dotted("", variant.get("train") or {}),
+                                 "pipeline": pipeline, "seed": int(seed), "dataset": dataset}
     if gen:
-        overrides[f"pipelines.{pipeline}"] = {"name": gen, "kwargs": dict(generators.get(gen) or {})}
+        kwargs = {**dict(generators.get(gen) or {}), **dict(variant.get("kwargs") or {})}
+        overrides[f"pipelines.{pipeline}"] = {"name": gen, "kwargs": kwargs}
     return load_train_config(preset_path, overrides)
 
 
@@ -284,16 +242,17 @@ def run_pipeline(
     config_path: str | Path, out: str | Path, backend: Backend | None = None, workers: int | None = None,
     task_fn: Callable[[Job], Any] = run_task, train_fn: Callable[[Job], Any] = train_job,
     eval_fn: Callable[[Job], Any] | None = None, train_config_fn: Callable[..., dict[str, Any]] = train_config,
-    step_backend: Backend | None = None, progress: bool = True,
+    step_backend: Backend | None = None, progress: bool = True, sets: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Run the experiment of ``config_path`` into ``out`` (module docstring). ``task_fn`` runs the data / fit steps
     (on ``step_backend``, default: one fresh worker process per step, in this process with an inline
     ``backend``), ``train_fn`` / ``eval_fn`` are the per-job functions and ``train_config_fn`` builds a run's
-    trainer config (injectable for tests). Returns a summary; raises after the report if any job failed."""
+    trainer config (injectable for tests); ``sets`` are ``--set`` overrides of the preset (`load_run_config`).
+    Returns a summary; raises after the report if any job failed."""
     from seal.experiments.evaluation.evaluate import evaluate_job
 
     config_path, out = Path(config_path).resolve(), Path(out).resolve()
-    config = load_run_config(config_path)
+    config = load_run_config(config_path, sets)
     check_plan(config, config_path, out, train_config_fn, FIT_OUTPUTS)  # every step's config, before any file
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(out / "config.yaml", yaml.safe_dump(config, sort_keys=False).encode())

@@ -34,7 +34,7 @@ OPTIONS: dict[str, tuple[str, ...]] = {
               "seed", "no_progress"),
     "skills": ("preset", "config", "split", "limit", "demos", "workers", "seed", "no_progress"),
     "objective": ("preset", "config", "prior", "candidates", "eval_split", "eval_limit", "workers", "seed", "split",
-                  "limit", "no_progress"),
+                  "limit", "skills", "behavior", "egos", "no_progress"),
 }
 """Known options per task / fitted model (the options of the matching ``seal`` command)."""
 
@@ -174,6 +174,7 @@ def fit_objective(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
         preset=o.get("preset", "standard"), config_file=o.get("config"), prior=o.get("prior"),
         candidates=o.get("candidates"), eval_split=o.get("eval_split"), eval_limit=o.get("eval_limit"),
         workers=o.get("workers"), seed=o.get("seed"), split=o.get("split"), limit=o.get("limit"),
+        skills=o.get("skills"), behavior=o.get("behavior"), egos=o.get("egos"),
     )
     _torch_threads(config.threads)
     return fit_objective(dataset, out, config, progress=not o.get("no_progress", False))

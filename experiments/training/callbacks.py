@@ -115,10 +115,12 @@ def evaluate_policy_on(model: Any, env: Any, scenarios: Sequence[Scenario]) -> l
     rows = []
     for i, scenario in enumerate(scenarios):
         obs, _ = env.reset(seed=i, options={"scenario_id": scenario.scenario_id})
-        done = False
+        done, start = False, True
         info: dict[str, Any] = {}
         while not done:
-            action, _ = model.predict(obs, deterministic=True)
+            # episode_start: a stateful policy (the ReSkill ego's skill schedule) restarts with the episode.
+            action, _ = model.predict(obs, episode_start=np.array([start]), deterministic=True)
+            start = False
             obs, _, terminated, truncated, info = env.step(action)
             done = terminated or truncated
         r = info["rollout"]
@@ -142,9 +144,12 @@ class EvalCallback(BaseCallback):
     """Every ``every`` env steps and at the end of training: `evaluate_policy_on` the eval scenarios; appends a
     row to ``eval/evaluations.csv``, writes ``eval/step_<N>.json`` and logs ``eval/*``."""
 
-    def __init__(self, every: int, folder: Path, make_env: Callable[[], Any], scenarios: Sequence[Scenario]) -> None:
+    def __init__(self, every: int, folder: Path, make_env: Callable[[], Any], scenarios: Sequence[Scenario],
+                 make_policy: Callable[[Any], Any] | None = None) -> None:
         super().__init__()
         self.every, self.folder, self.make_env, self.scenarios = int(every), Path(folder), make_env, list(scenarios)
+        self.make_policy = make_policy
+        """The model -> what plays the evaluation (None: the model itself; ReSkill: its two-level policy)."""
         self.env: Any = None
         self.next_step = 0
         self.last_step = -1
@@ -163,7 +168,8 @@ class EvalCallback(BaseCallback):
         if self.env is None:
             self.env = self.make_env()
         start = time.perf_counter()
-        rows = evaluate_policy_on(self.model, self.env, self.scenarios)
+        policy = self.make_policy(self.model) if self.make_policy is not None else self.model
+        rows = evaluate_policy_on(policy, self.env, self.scenarios)
         summary = {"step": int(self.num_timesteps), "episodes": len(rows), **summarize_eval(rows),
                    "eval_s": round(time.perf_counter() - start, 2)}
         atomic_write_json(self.folder / f"step_{self.num_timesteps}.json", {"summary": summary, "episodes": rows})

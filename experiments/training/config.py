@@ -19,7 +19,7 @@ from typing import Any
 from seal.adversaries.base import GENERATORS, NO_ADVERSARY, model_file_options, pipeline_names
 from seal.core.config import ConfigError, coerce, load_config, read_yaml, to_dict
 
-ALGOS = ("td3", "sac", "ppo")
+ALGOS = ("td3", "sac", "ppo", "reskill")
 PIPELINES = pipeline_names()
 """``noadv`` and every generator the registry marks as a training pipeline (`seal.adversaries.base.GENERATORS`)."""
 
@@ -122,6 +122,57 @@ class PPOHyperparams:
     """Hidden layer widths of policy and value networks."""
 
 
+def _high_level_td3() -> TD3Hyperparams:
+    # One transition per skill (H = 10 env steps): gamma 0.9 ~ 0.99^10 keeps the low-level TD3's horizon in
+    # seconds; one gradient step per decision (train_freq 1 vec-step of 2 decisions, 2 steps); learning_starts in
+    # env steps, as for every algorithm; wider exploration noise in the prior's noise space.
+    return TD3Hyperparams(gamma=0.9, learning_starts=5_000, buffer_size=100_000, train_freq=1, gradient_steps=2,
+                          action_noise_std=0.2)
+
+
+def _residual_td3() -> TD3Hyperparams:
+    # learning_starts counts residual transitions (collected once the gate opens); train_freq / gradient_steps:
+    # one gradient step per 4 residual transitions, the low-level TD3 preset's ratio. Exploration noise is added
+    # in the env workers (``residual_noise_std``), not by SB3.
+    return TD3Hyperparams(learning_starts=2_000, buffer_size=100_000, train_freq=4, gradient_steps=1,
+                          action_noise_std=0.0)
+
+
+@dataclass(frozen=True)
+class ReSkillHyperparams:
+    """The ReSkill ego (``algo: reskill``; `seal.experiments.training.reskill`): a high-level TD3 agent whose action
+    is the benign prior's noise, one decision per skill horizon, and a residual TD3 agent adding a bounded
+    correction to each decoded action, both trained on the env reward."""
+
+    skills: Path | None = None
+    """Skills folder (``seal fit skills``: ``vae.pt``, ``prior_benign.pt``) the ego draws its skills from."""
+    noise_bound: float = 1.0
+    """Prior noise per unit of high-level action (actions in [-1, 1] reach +-1 standard deviation of the prior's
+    base Gaussian). 1 rather than 2: TD3's tanh actor sits at the box edges early on, and +-2 sigma skills are the
+    prior's rare ones (standard preset, noadv, seed 0: 0.64 / 0.52 / 0.54 Normal-eval success at 10k / 20k / 30k
+    env steps with 1.0 against 0.41 / 0.43 / 0.46 with 2.0)."""
+    residual_bound: float = 0.2
+    """Largest residual per action dimension (normalised action units) once the gate is fully open."""
+    residual_start: int = 30_000
+    """Env steps before the residual gate opens (the high-level agent first learns to use the skills alone)."""
+    residual_ramp: int = 20_000
+    """Env steps over which the gate rises linearly from 0 to 1 (0: at once)."""
+    residual_noise_std: float = 0.1
+    """Gaussian exploration noise on the residual action (in its [-1, 1] units), added in the env workers."""
+    residual_sync_every: int = 200
+    """Env steps between copies of the residual actor's weights to the env workers."""
+    high: TD3Hyperparams = field(default_factory=_high_level_td3)
+    """High-level TD3 (transitions are skills; ``learning_starts`` in env steps)."""
+    residual: TD3Hyperparams = field(default_factory=_residual_td3)
+    """Residual TD3 (``train_freq``: residual transitions per ``gradient_steps`` gradient steps)."""
+
+    def __post_init__(self) -> None:
+        _check_ranges(self, {
+            "noise_bound": _POSITIVE, "residual_bound": _NON_NEGATIVE, "residual_start": _NON_NEGATIVE,
+            "residual_ramp": _NON_NEGATIVE, "residual_noise_std": _NON_NEGATIVE, "residual_sync_every": _AT_LEAST_1,
+        })
+
+
 @dataclass(frozen=True)
 class Hyperparams:
     """Settings of each algorithm (the run uses ``algo``'s)."""
@@ -132,16 +183,20 @@ class Hyperparams:
     """SAC settings."""
     ppo: PPOHyperparams = field(default_factory=PPOHyperparams)
     """PPO settings."""
+    reskill: ReSkillHyperparams = field(default_factory=ReSkillHyperparams)
+    """ReSkill ego settings."""
 
 
 @dataclass(frozen=True)
 class Curriculum:
-    """CAT's perturbation probability p(t) = min(slope t / T, cap)."""
+    """CAT's perturbation probability p(t) = min(slope (t / T - warmup), cap), 0 before warmup T."""
 
     slope: float = 1.8
     """Growth of p over the run (per fraction of total_timesteps)."""
     cap: float = 0.9
     """Largest p."""
+    warmup: float = 0.0
+    """Share of the run with p = 0 before the ramp starts (SEAL's non-reactive start), in [0, 1)."""
 
 
 @dataclass(frozen=True)
@@ -168,7 +223,7 @@ class EgoTrainConfig:
     """The ``train:`` section of a preset: everything ``seal train`` needs besides the run folder."""
 
     algo: str = "td3"
-    """SB3 algorithm: td3 | sac | ppo."""
+    """Ego algorithm: td3 | sac | ppo (SB3) | reskill (skill prior + residual, both TD3)."""
     pipeline: str = "cat"
     """Adversary pipeline: one of ``pipelines`` (noadv | goose | cat | seal)."""
     seed: int = 0
@@ -201,6 +256,9 @@ class EgoTrainConfig:
     """Env steps between checkpoints (model, replay buffer, queues, rng)."""
     torch_threads: int = 1
     """Torch threads of the learner."""
+    overlap_updates: bool = True
+    """Off-policy: run each training call's gradient updates while the env workers step the next transitions
+    (`seal.experiments.training.overlap`; same number of updates, sampled one vec-step earlier)."""
     device: str = "cpu"
     """Torch device of the learner."""
     hyperparams: Hyperparams = field(default_factory=Hyperparams)
@@ -218,6 +276,8 @@ class EgoTrainConfig:
 
 
 RESOLVED_ONLY = ("generator", "preset", "hyperparams")
+ADDED_LATER: dict[str, Any] = {"overlap_updates": False}
+"""Fields a run folder recorded before they existed may lack, with the value that reproduces those runs."""
 
 PRESETS = ("quick", "standard", "paper")
 DEFAULT_PRESET = "standard"
@@ -313,6 +373,7 @@ def check_resolved(config: Mapping[str, Any], source: str) -> dict[str, Any]:
     """A run folder's recorded config (``source`` names the file), checked for the keys a run needs."""
     if not isinstance(config, Mapping):
         raise ConfigError(f"{source}: expected a mapping")
+    config = {**ADDED_LATER, **config}  # runs recorded before a field existed resume with its old behaviour
     need = {f for f in EgoTrainConfig.__dataclass_fields__ if f != "pipelines"} | set(RESOLVED_ONLY)
     missing = sorted(need - set(config))
     if missing:

@@ -80,8 +80,24 @@ class PolicyEgo:
         return np.asarray(action, dtype=np.float64).reshape(-1)
 
 
+class ReSkillEgo:
+    """A trained ReSkill ego (`seal.experiments.training.reskill_policy.ReSkillPolicy`): a skill from the
+    high-level agent every H steps, decoded each step and corrected by the residual agent."""
+
+    def __init__(self, policy: Any, name: str) -> None:
+        self.policy = policy
+        self.name = name
+
+    def reset(self, scenario: Scenario) -> None:
+        self.policy.reset()
+
+    def act(self, observation: np.ndarray, step: int) -> np.ndarray:
+        return np.asarray(self.policy.act(observation), dtype=np.float64)
+
+
 def make_ego(spec: str) -> Ego:
-    """``"heuristic"``, ``"replay"`` or the path of a trained run (a folder or its model ``.zip``)."""
+    """``"heuristic"``, ``"replay"`` or the path of a trained run (a folder or its model ``.zip``; a ReSkill run
+    folder gives a `ReSkillEgo`)."""
     if spec == "heuristic":
         return HeuristicEgo()
     if spec == "replay":
@@ -91,7 +107,31 @@ def make_ego(spec: str) -> Ego:
         raise FileNotFoundError(
             f"--ego {spec!r}: not 'heuristic', 'replay' or an existing run folder / SB3 model .zip"
         )
+    if _find_algo(_find_model(path)) == "RESKILL":
+        return ReSkillEgo(load_reskill(path), name=str(path))
     return PolicyEgo(load_sb3_model(path), name=str(path))
+
+
+def load_reskill(path: Path) -> Any:
+    """The `ReSkillPolicy` of a finished ``seal train --algo reskill`` run folder (or its final model file)."""
+    from seal.experiments.training.reskill import FINAL_RESIDUAL, load_reskill_policy, load_skills, residual_spaces
+
+    model_path = _find_model(Path(path))
+    run = model_path.parent
+    config = yaml.safe_load((run / "config.yaml").read_text()) or {}
+    residual_path = run / FINAL_RESIDUAL
+    if not residual_path.is_file():
+        raise FileNotFoundError(f"ReSkill run {run}: no {FINAL_RESIDUAL} (is the run finished?)")
+    skills = load_skills(config["hyperparams"])
+    from gymnasium import spaces
+
+    high = load_sb3_model(model_path, algo_name="TD3",
+                          action_space=spaces.Box(-1.0, 1.0, (skills.latent_dim,), np.float32))
+    res_obs, res_act = residual_spaces(skills)
+    residual = load_sb3_model(residual_path, algo_name="TD3", observation_space=res_obs, action_space=res_act)
+    done = run / "done.json"
+    steps = json.loads(done.read_text())["steps"] if done.is_file() else int(config["total_timesteps"])
+    return load_reskill_policy(run, config, high, residual, int(steps))
 
 
 def _find_model(path: Path) -> Path:
@@ -119,27 +159,31 @@ def _find_algo(model: Path) -> str:
     )
 
 
-def load_sb3_model(path: Path) -> Any:
+def load_sb3_model(path: Path, algo_name: str | None = None, observation_space: Any = None,
+                   action_space: Any = None) -> Any:
     """Load an SB3 model for inference without unpickling anything: every cloudpickled entry of the model's
     ``data`` is replaced by a known-safe object (the env's spaces, the algorithm's ``MlpPolicy``, SB3's buffer
     classes, constant schedules; an unknown pickled entry is an error); parameters are read by SB3 with
-    ``torch.load(weights_only=True)``."""
+    ``torch.load(weights_only=True)``. ``algo_name`` (default: the run config's) and the spaces (default: the
+    ego's observation and ``[steering, acceleration]``) are for models of other shapes (the ReSkill agents)."""
     import stable_baselines3 as sb3
     from gymnasium import spaces
     from stable_baselines3.common.buffers import ReplayBuffer, RolloutBuffer
 
-    from seal.envs.observation import observation_space
+    from seal.envs.observation import observation_space as default_observation_space
 
+    obs_space = observation_space
     model_path = _find_model(Path(path))
-    algo_name = _find_algo(model_path)
+    algo_name = algo_name or _find_algo(model_path)
     algo = getattr(sb3, algo_name, None)
     if algo is None:
         raise ValueError(f"{model_path}: unknown SB3 algorithm {algo_name!r} in its config")
     with zipfile.ZipFile(model_path) as zf:
         data = json.loads(zf.read("data"))
     safe: dict[str, Any] = {
-        "observation_space": observation_space(),
-        "action_space": spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32),
+        "observation_space": obs_space if obs_space is not None else default_observation_space(),
+        "action_space": action_space if action_space is not None else spaces.Box(-1.0, 1.0, shape=(2,),
+                                                                                  dtype=np.float32),
         "policy_class": algo.policy_aliases["MlpPolicy"],
         "rollout_buffer_class": RolloutBuffer,
         "replay_buffer_class": ReplayBuffer,

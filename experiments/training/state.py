@@ -147,9 +147,12 @@ def set_rng_state(model: Any, json_part: dict[str, Any], arrays: dict[str, np.nd
     model.action_space.np_random.bit_generator.state = json_part["action_space"]
 
 
-def write_checkpoint(out: Path, model: Any, worker_states: list[dict[str, np.ndarray]], extra: dict[str, Any]) -> Path:
+def write_checkpoint(out: Path, model: Any, worker_states: list[dict[str, np.ndarray]], extra: dict[str, Any],
+                     extra_models: Mapping[str, Any] | None = None) -> Path:
     """Write checkpoint ``step_<num_timesteps>`` (module docstring), point ``latest.json`` at it and drop all but
-    the last `KEEP_CHECKPOINTS` (replay buffers only in the newest). Returns its folder."""
+    the last `KEEP_CHECKPOINTS` (replay buffers only in the newest). ``extra_models`` (name -> SB3 model: the
+    ReSkill ego's residual agent) are saved beside it as ``<name>.zip`` and ``<name>_replay_buffer.npz``, their
+    update counters in ``state.json["models"]``. Returns its folder."""
     step = int(model.num_timesteps)
     root = Path(out) / CHECKPOINTS
     root.mkdir(parents=True, exist_ok=True)
@@ -161,6 +164,11 @@ def write_checkpoint(out: Path, model: Any, worker_states: list[dict[str, np.nda
     model.save(tmp / "model.zip", exclude=SAVE_EXCLUDE)
     if getattr(model, "replay_buffer", None) is not None:
         save_replay_buffer(model.replay_buffer, tmp / "replay_buffer.npz")
+    models: dict[str, Any] = {}
+    for name, other in (extra_models or {}).items():
+        other.save(tmp / f"{name}.zip", exclude=SAVE_EXCLUDE)
+        save_replay_buffer(other.replay_buffer, tmp / f"{name}_replay_buffer.npz")
+        models[name] = {"n_updates": int(getattr(other, "_n_updates", 0))}
     for i, worker in enumerate(worker_states):
         _write_npz(tmp / f"worker_{i}.npz", worker, compressed=True)
     rng_json, rng_arrays = rng_state(model)
@@ -168,7 +176,7 @@ def write_checkpoint(out: Path, model: Any, worker_states: list[dict[str, np.nda
     state = {
         "step": step, "n_updates": int(getattr(model, "_n_updates", 0)),
         "episode_num": int(getattr(model, "_episode_num", 0)), "n_workers": len(worker_states),
-        "rng": rng_json, **extra,
+        "rng": rng_json, **({"models": models} if models else {}), **extra,
     }
     atomic_write_json(tmp / "state.json", state)
     shutil.rmtree(final, ignore_errors=True)
@@ -178,7 +186,8 @@ def write_checkpoint(out: Path, model: Any, worker_states: list[dict[str, np.nda
     for old in kept[:-KEEP_CHECKPOINTS]:
         shutil.rmtree(old, ignore_errors=True)
     for old in kept[-KEEP_CHECKPOINTS:-1]:
-        (old / "replay_buffer.npz").unlink(missing_ok=True)
+        for buffer in old.glob("*replay_buffer.npz"):
+            buffer.unlink(missing_ok=True)
     return final
 
 
@@ -208,6 +217,13 @@ def read_checkpoint_state(folder: Path) -> tuple[dict[str, Any], dict[str, np.nd
         with np.load(path, allow_pickle=False) as z:
             workers.append({k: z[k] for k in z.files})
     return state, rng_arrays, workers
+
+
+def load_extra_model(model: Any, checkpoint: Path, name: str, state: Mapping[str, Any]) -> None:
+    """Restore an ``extra_models`` entry of `write_checkpoint` (parameters, optimisers, buffer, update count)."""
+    load_model_state(model, checkpoint / f"{name}.zip")
+    load_replay_buffer(model.replay_buffer, checkpoint / f"{name}_replay_buffer.npz")
+    model._n_updates = int(state.get("models", {}).get(name, {}).get("n_updates", 0))
 
 
 def load_model_state(model: Any, path: Path) -> None:

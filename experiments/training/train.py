@@ -88,25 +88,37 @@ def _worker(fn: Callable[[], Any], threads: int) -> Callable[[], Any]:
 
 
 def build_vec_env(config: Mapping[str, Any], scenarios: list[Any], n_envs: int) -> Any:
-    """``VecMonitor`` over one `ClosedLoopEnv` per worker (``SubprocVecEnv`` when ``n_envs > 1``), perturb
-    probability 0 until the curriculum sets it."""
+    """``VecMonitor`` over one `ClosedLoopEnv` per worker (``SubprocVecEnv`` when ``n_envs > 1``; for ``reskill``
+    each wrapped in `ReSkillEnv`), perturb probability 0 until the curriculum sets it; off-policy runs with
+    ``overlap_updates`` get an `OverlapVecEnv` on top (`seal.experiments.training.overlap`)."""
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor
 
     from seal.adversaries.closed_loop import closed_loop_env_fns
+    from seal.experiments.training.overlap import OverlapVecEnv
 
     gen = config["generator"]
     kwargs = _generator_kwargs(config) if gen["name"] else {}
-    fns = closed_loop_env_fns(scenarios, n_envs, gen["name"], kwargs, env_config=config["env"], k=int(config["k"]),
-                              perturb_prob=0.0)
+    fns: list[Callable[[], Any]] = list(closed_loop_env_fns(
+        scenarios, n_envs, gen["name"], kwargs, env_config=config["env"], k=int(config["k"]), perturb_prob=0.0))
+    if config["algo"] == "reskill":
+        from seal.experiments.training.reskill import wrap_env_fns
+
+        fns = wrap_env_fns(fns, config["hyperparams"], int(config["seed"]))
     workers: list[Callable[[], Any]] = [_worker(fn, 1) for fn in fns]
-    venv = SubprocVecEnv(workers) if n_envs > 1 else DummyVecEnv(workers)
-    return VecMonitor(venv)
+    venv = VecMonitor(SubprocVecEnv(workers) if n_envs > 1 else DummyVecEnv(workers))
+    return OverlapVecEnv(venv) if config.get("overlap_updates") and config["algo"] != "ppo" else venv
 
 
 def build_model(config: Mapping[str, Any], env: Any) -> Any:
-    """The SB3 model of ``config["algo"]`` with ``config["hyperparams"]`` (see `seal.experiments.training.config`)."""
+    """The SB3 model of ``config["algo"]`` with ``config["hyperparams"]`` (see `seal.experiments.training.config`);
+    for ``reskill`` the high-level TD3 (``hyperparams.high``). Off-policy classes defer ``train()`` to an
+    `OverlapVecEnv` in ``env`` when there is one."""
     import stable_baselines3 as sb3
 
+    from seal.experiments.training.overlap import overlapped
+
+    if config["algo"] == "reskill":
+        return build_model({**config, "algo": "td3", "hyperparams": config["hyperparams"]["high"]}, env)
     h = dict(config["hyperparams"])
     policy_kwargs = {"net_arch": list(h.pop("net_arch"))}
     common = {"policy": "MlpPolicy", "env": env, "seed": int(config["seed"]), "device": config["device"],
@@ -118,9 +130,9 @@ def build_model(config: Mapping[str, Any], env: Any) -> Any:
         std = float(h.pop("action_noise_std"))
         n_act = env.action_space.shape[0]
         noise = NormalActionNoise(np.zeros(n_act), std * np.ones(n_act)) if std > 0 else None
-        return sb3.TD3(action_noise=noise, **h, **common)
+        return overlapped(sb3.TD3)(action_noise=noise, **h, **common)
     if algo == "sac":
-        return sb3.SAC(**h, **common)
+        return overlapped(sb3.SAC)(**h, **common)
     return sb3.PPO(**h, **common)
 
 
@@ -134,6 +146,9 @@ def _absolute_paths(config: dict[str, Any]) -> dict[str, Any]:
         if isinstance(value, str) and ("/" in value or Path(value).suffix) and Path(value).exists():
             kwargs[key] = str(Path(value).resolve())
     config["generator"] = {**config["generator"], "kwargs": kwargs}
+    skills = config["hyperparams"].get("skills") if config.get("algo") == "reskill" else None
+    if skills and Path(skills).exists():
+        config["hyperparams"] = {**config["hyperparams"], "skills": str(Path(skills).resolve())}
     return config
 
 
@@ -171,6 +186,10 @@ def train_run(config: dict[str, Any], out: Path, resume: bool = False, progress:
         raise ValueError(f"{len(train_scenarios)} train scenarios cannot feed {n_envs} env workers; lower train.n_envs")
     if config["generator"]["name"]:
         _generator_kwargs(config)  # fail before starting workers
+    if config["algo"] == "reskill":
+        from seal.experiments.training.reskill import load_skills
+
+        load_skills(config["hyperparams"])  # fail before starting workers
     if not resume:
         out.mkdir(parents=True, exist_ok=True)
         _write_config(out, config)
@@ -240,9 +259,12 @@ def _learn(config: Mapping[str, Any], out: Path, venv: Any, checkpoint: Path | N
 
     from seal.core.atomic import atomic_write_json
     from seal.experiments.training.callbacks import ResumableCSVOutputFormat
+    from seal.experiments.training.overlap import find_overlap_env
 
     total = int(config["total_timesteps"])
     model = build_model(config, venv)
+    reskill = _reskill_run(config, out)
+    overlap = find_overlap_env(venv)
     start_step, wall_before = 0, 0.0
     if checkpoint is not None:
         start_step = int(restored["state"]["step"])
@@ -253,23 +275,33 @@ def _learn(config: Mapping[str, Any], out: Path, venv: Any, checkpoint: Path | N
         model._n_updates = int(restored["state"]["n_updates"])
         model._episode_num = int(restored["state"]["episode_num"])
         wall_before = float(restored["state"].get("wall_s", 0.0))
+        if reskill is not None:
+            reskill.restore(checkpoint, restored["state"])
     (out / "eval").mkdir(exist_ok=True)
     model.set_logger(Logger(folder=str(out), output_formats=[
         ResumableCSVOutputFormat(str(out / ts.PROGRESS)), TensorBoardOutputFormat(str(out / "tb"))]))
     session_start = time.perf_counter()
 
     def save(m: Any) -> None:
+        if overlap is not None:
+            overlap.flush()  # the checkpoint holds every update of the steps it has seen
         states = m.get_env().env_method("get_state")
-        ts.write_checkpoint(out, m, states, {"wall_s": wall_before + time.perf_counter() - session_start})
+        ts.write_checkpoint(out, m, states, {"wall_s": wall_before + time.perf_counter() - session_start},
+                            reskill.models() if reskill is not None else None)
 
-    callbacks, stats = _callbacks(config, out, checkpoint, restored, eval_scenarios, save, progress)
+    callbacks, stats = _callbacks(config, out, checkpoint, restored, eval_scenarios, save, progress, reskill)
     model.learn(total_timesteps=total - start_step, callback=callbacks, log_interval=_log_interval(config),
                 reset_num_timesteps=False)
-    if model.num_timesteps != total:
+    if overlap is not None:
+        overlap.flush()
+    # A ReSkill step plays a whole skill (up to H env steps per worker): it may pass the budget by less than that.
+    if model.num_timesteps < total or (reskill is None and model.num_timesteps != total):
         raise RuntimeError(f"training stopped at {model.num_timesteps} env steps, expected {total}")
     tmp_model = out / f".tmp_{ts.FINAL_MODEL}"
     model.save(tmp_model, exclude=ts.SAVE_EXCLUDE)
     os.replace(tmp_model, out / ts.FINAL_MODEL)
+    if reskill is not None:
+        reskill.save_final(out)
     wall = wall_before + time.perf_counter() - session_start
     done = {"steps": int(model.num_timesteps), "wall_s": round(wall, 1), "resumed_from": start_step,
             "episodes": int(model._episode_num), "session_totals": stats.totals}
@@ -277,8 +309,18 @@ def _learn(config: Mapping[str, Any], out: Path, venv: Any, checkpoint: Path | N
     logger.info(f"finished {out}: {done['steps']} steps in {done['wall_s']} s")
 
 
+def _reskill_run(config: Mapping[str, Any], out: Path) -> Any:
+    """The ReSkill parts of a ``reskill`` run (`seal.experiments.training.reskill.ReSkillRun`), else None."""
+    if config["algo"] != "reskill":
+        return None
+    from seal.experiments.training.reskill import ReSkillRun
+
+    return ReSkillRun(config, out, build_model)
+
+
 def _callbacks(config: Mapping[str, Any], out: Path, checkpoint: Path | None, restored: dict[str, Any],
-               eval_scenarios: list[Any], save: Callable[[Any], None], progress: bool) -> tuple[Any, Any]:
+               eval_scenarios: list[Any], save: Callable[[Any], None], progress: bool,
+               reskill: Any = None) -> tuple[Any, Any]:
     """The training callbacks, in the order they must run, and the episode-stats callback among them."""
     from stable_baselines3.common.callbacks import CallbackList
 
@@ -296,14 +338,18 @@ def _callbacks(config: Mapping[str, Any], out: Path, checkpoint: Path | None, re
     curriculum = CurriculumCallback(total, **config["curriculum"])
     stats = EpisodeStatsCallback()
     eval_env_config = dict(config["eval_env"])
+    counter, residual = reskill.callbacks() if reskill is not None else (None, None)
     callbacks = [
+        counter,  # ReSkill: num_timesteps counts env steps before anything reads it
         curriculum,  # first: a resumed run's restore resets the envs, whose first episodes then use p(t)
         RestoreCallback(restored["workers"], restored["state"]["rng"], restored["rng"])
         if checkpoint is not None else None,
         stats,
+        residual,  # after the restore: its first weight copy reaches the restored workers
         CheckpointCallback(int(config["checkpoint_every"]), total, save),
         EvalCallback(int(config["eval_every"]), out / "eval", lambda: ScenarioEnv(eval_scenarios, eval_env_config),
-                     eval_scenarios) if eval_scenarios else None,
+                     eval_scenarios, make_policy=reskill.make_policy() if reskill is not None else None)
+        if eval_scenarios else None,
         ProgressCallback(total, stats, curriculum, enabled=progress),
     ]
     return CallbackList([c for c in callbacks if c]), stats

@@ -9,14 +9,17 @@ needs the explicit ``seal eval runs`` form (`seal.cli.tree.CommandTree.set_defau
 from __future__ import annotations
 
 import argparse
+import os
 
 from seal.cli.args import CliError, add_set_option, positive_int
 from seal.cli.tree import CommandTree
 
 
 def cmd_eval_runs(args: argparse.Namespace) -> int:
-    from seal.experiments.evaluation.evaluate import evaluate_runs, read_run, resolve_eval_config
+    from seal.experiments.backends import make_backend
+    from seal.experiments.evaluation.evaluate import read_run, resolve_eval_config
     from seal.experiments.evaluation.generators import apply_generator_options
+    from seal.experiments.evaluation.parallel import evaluate_runs
 
     try:
         egos = [read_run(r) for r in args.runs]
@@ -28,12 +31,20 @@ def cmd_eval_runs(args: argparse.Namespace) -> int:
             name = option.partition(".")[0]
             config["generators"].setdefault(name, {})
         apply_generator_options(config["generators"], args.gen_opt)
-    except ValueError as exc:
+        backend = None
+        if args.backend == "ray":
+            backend = make_backend("ray", address=args.address, ray_local_cpus=args.ray_local_cpus)
+    except (ValueError, RuntimeError) as exc:
         raise CliError(str(exc)) from None
-    results = evaluate_runs(
-        args.runs, args.settings, args.store, dataset=args.dataset, config=config,
-        replay_ego=not args.no_replay_ego, workers=args.workers, progress=not args.no_progress,
-    )
+    workers = args.workers or os.cpu_count() or 1
+    try:
+        results = evaluate_runs(
+            args.runs, args.settings, args.store, dataset=args.dataset, config=config,
+            replay_ego=not args.no_replay_ego, workers=workers, progress=not args.no_progress, backend=backend,
+        )
+    finally:
+        if backend is not None:
+            backend.shutdown()  # type: ignore[attr-defined]
     for r in results:
         written = ", ".join(f"{s}: {n}" for s, n in r["written"].items())
         print(f"{r['run']}: new episodes {written}")
@@ -76,7 +87,14 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--gen-opt", action="append", default=[], metavar="NAME.KEY=VALUE",
                    help="constructor option of one generator, repeatable, e.g. goose.model=goose.zip")
     p.add_argument("--no-replay-ego", action="store_true", help="do not evaluate the Replay ego")
-    p.add_argument("--workers", type=positive_int("--workers"), default=1,
-                   help="egos evaluated in parallel processes (default 1)")
+    p.add_argument("--workers", type=positive_int("--workers"), default=None,
+                   help="local worker processes over which egos x scenarios are spread, in chunks of a few "
+                   "scenarios (default: the CPU count; 1 = in this process); the rows are the same for any count")
+    p.add_argument("--backend", choices=("local", "ray"), default="local",
+                   help="local: --workers processes on this machine (default); ray: Ray tasks on a running cluster "
+                   "(--address, RAY_ADDRESS or auto) or on a private local instance (--ray-local-cpus)")
+    p.add_argument("--address", default=None, help="with --backend ray: the cluster address")
+    p.add_argument("--ray-local-cpus", type=positive_int("--ray-local-cpus"), default=None,
+                   help="with --backend ray: start a private local Ray instance of N CPUs instead of connecting")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_eval_runs)

@@ -17,7 +17,8 @@ def _config(args: argparse.Namespace) -> ObjectiveFitConfig:
     from seal.experiments.fitting.objective import resolve_config
 
     return resolve_config(preset=args.preset, config_file=args.config, sets=args.set, prior=args.prior,
-                          candidates=args.candidates,
+                          candidates=args.candidates, skills=args.skills, behavior=args.behavior,
+                          egos=tuple(args.ego) or None,
                           eval_split=args.eval_split, eval_limit=args.eval_limit, workers=args.workers, seed=args.seed,
                           **({"split": args.split, "limit": args.limit} if hasattr(args, "split") else {}))
 
@@ -55,6 +56,13 @@ def _common(p: argparse.ArgumentParser) -> None:
     src.add_argument("--prior", default=None, help="trajectory prior file (seal fit prior) giving the candidates")
     src.add_argument("--candidates", default=None, choices=("lanes", "constant_velocity"),
                      help="built-in candidate source instead of a prior")
+    p.add_argument("--behavior", default=None, choices=("replay", "seal"),
+                   help="adversary of the label roll-outs: replay the candidate (default) or SEAL's follow-then-"
+                   "skill-switch (needs --skills)")
+    p.add_argument("--skills", default=None, help="skills folder (seal fit skills) of --behavior seal")
+    p.add_argument("--ego", action="append", default=[],
+                   help="ego of the label roll-outs: heuristic or a seal train run folder; repeatable (default "
+                   "heuristic)")
     p.add_argument("--eval-split", default=None, help="held-out split of the report (default eval)")
     p.add_argument("--eval-limit", type=positive_int("--eval-limit"), default=None,
                    help="use only the first N held-out scenarios")

@@ -28,7 +28,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from None
     out = args.out or str(Path("runs") / Path(args.config).stem)
     try:
-        summary = run_pipeline(args.config, out, backend=backend, progress=not args.no_progress)
+        summary = run_pipeline(args.config, out, backend=backend, progress=not args.no_progress, sets=args.set)
     except RuntimeError as exc:
         print(f"seal run: {exc}")
         return 1

@@ -1,4 +1,4 @@
-"""``seal fit skills``: SEAL's skill VAE and benign / adversarial skill priors from heuristic demonstrations."""
+"""``seal fit skills``: SEAL's skill VAE and benign / adversarial skill priors from demonstrations."""
 
 from __future__ import annotations
 
@@ -24,14 +24,18 @@ def cmd_fit_skills(args: argparse.Namespace) -> int:
 def register(tree: CommandTree) -> None:
     p = tree.group("fit").add_parser(
         "skills",
-        help="train SEAL's skill VAE and benign / adversarial skill priors from heuristic demonstrations",
-        description="Simulate every vehicle of the split's scenarios with a noisy heuristic driver (resumable, in "
-        "parallel), cut the (own observation, action) sequences into 10-step windows (adversarial: ending within "
-        "20 steps before that agent's collision; dropped: near an out-of-road end; else benign), train the skill "
-        "VAE (LSTM encoder, closed-loop MLP decoder, latent 8) and two state-conditioned RealNVP priors. Writes "
-        "vae.pt, prior_benign.pt, prior_adversarial.pt, metrics.json (held-out reconstruction error, prior NLL per "
-        "class incl. cross terms), embedding.png (both priors' samples over held-out states, PCA), config.yaml "
-        "and CSV training logs to --out.",
+        help="train SEAL's skill VAE and benign / adversarial skill priors from demonstrations",
+        description="Record (own observation, action) of every vehicle of the split's scenarios driven by the "
+        "logged traffic's own actions (clean: the benign windows) and by noisy heuristic drivers, and optionally of "
+        "a CAT adversary in closed loop against egos (config key ego_rollouts; resumable, in parallel). Find the "
+        "collisions and near misses (box gap < 0.5 m while closing) and who struck them (the vehicle whose own "
+        "motion closes the gap). Cut 10-step windows: adversarial = starting within 2H = 20 steps before an event "
+        "the agent struck; benign = other windows of the logged drivers; dropped: near an out-of-road end. Train "
+        "the skill VAE (LSTM encoder, closed-loop MLP decoder that sees the previous action, latent 8) and two "
+        "state-conditioned RealNVP priors, each on its own windows. Writes vae.pt, prior_benign.pt, "
+        "prior_adversarial.pt, metrics.json (held-out reconstruction error, prior NLL of both priors on both "
+        "classes and their separation), embedding.png, config.yaml, demos_<source>.npz and CSV training logs to "
+        "--out.",
     )
     add_fit_job_options(p, "skills", "seal.experiments.fitting.skills.SkillsFitConfig", "vae_train.max_epochs=5",
                         "metrics")
@@ -39,7 +43,7 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--split", default=None, help="split to learn from (default train)")
     p.add_argument("--limit", type=positive_int("--limit"), default=None, help="use only the first N scenarios")
     p.add_argument("--demos", default=None,
-                   help="demonstrations file to build or reuse (default OUT/demos.npz)")
+                   help="folder of the demonstrations files to build or reuse (default OUT)")
     p.add_argument("--workers", type=positive_int("--workers"), default=None,
                    help="processes for the demonstrations (default 2)")
     p.set_defaults(func=cmd_fit_skills)

@@ -8,8 +8,8 @@ from seal.cli.args import CliError, add_set_option, pipeline_choices, positive_i
 from seal.cli.tree import CommandTree
 
 DEFAULT_CONFIG = "standard"
-ALGOS = ("td3", "sac", "ppo")
-"""SB3 algorithms (`seal.experiments.training.config.ALGOS`, repeated so ``seal --help`` stays light)."""
+ALGOS = ("td3", "sac", "ppo", "reskill")
+"""Ego algorithms (`seal.experiments.training.config.ALGOS`, repeated so ``seal --help`` stays light)."""
 
 
 def overrides_from_args(args: argparse.Namespace) -> dict[str, object]:
@@ -28,6 +28,8 @@ def overrides_from_args(args: argparse.Namespace) -> dict[str, object]:
         over["pipelines.seal.kwargs.objective"] = args.objective
     if args.skills is not None:
         over["pipelines.seal.kwargs.skills"] = args.skills
+    if args.ego_skills is not None:
+        over["hyperparams.reskill.skills"] = args.ego_skills
     return over
 
 
@@ -48,7 +50,8 @@ def cmd_train(args: argparse.Namespace) -> int:
                    ("--set", args.set or None), ("--steps", args.steps), ("--algo", args.algo),
                    ("--dataset", args.dataset),
                    ("--n-envs", args.n_envs), ("--prior", args.prior), ("--goose-model", args.goose_model),
-                   ("--objective", args.objective), ("--skills", args.skills), ("--steer", args.steer))
+                   ("--objective", args.objective), ("--skills", args.skills), ("--ego-skills", args.ego_skills),
+                   ("--steer", args.steer))
         given = [opt for opt, v in options if v is not None]
         if given:
             raise CliError(f"--resume continues with the run's recorded config.yaml; drop {', '.join(given)}")
@@ -79,7 +82,7 @@ def cmd_train(args: argparse.Namespace) -> int:
 def register(tree: CommandTree) -> None:
     p = tree.top.add_parser(
         "train",
-        help="train an SB3 ego (TD3 / SAC / PPO) against an adversary pipeline under CAT's curriculum",
+        help="train an ego (TD3 / SAC / PPO / ReSkill) against an adversary pipeline under CAT's curriculum",
         description="Train an ego policy with Stable-Baselines3 in the closed loop: a random train scenario per "
         "episode, perturbed with probability p(t) = min(1.8 t/T, 0.9) by the pipeline's generator (noadv: never; "
         "goose, cat, seal), one env worker per core, each keeping its scenarios' last K ego roll-outs. Writes a run "
@@ -96,7 +99,10 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--seed", type=int, default=None, help="random seed (default: the config's, 0)")
     p.add_argument("--out", default=None, help="new run folder (must be absent or empty)")
     p.add_argument("--resume", default=None, metavar="RUN", help="continue the unfinished run in RUN")
-    p.add_argument("--algo", choices=ALGOS, default=None, help="SB3 algorithm (default td3)")
+    p.add_argument("--algo", choices=ALGOS, default=None,
+                   help="ego algorithm: td3 / sac / ppo (SB3) or reskill (a high-level agent choosing benign skills "
+                   "every skill horizon plus a residual agent correcting each decoded action; needs --ego-skills) "
+                   "(default td3)")
     p.add_argument("--dataset", default=None, help="dataset directory with train / eval splits (default: config)")
     p.add_argument("--steps", type=positive_int("--steps"), default=None, help="total env steps (default: config)")
     p.add_argument("--n-envs", type=positive_int("--n-envs"), default=None,
@@ -106,6 +112,8 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--goose-model", default=None, help="GOOSE agent file for the goose pipeline")
     p.add_argument("--objective", default=None, help="SEAL objective network file for the seal pipeline")
     p.add_argument("--skills", default=None, help="SEAL skills folder (seal fit skills) for the seal pipeline")
+    p.add_argument("--ego-skills", default=None,
+                   help="skills folder (seal fit skills) the reskill ego draws its benign skills from")
     add_set_option(p, "hyperparams.td3.learning_starts=500 (a train: key)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print done.json as JSON")

@@ -55,9 +55,11 @@ def test_edit_moves_points_1_to_4_within_bounds(lane_change: Scenario) -> None:
     many = c
     for _ in range(20):
         many = many.edited(np.ones(12), SPEC)
-    limit = SPEC.max_offset_m * np.array(SPEC.point_scale)[:, None]
-    np.testing.assert_allclose(many.ctrl[1:] - c.fitted.ctrl[1:], np.broadcast_to(limit, (4, 2)))
-    np.testing.assert_allclose(many.features(SPEC)[8:16], 1.0)  # offsets are normalised to their limits
+    limit = np.array(np.broadcast_to(SPEC.max_offset_m * np.array(SPEC.point_scale)[:, None], (4, 2)))
+    limit[0, 1] = 0.0  # point 1 slides along the start heading only: the curve keeps leaving along it
+    np.testing.assert_allclose(many.ctrl[1:] - c.fitted.ctrl[1:], limit)
+    np.testing.assert_allclose(np.delete(many.features(SPEC)[8:16], 1), 1.0)  # offsets normalised to their limits
+    assert many.features(SPEC)[9] == 0.0
     np.testing.assert_allclose(many.weights[1:], SPEC.weight_max)
     np.testing.assert_allclose(many.ctrl[0], c.fitted.ctrl[0])
     np.testing.assert_allclose(many.reset_edit().ctrl, c.fitted.ctrl)
@@ -140,3 +142,21 @@ def test_an_adversary_with_no_logged_future_stays_absent(lane_change: Scenario) 
         assert not np.any(track[CURRENT_STEP + 1 :, VALID])
         np.testing.assert_array_equal(track[: CURRENT_STEP + 1], tracks[lane_change.adv_index, : CURRENT_STEP + 1])
         assert np.all(np.isfinite(curve.features(SPEC)))
+
+
+def test_curve_leaves_the_current_pose_along_the_logged_heading(highway: list[Scenario]) -> None:
+    """The replay's first step turns no faster than the goal's yaw-rate bound allows, for the fitted curve and for
+    any edit: point 1 stays on the heading ray (a sideways push of it is ignored)."""
+    rng = np.random.default_rng(0)
+    for scenario in highway:
+        c = GooseCurve.from_scenario(scenario)
+        assert c.fitted.ctrl[1, 1] == 0.0 and c.fitted.ctrl[1, 0] > 0
+        h0 = scenario.track(scenario.adv_id)[CURRENT_STEP, HEADING]
+        for a in [np.zeros(12), *rng.uniform(-1, 1, (5, 12))]:
+            e = c.edited(a, SPEC)
+            assert e.ctrl[1, 1] == 0.0
+            side = a.copy()
+            side[1] = -a[1]
+            np.testing.assert_array_equal(c.edited(side, SPEC).track(), e.track())
+            step = math.remainder(e.track()[CURRENT_STEP + 1, HEADING] - h0, 2 * math.pi)
+            assert abs(step) / DT_S < SPEC.desired_goal[2]

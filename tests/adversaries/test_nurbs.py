@@ -147,3 +147,20 @@ def test_chord_length_params_and_distance_to_curve() -> None:
     line = NurbsCurve(np.stack([np.linspace(0, 40, 5), np.zeros(5)], axis=1), np.ones(5))
     pts = np.array([[10.0, 3.0], [20.0, -1.5], [50.0, 0.0]])  # the last is 10 m beyond the end
     np.testing.assert_allclose(distance_to_curve(pts, line), [3.0, 1.5, 10.0], atol=1e-9)
+
+
+def test_fit_with_a_start_direction_leaves_the_start_along_it() -> None:
+    # A lane change that starts at once: the free fit's start tangent points into the turn.
+    x = np.linspace(0.0, 80.0, 81)
+    path = np.stack([x, 3.5 * (1.0 - np.cos(np.pi * np.clip(x / 40.0, 0.0, 1.0))) / 2.0], axis=1)
+    free = fit_nurbs(path)
+    d_free = nurbs_derivatives(free.ctrl, free.weights, np.array([0.0]))[0]
+    assert abs(math.atan2(d_free[1], d_free[0])) > 0.01
+    for direction in (np.array([1.0, 0.0]), np.array([math.cos(0.2), math.sin(0.2)])):
+        fixed = fit_nurbs(path, start_direction=direction)
+        d0 = nurbs_derivatives(fixed.ctrl, fixed.weights, np.array([0.0]))[0]
+        assert d0 @ direction > 0 and abs(d0[0] * direction[1] - d0[1] * direction[0]) < 1e-9 * np.linalg.norm(d0)
+        np.testing.assert_allclose(fixed.ctrl[[0, -1]], path[[0, -1]], atol=1e-12)
+    assert distance_to_curve(path, fit_nurbs(path, start_direction=np.array([1.0, 0.0]))).max() < 0.3
+    stub = fit_nurbs(np.array([[0.0, 0.0], [0.0, 2.0]]), start_direction=np.array([1.0, 0.0]))
+    assert stub.ctrl[1, 1] == 0.0 and stub.ctrl[1, 0] > 0  # even a stub leaves along the direction

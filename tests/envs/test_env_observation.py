@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import scenario_factory as sf
 import shapely
+from kernel_reference import cast_rays
 
 from seal.core.road import LaneSpec, RoadDescription
 from seal.core.scenario import CURRENT_STEP
@@ -15,7 +16,6 @@ from seal.envs import observation as ob
 from seal.envs.behaviors import PolicyBehavior
 from seal.envs.heuristic import HeuristicDriver
 from seal.envs.kinematics import AgentState
-from seal.envs.rays import cast_rays
 from seal.envs.road_geometry import RoadGeometry
 from seal.envs.route import Route
 from seal.envs.scenario_env import ScenarioEnv

@@ -22,6 +22,7 @@ SHARES = (0.7, 0.15, 0.15)
 META_KEYS = {
     "layout",
     "run",
+    "group",
     "t0_step",
     "pair_min_gap_m",
     "pair_collision",

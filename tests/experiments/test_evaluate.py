@@ -12,7 +12,8 @@ from seal.cli import main
 from seal.core.dataset import Dataset
 from seal.envs.scenario_env import ScenarioEnv
 from seal.experiments.evaluation.episodes import run_episode
-from seal.experiments.evaluation.evaluate import evaluate_runs, parse_settings, read_run, resolve_eval_config
+from seal.experiments.evaluation.evaluate import parse_settings, read_run, resolve_eval_config
+from seal.experiments.evaluation.parallel import evaluate_runs
 from seal.experiments.evaluation.results_store import ResultsStore
 from seal.experiments.training.egos import HeuristicEgo
 

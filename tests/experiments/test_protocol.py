@@ -16,8 +16,9 @@ from seal.envs.behaviors import TrackingBehavior
 from seal.envs.rollout import Rollout
 from seal.envs.scenario_env import ScenarioEnv
 from seal.experiments.evaluation import protocol
-from seal.experiments.evaluation.evaluate import evaluate_runs, resolve_eval_config
+from seal.experiments.evaluation.evaluate import resolve_eval_config
 from seal.experiments.evaluation.generators import evaluate_generators
+from seal.experiments.evaluation.parallel import evaluate_runs
 from seal.experiments.evaluation.results_store import ResultsStore
 from seal.experiments.training.egos import HeuristicEgo
 

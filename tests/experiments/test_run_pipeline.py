@@ -14,7 +14,8 @@ from results_builders import episode
 from seal.core.dataset import Dataset, write_dataset
 from seal.experiments.backends import InlineBackend
 from seal.experiments.evaluation.results_store import ResultsStore
-from seal.experiments.pipeline.run import fits_needed, load_run_config, run_pipeline, substitute
+from seal.experiments.pipeline.references import fits_needed, substitute
+from seal.experiments.pipeline.run import load_run_config, run_pipeline
 from seal.experiments.pipeline.tasks import run_task
 
 CONFIGS = Path(__file__).resolve().parents[2] / "experiments" / "configs"
@@ -195,6 +196,21 @@ def test_set_overrides_the_preset(tmp_path: Path) -> None:
         load_run_config(path, ["evals.limit=3"])
 
 
+def test_set_reaches_the_steps_and_the_trainer_config(tmp_path: Path) -> None:
+    from seal.experiments.pipeline.run import train_config
+
+    preset, commands = write_preset(tmp_path), FakeTasks()
+    run_pipeline(preset, tmp_path / "out", backend=InlineBackend(), task_fn=commands, train_fn=fake_train,
+                 eval_fn=fake_eval, train_config_fn=fake_train_config, progress=False,
+                 sets=["fit.prior.epochs=7", "seeds=[4]"])
+    assert ("prior", str(tmp_path / "out" / "data"), str(tmp_path / "out" / "models" / "prior.pt"),
+            {"epochs": 7, "no_progress": True}) in commands.calls
+    assert sorted(p.name for p in (tmp_path / "out" / "runs").iterdir()) == ["cat-s4", "noadv-s4"]
+    # The trainer config follows the run config's train section (a --set there too), not only the file's.
+    config = load_run_config(CONFIGS / "quick.yaml", ["train.total_timesteps=1234"])
+    assert train_config(config, CONFIGS / "quick.yaml", "noadv", 0, "/d", {})["total_timesteps"] == 1234
+
+
 def test_fit_dependencies_come_first(tmp_path: Path) -> None:
     fit = {"objective": {"prior": "${fit.prior}"}, "prior": {"epochs": 1}, "skills": {}}
     config = load_run_config(write_preset(tmp_path, fit=fit, pipelines=["seal"],
@@ -264,3 +280,48 @@ def test_shipped_presets(name: str) -> None:
     assert set(fits_needed(config)) == {"prior", "goose", "skills", "objective"}
     assert {"normal", "hard", "cat", "goose", "seal"} <= set(config["eval"]["settings"])
     assert "train" in config and config["data"]["split"]["n_eval"] >= 16
+
+
+def test_ablation_preset_trains_each_fig_6_5_variant_as_a_pipeline() -> None:
+    from seal.experiments.pipeline.references import generator_of, generators_in_use, variant_of
+    from seal.experiments.pipeline.run import train_config
+
+    path = CONFIGS / "quick_ablations.yaml"
+    config = load_run_config(path)
+    assert set(fits_needed(config)) == {"prior", "skills", "objective"}
+    assert generators_in_use(config) == ["cat", "seal"]
+    gens = {"cat": {"prior": "/m/prior.pt"},
+            "seal": {"prior": "/m/prior.pt", "objective": "/m/objective.pt", "skills": "/m/skills"}}
+    resolved = {p: train_config(config, path, p, 0, "/d", gens) for p in config["pipelines"]}
+    assert {p: generator_of(p, config) for p in config["pipelines"]} == {
+        "cat": "cat", "seal": "seal", "seal_heuristic_obj": "seal", "seal_benign_prior": "seal",
+        "seal_traj_only": "seal", "seal_no_curriculum": "seal", "seal_no_nonreactive_start": "seal"}
+    kwargs = {p: r["generator"]["kwargs"] for p, r in resolved.items()}
+    assert kwargs["seal"]["objective"] == "/m/objective.pt" and kwargs["seal"].get("switch") is None
+    assert kwargs["seal_heuristic_obj"]["objective"] == "cat"
+    assert kwargs["seal_benign_prior"]["switch"] == "benign" and kwargs["seal_traj_only"]["switch"] == "none"
+    assert all(k["skills"] == "/m/skills" for k in kwargs.values() if "skills" in k)
+    curriculum = {p: r["curriculum"] for p, r in resolved.items()}
+    assert curriculum["seal"] == {"slope": 1.8, "cap": 0.9, "warmup": 0.1}
+    assert curriculum["seal_no_curriculum"] == {"slope": 1000.0, "cap": 0.9, "warmup": 0.1}
+    assert curriculum["seal_no_nonreactive_start"] == {"slope": 1.8, "cap": 0.9, "warmup": 0.0}
+    assert all(r["pipeline"] == p for p, r in resolved.items())
+    with pytest.raises(ValueError, match=r"variants\.x: unknown key\(s\) \['kwarg'\]"):
+        variant_of({"variants": {"x": {"generator": "seal", "kwarg": {}}}}, "x")
+    with pytest.raises(ValueError, match=r"variants\.seal_traj_only: unknown key"):  # at load, before any step
+        load_run_config(path, ["variants.seal_traj_only.kwarg={}"])
+
+
+def test_non_reactive_start_keeps_p_at_zero_then_ramps() -> None:
+    from seal.experiments.bench.training import mean_perturb_probability
+    from seal.experiments.training.curriculum import perturb_probability
+
+    assert perturb_probability(99, 1000, warmup=0.1) == 0.0
+    assert perturb_probability(100, 1000, warmup=0.1) == 0.0
+    assert perturb_probability(200, 1000, warmup=0.1) == pytest.approx(0.18)
+    assert perturb_probability(900, 1000, warmup=0.1) == 0.9
+    assert perturb_probability(101, 1000, slope=1000.0, warmup=0.1) == 0.9  # no curriculum: cap at once
+    # Mean of p over the run, against a fine numerical average.
+    for slope, cap, warmup in ((1.8, 0.9, 0.0), (1.8, 0.9, 0.1), (1000.0, 0.9, 0.1)):
+        numeric = sum(perturb_probability(t, 100_000, slope, cap, warmup) for t in range(100_000)) / 100_000
+        assert mean_perturb_probability(slope, cap, warmup) == pytest.approx(numeric, abs=1e-3)

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 import scenario_factory as sf
 import yaml
+from train_fixtures import tiny_dataset, tiny_scenarios, tiny_train_config
 
 from seal.adversaries.closed_loop import ClosedLoopEnv
 from seal.adversaries.history import RolloutHistory
 from seal.adversaries.rule import RuleGenerator
-from seal.core.dataset import Dataset, write_dataset
 from seal.envs.heuristic import HeuristicDriver
 from seal.envs.scenario_env import ScenarioEnv
 from seal.experiments.training import state as ts
@@ -24,8 +24,7 @@ CONFIG_DIR = Path(__file__).resolve().parents[2] / "experiments" / "configs"
 
 
 def _scenarios() -> list:
-    return [sf.lane_change_scenario(), sf.curve_scenario(), sf.stopped_adversary_scenario(),
-            *(sf.highway_scenario(i) for i in range(3))]
+    return tiny_scenarios()
 
 
 def _play(env: ClosedLoopEnv, episodes: int) -> None:
@@ -135,32 +134,12 @@ def test_history_state_rejects_bad_queue() -> None:
 
 
 # ------------------------------------------------------------------------------------- kill and resume
-def _dataset(tmp_path: Path) -> Path:
-    root = tmp_path / "data"
-    scenarios = _scenarios()
-    write_dataset(root, scenarios)
-    ids = [s.scenario_id for s in scenarios]
-    Dataset.open(root).update_manifest(splits={"train": ids[:4], "eval": ids[4:]})
-    return root
-
-
-def _tiny_config(data: Path) -> dict:
-    over = {
-        "pipeline": "cat", "seed": 1, "dataset": str(data), "total_timesteps": 160, "n_envs": 2,
-        "checkpoint_every": 40, "eval_every": 80, "eval_episodes": 2,
-        "pipelines.cat": {"name": "rule", "kwargs": {}},  # the rule generator: no fitted model needed
-        "hyperparams.td3": {"learning_starts": 30, "batch_size": 16, "net_arch": [16, 16], "buffer_size": 400,
-                            "train_freq": 1, "gradient_steps": 1},
-    }
-    return load_train_config(CONFIG_DIR / "quick.yaml", over)
-
-
 def test_killed_run_resumes_to_the_same_step_count(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from seal.experiments.training import callbacks as train_callbacks
     from seal.experiments.training.train import train_run
 
     run = tmp_path / "run"
-    config = _tiny_config(_dataset(tmp_path))
+    config = tiny_train_config(tiny_dataset(tmp_path))
 
     # Simulated kill between two checkpoints (step 100; the last checkpoint is at 80).
     original_on_step = train_callbacks.EpisodeStatsCallback._on_step

@@ -119,6 +119,7 @@ def test_evaluate_reports_metrics_and_baselines(built) -> None:
     assert report["mse"]["logged_prev"]["pairs"] == labels.n_scenarios * N_CAND
     assert set(report["ranking_logged_prev"]) == {"pi_score", "closeness", "cat", "prior_probability"}
     assert report["ranking_k5_prev"]["pi_score"]["scenarios"] == 2
+    assert report["labels"]["f_diff_var_all_prev"] == pytest.approx(float(labels.f_diff.var()), abs=1e-5)
     # The closeness baseline with the logged roll-out as previous roll-out is f_coll of that roll-out.
     from seal.scoring.criticality import f_coll
 
@@ -129,3 +130,52 @@ def test_evaluate_reports_metrics_and_baselines(built) -> None:
                                                          "rank_latency": {"candidates": 32, "rollouts": 5,
                                                                           "median_ms": 1.0, "p95_ms": 2.0},
                                                          "timings": {}})
+
+
+@pytest.fixture(scope="module")
+def tiny_skills(tmp_path_factory):
+    """A skills folder with untrained default-size models (the labels' mechanics do not depend on the weights)."""
+    import torch
+
+    from seal.models.skills.io import VAE_FILE, prior_file, save_model
+    from seal.models.skills.realnvp import ConditionalRealNVP
+    from seal.models.skills.vae import SkillVAE
+
+    folder = tmp_path_factory.mktemp("skills")
+    torch.manual_seed(0)
+    save_model(SkillVAE(), folder / VAE_FILE)
+    for name in ("benign", "adversarial"):
+        save_model(ConditionalRealNVP(), folder / prior_file(name))
+    return folder
+
+
+def test_seal_behaviour_labels_roll_out_follow_then_switch_per_ego(scenarios, tiny_skills, tmp_path) -> None:
+    from seal.envs.scenario_env import ScenarioEnv
+    from seal.envs.skill_behavior import SkillSwitchBehavior
+    from seal.experiments.evaluation.episodes import run_episode
+    from seal.experiments.training.egos import HeuristicEgo
+
+    spec = ol.source_spec(candidates="constant_velocity")
+    behavior = ol.LabelBehavior(kind="seal", skills=str(tiny_skills), seed=3)
+    labels = ol.build_labels(scenarios[:1], tmp_path / "l", spec, n_candidates=N_CAND, workers=1, chunk_size=1,
+                             progress=False, egos=["heuristic", "replay"], behavior=behavior)
+    sid = scenarios[0].scenario_id
+    assert labels.scenario_ids.tolist() == [sid, sid]  # one row per ego
+    # The open-loop replayed ego ignores the adversary: its roll-outs agree until one of them ends.
+    both = labels.ego_valid[1, 1] & labels.ego_valid[1, 2]
+    np.testing.assert_allclose(labels.ego_xy[1, 1][both], labels.ego_xy[1, 2][both], atol=1e-4)
+    # Row 0 (heuristic ego), candidate j: the episode of SEAL's follow-then-switch behaviour, reproducible.
+    scenario = scenarios[0]
+    source = ol._candidate_source(spec)
+    cands = source(scenario)
+    env = ScenarioEnv(scenario)
+    logged = run_episode(env, scenario, HeuristicEgo())
+    behaviors = ol._candidate_behaviors(scenario, cands, cands.xy[:N_CAND, :80], logged, behavior, 0)
+    assert all(isinstance(b, SkillSwitchBehavior) and b.switch_step >= 10 for b in behaviors)
+    ro = run_episode(env, scenario, HeuristicEgo(), behaviors[1])
+    np.testing.assert_allclose(labels.ego_xy[0, 2], ro.ego_track[11:91, :2] * (ro.ego_track[11:91, 7:8] > 0.5)
+                               + labels.ego_xy[0, 2] * (ro.ego_track[11:91, 7:8] <= 0.5), atol=1e-3)
+    replay = ol._candidate_behaviors(scenario, cands, cands.xy[:N_CAND, :80], logged, ol.LabelBehavior(), 0)
+    assert not any(isinstance(b, SkillSwitchBehavior) for b in replay)
+    with pytest.raises(ValueError, match="needs a skills folder"):
+        ol.LabelBehavior(kind="seal")

@@ -149,9 +149,10 @@ def _box_edges(boxes: np.ndarray, x: float, y: float) -> tuple[np.ndarray, ...]:
 def test_build_many_equals_one_build_per_viewer(highway) -> None:
     # The env builds the ego's and the skill adversary's observations in one pass (`build_many`); each row must
     # be exactly what `build` gives that viewer alone, and the lidar must match a ray cast against box edges.
+    from kernel_reference import cast_rays
+
     from seal.envs.kinematics import AgentState
     from seal.envs.observation import ObservationBuilder
-    from seal.envs.rays import cast_rays
     from seal.envs.road_geometry import get_road_geometry
     from seal.envs.route import Route
 

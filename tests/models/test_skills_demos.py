@@ -21,10 +21,10 @@ from seal.models.skills.demonstrations import DemoConfig, build_demonstrations, 
 from seal.models.skills.demos import (
     ADVERSARIAL,
     BENIGN,
+    LOG,
     DemoFileError,
     Demonstrations,
     WindowSpec,
-    label_windows,
     split_by_scenario,
 )
 
@@ -48,25 +48,29 @@ def _rear_end_scenario(gap_m: float = 45.5):
     return sf.make_scenario(road, [follower, leader], "rear_end")
 
 
-def test_label_windows_by_gap_to_the_end_event() -> None:
-    spec = WindowSpec(horizon=10, adversarial_steps=20, drop_steps=20)
-    seg_row = np.array([0, 50, 100, 150])
-    seg_len = np.array([50, 50, 50, 7])
-    reason = np.array([COLLISION, OUT_OF_ROAD, HORIZON, COLLISION])
-    w = label_windows(seg_row, seg_len, reason, spec)
-    # Segment 0: 41 windows (starts 0..40); gap = 50 - (s + 10) < 20 <=> s >= 21 -> adversarial.
-    s0 = w.row[w.segment == 0]
-    assert s0.tolist() == list(range(41))
-    assert (w.label[w.segment == 0] == ADVERSARIAL).tolist() == [s >= 21 for s in range(41)]
-    # Segment 1 (out of road): starts 21..40 dropped, the rest benign.
-    assert w.row[w.segment == 1].tolist() == [50 + s for s in range(21)]
-    assert (w.label[w.segment == 1] == BENIGN).all()
-    assert w.n_dropped == 20
-    # Segment 2: all benign; segment 3 is shorter than a window.
-    assert (w.label[w.segment == 2] == BENIGN).all() and (w.segment == 2).sum() == 41
-    assert not (w.segment == 3).any()
-    strided = label_windows(seg_row, seg_len, reason, WindowSpec(stride=5))
-    assert strided.row[strided.segment == 0].tolist() == list(range(0, 41, 5))
+def _segments(seg_len: list[int], reasons: list[int], source: int = LOG) -> Demonstrations:
+    """Event-free demonstrations with segments of ``seg_len`` rows ending for ``reasons``."""
+    n = len(seg_len)
+    e = np.zeros(0, dtype=np.int64)
+    return Demonstrations(
+        obs=np.zeros((sum(seg_len), 100), np.float16), actions=np.zeros((sum(seg_len), 2), np.float32),
+        seg_row=np.concatenate([[0], np.cumsum(seg_len)[:-1]]).astype(np.int64), seg_len=np.array(seg_len, np.int32),
+        seg_scenario=np.zeros(n, np.int32), seg_agent=np.arange(n, dtype=np.int64),
+        seg_start_step=np.zeros(n, np.int32), seg_end_reason=np.array(reasons, np.int8),
+        seg_impaired=np.zeros(n, bool), seg_source=np.full(n, source, np.int8),
+        ev_seg=e, ev_step=e.astype(np.int32), ev_kind=e.astype(np.int8), ev_striker=e.astype(bool),
+        scenario_ids=np.array(["s"]), params={})
+
+
+def test_windows_drop_near_out_of_road_ends_and_stride() -> None:
+    d = _segments([50, 50, 7], [OUT_OF_ROAD, HORIZON, HORIZON])
+    w = d.windows(WindowSpec(horizon=10, drop_steps=20))
+    # Segment 0 (out of road): starts 21..40 end within 20 steps of it and are dropped, the rest benign.
+    assert w.row[w.segment == 0].tolist() == list(range(21))
+    assert (w.label == BENIGN).all() and w.n_dropped == 20
+    assert (w.segment == 1).sum() == 41 and not (w.segment == 2).any()  # segment 2 is shorter than a window
+    strided = d.windows(WindowSpec(stride=5))
+    assert strided.row[strided.segment == 1].tolist() == [50 + s for s in range(0, 41, 5)]
 
 
 def test_box_overlaps_matches_the_env_test() -> None:
@@ -99,10 +103,16 @@ def test_rear_end_collision_at_the_predicted_step_labels_the_last_20_steps() -> 
     assert steps == collide
     assert sorted((e.index, e.start_step, e.end_step, e.end_reason) for e in sim.ends) == [
         (0, 0, collide, COLLISION), (1, 0, collide, COLLISION)]
-    w = label_windows(np.array([0]), np.array([collide]), np.array([COLLISION]), WindowSpec())
-    # Rows 0..45: windows start at 0..36; those ending within 20 steps of the collision start at 17..36.
-    assert w.row[w.label == ADVERSARIAL].tolist() == list(range(collide - 10 - 19, collide - 10 + 1))
-    assert w.row[w.label == BENIGN].tolist() == list(range(0, collide - 10 - 19))
+    # The same roll-out as heuristic demonstrations: the follower struck at step 46, so its windows starting at
+    # steps 26..36 (2H before, inside its 46 rows) are adversarial; the leader was struck: none of its windows.
+    d = roll_out_demonstrations(_rear_end_scenario(gap), DemoConfig(start_step=0, steer_noise=0.0, accel_noise=0.0,
+                                                                  impaired_share=1.0, distraction_rate_hz=100.0,
+                                                                  distraction_s=(9.0, 9.0)))
+    w = d.windows(WindowSpec())
+    follower = int(np.flatnonzero(d.seg_agent == 0)[0])
+    assert d.seg_len[follower] == collide and d.seg_end_reason[follower] == COLLISION
+    assert (w.row[w.label == ADVERSARIAL] - d.seg_row[follower]).tolist() == list(range(collide - 20, collide - 9))
+    assert (w.segment[w.label == ADVERSARIAL] == follower).all() and not (w.label == BENIGN).any()
 
 
 def test_out_of_road_finish_and_horizon_ends() -> None:
@@ -206,7 +216,8 @@ def test_demonstrations_file_round_trip_and_errors(tmp_path, highway) -> None:
     path = tmp_path / "d.npz"
     demos.save(path)
     back = Demonstrations.load(path)
-    for name in ("obs", "actions", "seg_row", "seg_len", "seg_end_reason", "seg_agent", "scenario_ids"):
+    for name in ("obs", "actions", "seg_row", "seg_len", "seg_end_reason", "seg_agent", "scenario_ids", "seg_source",
+                 "ev_seg", "ev_step", "ev_kind", "ev_striker"):
         assert np.array_equal(getattr(back, name), getattr(demos, name)), name
     assert back.params == demos.params
     broken = Demonstrations.load(path)
@@ -220,8 +231,7 @@ def test_demonstrations_file_round_trip_and_errors(tmp_path, highway) -> None:
 
 
 def test_split_by_scenario_holds_out_whole_scenarios() -> None:
-    seg_row = np.arange(0, 600, 60)
-    w = label_windows(seg_row, np.full(10, 60), np.zeros(10, dtype=int), WindowSpec())
+    w = _segments([60] * 10, [HORIZON] * 10).windows(WindowSpec())
     seg_scenario = np.repeat(np.arange(5), 2)
     train, val = split_by_scenario(w, seg_scenario, 5, 0.2, seed=0)
     assert len(train) + len(val) == len(w)

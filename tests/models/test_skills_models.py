@@ -52,12 +52,14 @@ def test_vae_shapes_and_action_range() -> None:
     assert vae.kl(torch.zeros(3, 8), torch.zeros(3, 8)).abs().max() == 0.0
 
 
-def test_decoder_ignores_the_last_action_slots() -> None:
+def test_decoder_sees_the_previous_action_unless_told_to_ignore_it() -> None:
     torch.manual_seed(0)
-    vae = SkillVAE(VAEConfig())
     obs, z = torch.randn(4, 100), torch.randn(4, 8)
     changed = obs.clone()
     changed[:, 32:35] += 5.0  # steering and last action
+    sees = SkillVAE(VAEConfig())
+    assert not torch.allclose(sees.decode(obs, z), sees.decode(changed, z))
+    vae = SkillVAE(VAEConfig(decoder_ignore=(32, 33, 34)))
     assert torch.equal(vae.decode(obs, z), vae.decode(changed, z))
     changed[:, 31] += 1.0  # speed is seen
     assert not torch.allclose(vae.decode(obs, z), vae.decode(changed, z))

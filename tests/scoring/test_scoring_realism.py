@@ -85,3 +85,24 @@ def test_contact_normal_of_frontal_overlap() -> None:
     a = box_corners(0.0, 0.0, 0.0, 4.5, 2.0)
     b = box_corners(4.0, 0.3, np.pi, 4.5, 2.0)
     np.testing.assert_allclose(contact_normal(a, b), [1.0, 0.0], atol=1e-9)
+
+
+def test_jerk_is_the_second_difference_of_the_speed_and_compares_profiles() -> None:
+    from seal.scoring.realism import jerk_stats, jerks
+
+    t = np.zeros((6, 8))
+    t[:, 3] = [10.0, 10.0, 11.0, 12.0, 12.0, 12.0]  # speed: +1 m/s per step twice, then constant
+    t[:, 7] = 1.0
+    # Accelerations 0, 10, 10, 0, 0 m/s^2 -> jerks 100, 0, -100, 0 m/s^3.
+    np.testing.assert_allclose(jerks(t), [100.0, 0.0, -100.0, 0.0])
+    t[3, 7] = 0.0  # an invalid step breaks every triple through it
+    np.testing.assert_allclose(jerks(t), [100.0])
+    smooth = np.zeros((1, 30, 8))
+    smooth[0, :, 3] = np.linspace(10.0, 13.0, 30)  # constant acceleration: jerk 0
+    smooth[0, :, 7] = 1.0
+    rough = smooth.copy()
+    rough[0, ::2, 3] += 0.3
+    same = jerk_stats(smooth, smooth)
+    assert same["jerk_wd"] == 0.0 and same["jerk_abs_p95"] == pytest.approx(0.0, abs=1e-6)
+    diff = jerk_stats(rough, smooth)
+    assert diff["jerk_wd"] > 10.0 and diff["jerk_abs_p95"] > 50.0 and diff["logged_jerk_abs_p95"] < 1e-6

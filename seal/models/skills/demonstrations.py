@@ -1,7 +1,14 @@
-"""Skill demonstrations: every vehicle of a scenario driven by a noisy `HeuristicDriver` (thesis 6.3.3: all
-agents follow the heuristic and produce demonstrations), recorded as (own observation, applied action) per step.
+"""Skill demonstrations: every vehicle of a scenario driven from its own observation, recorded as (own observation,
+applied action) per step, with the collisions and near misses of the simulated tracks and who struck them
+(`seal.models.skills.events`). Two sources (`DemoConfig.source`):
 
-Noise model (`DemoConfig`), per agent:
+* ``log``: the logged traffic's own drivers (`roll_out_log_demonstrations`): each vehicle applies the actions that
+  reproduce its logged track. Clean driving, no injected noise: the benign skills are learned from these.
+* ``heuristic``: the noisy `HeuristicDriver` of thesis 6.3.3 (all agents follow the heuristic), with the noise
+  model below. Its collisions give adversarial windows (the striker's, `seal.models.skills.demos.WindowSpec`);
+  its other windows are not benign demonstrations (the noise is not how the logged traffic drives).
+
+Noise model of the heuristic source (`DemoConfig`), per agent:
 
 * every driver gets its own IDM time headway and minimum gap (drawn uniformly from the configured ranges);
 * additive Ornstein-Uhlenbeck noise on steering and acceleration (stationary std ``steer_noise`` /
@@ -22,7 +29,7 @@ from __future__ import annotations
 import math
 import shutil
 import zlib
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -31,11 +38,16 @@ import numpy as np
 
 from seal.core.chunked import fingerprint, run_chunked
 from seal.core.config import check_keys
-from seal.core.scenario import DT_S, N_STEPS, Scenario
+from seal.core.scenario import DT_S, N_STEPS, VALID, Scenario
 from seal.envs import observation as ob
 from seal.envs.heuristic import HeuristicDriver
-from seal.envs.multi_agent import MultiAgentSim, SimConfig
-from seal.models.skills.demos import Demonstrations
+from seal.envs.kinematics import recover_actions
+from seal.envs.multi_agent import HORIZON, MultiAgentSim, SimConfig
+from seal.models.skills.demos import HEURISTIC, LOG, Demonstrations
+from seal.models.skills.events import EventSpec, find_events
+
+DEMO_SOURCES = ("heuristic", "log")
+"""Sources a `DemoConfig` simulates (the closed-loop ego roll-outs are built by `seal.experiments.fitting`)."""
 
 
 @dataclass(frozen=True)
@@ -54,6 +66,10 @@ class DemoConfig:
         distraction_s: range of a distraction's duration (s).
         max_lateral_m, offroad_tolerance_m: road checks (`SimConfig`).
         seed: base seed; each scenario's stream is derived from it and the scenario id.
+        source: ``heuristic`` (the noisy drivers above) or ``log`` (the logged traffic's own actions, no noise:
+            `roll_out_log_demonstrations`; the noise settings are ignored).
+        near_miss_gap_m, near_miss_closing_mps, striker_margin_mps: event thresholds
+            (`seal.models.skills.events.EventSpec`).
     """
 
     start_step: int = 0
@@ -71,6 +87,10 @@ class DemoConfig:
     max_lateral_m: float = 10.0
     offroad_tolerance_m: float = 0.5
     seed: int = 0
+    source: str = "heuristic"
+    near_miss_gap_m: float = 0.5
+    near_miss_closing_mps: float = 1.0
+    striker_margin_mps: float = 0.5
 
     def __post_init__(self) -> None:
         for name in ("steer_noise", "accel_noise", "impaired_noise_scale", "distraction_rate_hz"):
@@ -85,6 +105,13 @@ class DemoConfig:
             if not 0 <= lo <= hi:
                 raise ValueError(f"DemoConfig: {name} must be a range 0 <= low <= high, got {(lo, hi)}")
         self.sim_config()  # validates the time span
+        self.event_spec()
+        if self.source not in DEMO_SOURCES:
+            raise ValueError(f"DemoConfig: source must be one of {DEMO_SOURCES}, got {self.source!r}")
+
+    def event_spec(self) -> EventSpec:
+        return EventSpec(near_miss_gap_m=self.near_miss_gap_m, near_miss_closing_mps=self.near_miss_closing_mps,
+                         striker_margin_mps=self.striker_margin_mps)
 
     def sim_config(self) -> SimConfig:
         return SimConfig(start_step=self.start_step, end_step=self.end_step, max_lateral_m=self.max_lateral_m,
@@ -182,43 +209,93 @@ def _blind(obs: np.ndarray) -> np.ndarray:
     return o
 
 
-def roll_out_demonstrations(scenario: Scenario, config: DemoConfig | None = None) -> Demonstrations:
-    """Simulate one scenario with every vehicle driven by `NoisyHeuristicDrivers`; its `Demonstrations`
-    (segments in the order agents ended; deterministic for the config's seed and the scenario id)."""
-    cfg = config or DemoConfig()
-    rng = np.random.default_rng(scenario_seed(cfg.seed, scenario.scenario_id))
+Act = Callable[[np.ndarray, np.ndarray, int], np.ndarray]
+"""``(agent rows [n], observations [n, D], scenario step) -> actions [n, 2]`` of the active driven agents."""
+
+
+def _simulate(scenario: Scenario, cfg: DemoConfig, act: Act, source: int, impaired: Callable[[int], bool],
+              record_until: np.ndarray | None = None) -> Demonstrations:
+    """Drive ``scenario``'s vehicles with ``act`` in a `MultiAgentSim`, record (observation, action) per agent and
+    step, find the collisions and near misses on the simulated tracks (`seal.models.skills.events.find_events`) and
+    return the `Demonstrations` (segments in the order agents ended). ``record_until[i]``: agent row ``i``'s
+    actions are recorded at steps before it only (its segment is cut there)."""
     sim = MultiAgentSim(scenario, cfg.sim_config())
-    drivers = NoisyHeuristicDrivers(cfg, rng)
+    tracks = np.zeros((scenario.n_agents, N_STEPS, 8))
+    tracks[:, sim.t] = sim.boxes()
     rec_obs: dict[int, list[np.ndarray]] = {}
     rec_act: dict[int, list[np.ndarray]] = {}
     while not sim.done:
+        t = sim.t
         idx, obs = sim.observe()
-        actions = drivers.act(idx, obs)
+        actions = act(idx, obs, t)
         for k, i in enumerate(idx.tolist()):
-            rec_obs.setdefault(i, []).append(obs[k])
-            rec_act.setdefault(i, []).append(actions[k])
-        sim.step(idx, actions)
-    obs_parts, act_parts, segs = [], [], []
+            if record_until is None or t < record_until[i]:
+                rec_obs.setdefault(i, []).append(obs[k])
+                rec_act.setdefault(i, []).append(actions[k])
+        ended = sim.step(idx, actions)
+        tracks[:, sim.t] = sim.boxes()
+        for end in ended:
+            if end.row is not None:
+                tracks[end.index, end.end_step] = end.row
+    events = find_events(tracks, cfg.event_spec())
+    obs_parts: list[np.ndarray] = []
+    act_parts: list[np.ndarray] = []
+    segs: list[tuple[int, ...]] = []
+    seg_of: dict[int, int] = {}
     row = 0
     for end in sim.ends:
-        n = end.end_step - end.start_step
-        if n < 1:
+        stop = end.end_step if record_until is None else min(end.end_step, int(record_until[end.index]))
+        n = stop - end.start_step
+        if n < 1 or end.index not in rec_obs:
             continue
         o, a = rec_obs.pop(end.index), rec_act.pop(end.index)
         assert len(o) == n, (scenario.scenario_id, end, len(o))
         obs_parts.append(np.stack(o))
         act_parts.append(np.stack(a))
-        segs.append((row, n, end.agent_id, end.start_step, end.end_reason, drivers.impaired(end.index)))
+        reason = end.end_reason if stop == end.end_step else HORIZON  # cut where its log ends
+        seg_of[end.index] = len(segs)
+        segs.append((row, n, end.agent_id, end.start_step, reason, impaired(end.index)))
         row += n
     seg = np.array(segs, dtype=np.int64).reshape(-1, 6)
+    keep = np.array([int(a) in seg_of for a in events.agent.tolist()], dtype=bool)
+    ev_seg = np.array([seg_of[int(a)] for a in events.agent[keep].tolist()], dtype=np.int64)
     return Demonstrations(
         obs=np.concatenate(obs_parts).astype(np.float16) if obs_parts else np.zeros((0, ob.OBS_DIM), np.float16),
         actions=np.concatenate(act_parts).astype(np.float32) if act_parts else np.zeros((0, 2), np.float32),
         seg_row=seg[:, 0], seg_len=seg[:, 1].astype(np.int32), seg_scenario=np.zeros(len(seg), dtype=np.int32),
         seg_agent=seg[:, 2], seg_start_step=seg[:, 3].astype(np.int32), seg_end_reason=seg[:, 4].astype(np.int8),
-        seg_impaired=seg[:, 5].astype(bool), scenario_ids=np.array([scenario.scenario_id]),
-        params=cfg.to_dict(),
+        seg_impaired=seg[:, 5].astype(bool), seg_source=np.full(len(seg), source, dtype=np.int8),
+        ev_seg=ev_seg, ev_step=events.step[keep], ev_kind=events.kind[keep], ev_striker=events.striker[keep],
+        scenario_ids=np.array([scenario.scenario_id]), params=cfg.to_dict(),
     )
+
+
+def roll_out_demonstrations(scenario: Scenario, config: DemoConfig | None = None) -> Demonstrations:
+    """One scenario's `Demonstrations` of the configured source (``config.source``): `roll_out_log_demonstrations`
+    or every vehicle driven by `NoisyHeuristicDrivers` (deterministic for the config's seed and the scenario id)."""
+    cfg = config or DemoConfig()
+    if cfg.source == "log":
+        return roll_out_log_demonstrations(scenario, cfg)
+    rng = np.random.default_rng(scenario_seed(cfg.seed, scenario.scenario_id))
+    drivers = NoisyHeuristicDrivers(cfg, rng)
+    return _simulate(scenario, cfg, lambda idx, obs, _t: drivers.act(idx, obs), HEURISTIC, drivers.impaired)
+
+
+def roll_out_log_demonstrations(scenario: Scenario, config: DemoConfig | None = None) -> Demonstrations:
+    """The logged traffic's own drivers: every vehicle acts with the normalised actions that make the bicycle model
+    follow its logged track (`seal.envs.kinematics.recover_actions`, row ``t`` moves step ``t`` to ``t + 1``), each
+    from its own observation of the simulated scene. No noise: the actions are the log's, so the segments are clean
+    driving (benign windows). An agent's segment is cut at its last logged step (afterwards it would only coast)."""
+    cfg = config or DemoConfig(source="log")
+    log = scenario.tracks.astype(np.float64)
+    actions = np.stack([recover_actions(log[i]) for i in range(scenario.n_agents)])  # [A, T - 1, 2]
+    valid = log[:, :, VALID] > 0.5
+    last = valid.shape[1] - 1 - np.argmax(valid[:, ::-1], axis=1)
+
+    def act(idx: np.ndarray, _obs: np.ndarray, t: int) -> np.ndarray:
+        return actions[idx, min(t, actions.shape[1] - 1)].astype(np.float32)
+
+    return _simulate(scenario, cfg, act, LOG, lambda _i: False, record_until=last)
 
 
 def _run_chunk(args: tuple[int, list[Scenario], dict[str, Any]]) -> tuple[int, Demonstrations]:

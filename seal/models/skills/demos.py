@@ -15,6 +15,11 @@ seg_agent           [S] i64      agent id in its scenario
 seg_start_step      [S] i32      scenario step of the segment's first row
 seg_end_reason      [S] i8       index into `END_REASONS`: what happened at step ``start + len``
 seg_impaired        [S] bool     the agent drove with the impaired noise model
+seg_source          [S] i8       index into `SOURCES`: how the segment was produced
+ev_seg              [E] i64      segment of each event row (one row per agent of a collision / near miss)
+ev_step             [E] i32      scenario step of the event (`seal.models.skills.events`)
+ev_kind             [E] i8       index into `seal.models.skills.events.EVENT_KINDS`
+ev_striker          [E] bool     the segment's agent caused the event (the striker rule)
 scenario_ids        [N] str      scenarios simulated
 params              [] str       JSON of the settings that produced the file
 =================== ============ ===========================================================================
@@ -32,16 +37,24 @@ import numpy as np
 
 from seal.core.atomic import atomic_write
 from seal.envs.multi_agent import COLLISION, END_REASONS, OUT_OF_ROAD
+from seal.models.skills.events import EVENT_KINDS, NEAR_MISS_EVENT, adversarial_start_mask
 
 FORMAT = "seal-skill-demos"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 BENIGN, ADVERSARIAL = 0, 1
 LABEL_NAMES = ("benign", "adversarial")
+SOURCES = ("log", "heuristic", "ego_rollout")
+"""How a segment was produced: ``log``: the logged traffic's own drivers (the actions that reproduce each logged
+track, `seal.models.skills.demonstrations.roll_out_log_demonstrations`); ``heuristic``: the noisy, partly impaired
+heuristic drivers; ``ego_rollout``: an adversary in closed loop against an ego policy
+(`seal.experiments.fitting.skill_rollouts`)."""
+LOG, HEURISTIC, EGO_ROLLOUT = range(len(SOURCES))
 
 _SEG_FIELDS = {
     "seg_row": np.int64, "seg_len": np.int32, "seg_scenario": np.int32, "seg_agent": np.int64,
-    "seg_start_step": np.int32, "seg_end_reason": np.int8, "seg_impaired": np.bool_,
+    "seg_start_step": np.int32, "seg_end_reason": np.int8, "seg_impaired": np.bool_, "seg_source": np.int8,
 }
+_EV_FIELDS = {"ev_seg": np.int64, "ev_step": np.int32, "ev_kind": np.int8, "ev_striker": np.bool_}
 
 
 class DemoFileError(ValueError):
@@ -61,6 +74,11 @@ class Demonstrations:
     seg_start_step: np.ndarray
     seg_end_reason: np.ndarray
     seg_impaired: np.ndarray
+    seg_source: np.ndarray
+    ev_seg: np.ndarray
+    ev_step: np.ndarray
+    ev_kind: np.ndarray
+    ev_striker: np.ndarray
     scenario_ids: np.ndarray
     params: dict[str, Any]
 
@@ -93,6 +111,17 @@ class Demonstrations:
             raise DemoFileError(f"{where}: fields 'seg_row'/'seg_len' point outside the {self.n_rows} rows")
         if n_seg and ((self.seg_end_reason < 0).any() or (self.seg_end_reason >= len(END_REASONS)).any()):
             raise DemoFileError(f"{where}: field 'seg_end_reason' holds codes outside 0..{len(END_REASONS) - 1}")
+        if n_seg and ((self.seg_source < 0).any() or (self.seg_source >= len(SOURCES)).any()):
+            raise DemoFileError(f"{where}: field 'seg_source' holds codes outside 0..{len(SOURCES) - 1}")
+        n_ev = self.ev_seg.shape[0]
+        for name in _EV_FIELDS:
+            if getattr(self, name).shape != (n_ev,):
+                raise DemoFileError(f"{where}: field {name!r} must have shape [{n_ev}], got "
+                                    f"{getattr(self, name).shape}")
+        if n_ev and ((self.ev_seg < 0).any() or (self.ev_seg >= n_seg).any()):
+            raise DemoFileError(f"{where}: field 'ev_seg' indexes outside the {n_seg} segments")
+        if n_ev and ((self.ev_kind < 0).any() or (self.ev_kind >= len(EVENT_KINDS)).any()):
+            raise DemoFileError(f"{where}: field 'ev_kind' holds codes outside 0..{len(EVENT_KINDS) - 1}")
         if n_seg and ((self.seg_scenario < 0).any() or (self.seg_scenario >= len(self.scenario_ids)).any()):
             raise DemoFileError(f"{where}: field 'seg_scenario' indexes outside 'scenario_ids'")
         if not np.isfinite(self.actions).all() or not np.isfinite(self.obs).all():
@@ -105,6 +134,7 @@ class Demonstrations:
             "format": np.array(FORMAT), "format_version": np.array(FORMAT_VERSION),
             "obs": self.obs.astype(np.float16, copy=False), "actions": self.actions.astype(np.float32, copy=False),
             **{name: getattr(self, name).astype(dtype, copy=False) for name, dtype in _SEG_FIELDS.items()},
+            **{name: getattr(self, name).astype(dtype, copy=False) for name, dtype in _EV_FIELDS.items()},
             "scenario_ids": np.asarray(self.scenario_ids, dtype=str),
             "params": np.array(json.dumps(self.params, sort_keys=True)),
         }
@@ -127,8 +157,9 @@ class Demonstrations:
             raise DemoFileError(f"{where}: field 'format' is not {FORMAT!r}")
         if int(data.get("format_version", -1)) != FORMAT_VERSION:
             raise DemoFileError(f"{where}: field 'format_version' is {data.get('format_version')}; "
-                                f"this seal reads {FORMAT_VERSION}")
-        missing = [k for k in ("obs", "actions", "scenario_ids", "params", *_SEG_FIELDS) if k not in data]
+                                f"this seal reads {FORMAT_VERSION} (delete the file and re-run `seal fit skills`)")
+        missing = [k for k in ("obs", "actions", "scenario_ids", "params", *_SEG_FIELDS, *_EV_FIELDS)
+                   if k not in data]
         if missing:
             raise DemoFileError(f"{where}: missing field(s) {missing}")
         try:
@@ -138,6 +169,7 @@ class Demonstrations:
         demos = cls(
             obs=data["obs"], actions=data["actions"].astype(np.float32),
             **{name: data[name].astype(dtype) for name, dtype in _SEG_FIELDS.items()},
+            **{name: data[name].astype(dtype) for name, dtype in _EV_FIELDS.items()},
             scenario_ids=data["scenario_ids"], params=params,
         )
         demos.validate(where)
@@ -149,6 +181,7 @@ class Demonstrations:
         if not parts:
             raise ValueError("Demonstrations.concat needs at least one part")
         row_off = np.cumsum([0] + [p.n_rows for p in parts[:-1]])
+        seg_off = np.cumsum([0] + [p.n_segments for p in parts[:-1]])
         scen_off = np.cumsum([0] + [len(p.scenario_ids) for p in parts[:-1]])
         return cls(
             obs=np.concatenate([p.obs for p in parts]),
@@ -160,104 +193,149 @@ class Demonstrations:
             seg_start_step=np.concatenate([p.seg_start_step for p in parts]),
             seg_end_reason=np.concatenate([p.seg_end_reason for p in parts]),
             seg_impaired=np.concatenate([p.seg_impaired for p in parts]),
+            seg_source=np.concatenate([p.seg_source for p in parts]),
+            ev_seg=np.concatenate([p.ev_seg + o for p, o in zip(parts, seg_off, strict=True)]),
+            ev_step=np.concatenate([p.ev_step for p in parts]),
+            ev_kind=np.concatenate([p.ev_kind for p in parts]),
+            ev_striker=np.concatenate([p.ev_striker for p in parts]),
             scenario_ids=np.concatenate([np.asarray(p.scenario_ids, dtype=str) for p in parts]),
             params=dict(params if params is not None else parts[0].params),
         )
 
     # ------------------------------------------------------------------------------------------------ stats
+    def windows(self, spec: WindowSpec | None = None) -> Windows:
+        """`label_windows` of these demonstrations under ``spec``."""
+        return label_windows(self, spec or WindowSpec())
+
     def stats(self, spec: WindowSpec | None = None) -> dict[str, Any]:
-        """Counts: scenarios, agents, rows, end reasons, collision shares and windows per class under ``spec``."""
+        """Counts: scenarios, agents and rows per source, end reasons, events (struck or not), windows per class."""
         reasons = {name: int((self.seg_end_reason == k).sum()) for k, name in enumerate(END_REASONS)}
         coll = self.seg_end_reason == COLLISION
-        scen_coll = np.unique(self.seg_scenario[coll]).size
-        win = label_windows(self.seg_row, self.seg_len, self.seg_end_reason, spec or WindowSpec())
+        win = self.windows(spec)
         imp = self.seg_impaired
+        rows_per_seg = self.seg_len.astype(np.int64)
         return {
             "scenarios": len(self.scenario_ids),
             "agents": self.n_segments,
             "agent_steps": self.n_rows,
+            "agents_per_source": {n: int((self.seg_source == k).sum()) for k, n in enumerate(SOURCES)},
+            "agent_steps_per_source": {n: int(rows_per_seg[self.seg_source == k].sum()) for k, n in enumerate(SOURCES)},
             "end_reasons": reasons,
             "collision_share_agents": round(float(coll.mean()) if coll.size else 0.0, 4),
-            "collision_share_scenarios": round(scen_coll / max(1, len(self.scenario_ids)), 4),
             "collision_share_impaired": round(float(coll[imp].mean()) if imp.any() else 0.0, 4),
-            "collision_share_unimpaired": round(float(coll[~imp].mean()) if (~imp).any() else 0.0, 4),
             "out_of_road_share_agents": round(reasons[END_REASONS[OUT_OF_ROAD]] / max(1, self.n_segments), 4),
+            "events": {f"{kind}_{who}": int(((self.ev_kind == k) & (self.ev_striker == (who == "striker"))).sum())
+                       for k, kind in enumerate(EVENT_KINDS) for who in ("striker", "struck")},
             "windows_benign": int((win.label == BENIGN).sum()),
             "windows_adversarial": int((win.label == ADVERSARIAL).sum()),
+            "windows_adversarial_per_source": {
+                n: int(((win.label == ADVERSARIAL) & (self.seg_source[win.segment] == k)).sum())
+                for k, n in enumerate(SOURCES)},
             "windows_dropped": int(win.n_dropped),
+            "windows_unused": int(win.n_unused),
         }
 
 
 @dataclass(frozen=True)
 class WindowSpec:
-    """How agent segments are cut into windows and labelled (thesis 6.3.2).
+    """How agent segments are cut into windows and labelled (thesis 6.3.2; `seal.models.skills.events`).
 
-    A window starting at local row ``s`` of a segment of ``n`` rows covers rows ``s .. s + horizon - 1`` and
-    ends ``gap = n - (s + horizon)`` steps before the segment's end event (gap 0: its last action led straight
-    into the event).
+    A window of ``horizon`` steps starting at scenario step ``s`` is **adversarial** when its agent struck a
+    collision (or, with ``near_misses``, a near miss) at step ``t_e`` with ``t_e - lead_steps <= s < t_e``, and the
+    window lies inside the agent's segment. Every other window is **benign** when its segment's source is one of
+    ``benign_sources`` (clean driving: by default only the logged traffic's own drivers), else unused (the noisy
+    heuristic and the closed-loop adversaries give adversarial windows only).
 
     Attributes:
         horizon: window length (steps), the skill horizon (10 = 1 s).
-        adversarial_steps: windows of a segment that ended in a collision with ``gap < adversarial_steps`` (i.e.
-            ending within the last 20 steps before the collision) are adversarial.
-        drop_steps: windows of a segment that ended out of road with ``gap < drop_steps`` are dropped.
+        lead_steps: adversarial windows start at most this many steps before the struck event (None: 2 x horizon,
+            the thesis' 2H).
+        near_misses: near misses count as events (collisions always do).
+        drop_steps: windows ending within this many steps of an out-of-road end are dropped (the demonstrator
+            lost the road, not a skill).
         stride: step between window starts (1: every window).
+        benign_sources: names in `SOURCES` whose non-adversarial windows are benign.
     """
 
     horizon: int = 10
-    adversarial_steps: int = 20
+    lead_steps: int | None = None
+    near_misses: bool = True
     drop_steps: int = 20
     stride: int = 1
+    benign_sources: tuple[str, ...] = ("log",)
 
     def __post_init__(self) -> None:
-        for name in ("horizon", "adversarial_steps", "stride"):
+        for name in ("horizon", "stride"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"WindowSpec: {name} must be >= 1, got {getattr(self, name)}")
+        if self.lead_steps is not None and int(self.lead_steps) < 1:
+            raise ValueError(f"WindowSpec: lead_steps must be >= 1 or null, got {self.lead_steps}")
         if int(self.drop_steps) < 0:
             raise ValueError(f"WindowSpec: drop_steps must be >= 0, got {self.drop_steps}")
+        bad = [s for s in self.benign_sources if s not in SOURCES]
+        if bad:
+            raise ValueError(f"WindowSpec: benign_sources {bad} are not among {SOURCES}")
+        object.__setattr__(self, "benign_sources", tuple(self.benign_sources))
 
-    def to_dict(self) -> dict[str, int]:
-        return asdict(self)
+    @property
+    def lead(self) -> int:
+        """Steps before a struck event in which adversarial windows start."""
+        return 2 * int(self.horizon) if self.lead_steps is None else int(self.lead_steps)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["benign_sources"] = list(self.benign_sources)
+        return d
 
 
 @dataclass(frozen=True)
 class Windows:
     """Labelled windows: first ``row`` into the demonstrations, ``segment`` index and ``label`` (`BENIGN` /
-    `ADVERSARIAL`), all ``[W]``; ``n_dropped`` windows were left out (near an out-of-road end)."""
+    `ADVERSARIAL`), all ``[W]``; ``n_dropped`` windows were left out near an out-of-road end, ``n_unused`` were
+    neither adversarial nor from a benign source."""
 
     row: np.ndarray
     segment: np.ndarray
     label: np.ndarray
     n_dropped: int
+    n_unused: int = 0
 
     def __len__(self) -> int:
         return int(self.row.shape[0])
 
     def subset(self, mask: np.ndarray) -> Windows:
-        return Windows(self.row[mask], self.segment[mask], self.label[mask], 0)
+        return Windows(self.row[mask], self.segment[mask], self.label[mask], 0, 0)
 
 
-def label_windows(
-    seg_row: np.ndarray, seg_len: np.ndarray, seg_end_reason: np.ndarray, spec: WindowSpec
-) -> Windows:
-    """All windows of all segments with their labels (see `WindowSpec`); vectorised over segments."""
-    seg_row = np.asarray(seg_row, dtype=np.int64)
-    seg_len = np.asarray(seg_len, dtype=np.int64)
-    reason = np.asarray(seg_end_reason, dtype=np.int64)
+def label_windows(demos: Demonstrations, spec: WindowSpec) -> Windows:
+    """All windows of all segments with their labels (see `WindowSpec`); vectorised over segments and events."""
+    seg_row = np.asarray(demos.seg_row, dtype=np.int64)
+    seg_len = np.asarray(demos.seg_len, dtype=np.int64)
+    reason = np.asarray(demos.seg_end_reason, dtype=np.int64)
     h, stride = int(spec.horizon), int(spec.stride)
     counts = np.where(seg_len >= h, (seg_len - h) // stride + 1, 0)
     total = int(counts.sum())
     seg = np.repeat(np.arange(seg_row.shape[0]), counts)
     first = np.cumsum(counts) - counts
     local = (np.arange(total) - np.repeat(first, counts)) * stride
+    start_step = np.asarray(demos.seg_start_step, dtype=np.int64)[seg] + local
     gap = seg_len[seg] - (local + h)
-    r = reason[seg]
-    adversarial = (r == COLLISION) & (gap < spec.adversarial_steps)
-    dropped = (r == OUT_OF_ROAD) & (gap < spec.drop_steps)
-    keep = ~dropped
+    adversarial = np.zeros(total, dtype=bool)
+    struck = demos.ev_striker & ((demos.ev_kind != NEAR_MISS_EVENT) | spec.near_misses)
+    # Per struck event, the windows of its segment: windows are grouped by segment, so a segment's windows are the
+    # range first[s] .. first[s] + counts[s].
+    for e in np.flatnonzero(struck).tolist():
+        s = int(demos.ev_seg[e])
+        sl = slice(int(first[s]), int(first[s] + counts[s]))
+        adversarial[sl] |= adversarial_start_mask(start_step[sl], np.full(int(counts[s]), int(demos.ev_step[e])),
+                                                  h, spec.lead)
+    dropped = (reason[seg] == OUT_OF_ROAD) & (gap < spec.drop_steps) & ~adversarial
+    benign_src = np.isin(np.asarray(demos.seg_source)[seg], [SOURCES.index(n) for n in spec.benign_sources])
+    unused = ~adversarial & ~dropped & ~benign_src
+    keep = ~dropped & ~unused
     label = np.where(adversarial, ADVERSARIAL, BENIGN).astype(np.int8)
     return Windows(row=(seg_row[seg] + local)[keep], segment=seg[keep], label=label[keep],
-                   n_dropped=int(dropped.sum()))
+                   n_dropped=int(dropped.sum()), n_unused=int(unused.sum()))
 
 
 def gather_windows(obs: np.ndarray, actions: np.ndarray, rows: np.ndarray, horizon: int) -> tuple[np.ndarray,

@@ -80,9 +80,8 @@ class SkillPolicy:
 
     def act(self, observation: np.ndarray) -> np.ndarray:
         """Normalised action ``[steering, acceleration]`` ``[2]`` float32 for one observation ``[obs_dim]``."""
-        obs = np.asarray(observation, dtype=np.float32)  # no copy for the env's float32 rows
-        if obs.ndim != 1:
-            obs = obs.reshape(-1)
+        # No copy for the env's float32 rows; the compiled decoder needs a contiguous vector.
+        obs = np.ascontiguousarray(observation, dtype=np.float32).reshape(-1)
         if obs.shape[0] != self.obs_dim:
             raise ValueError(f"SkillPolicy.act: observation must have {self.obs_dim} entries, got {obs.shape[0]}")
         if self.steps % self.horizon == 0:

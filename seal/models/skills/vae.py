@@ -34,9 +34,11 @@ class VAEConfig:
         encoder_hidden: LSTM hidden size.
         decoder_hidden: hidden layer sizes of the decoder MLP.
         beta: KL weight.
-        decoder_ignore: observation slots the decoder does not see: by default the last applied steering and
-            action (slots 32-34 of `seal.envs.observation`). With them the decoder could copy the previous action, and
-            the latent would carry no intention (a skill's plan would be only "keep doing what you did").
+        decoder_ignore: observation slots the decoder does not see. Default none: the decoder sees the previous
+            action (slots 32-34 of `seal.envs.observation`: the applied steering and the last action), so consecutive
+            actions, and the first action of a new skill, continue from the last one (smooth skills, issue 16).
+            ``[32, 33, 34]`` hides it (the decoder cannot lean on copying the previous action; skill boundaries
+            then jump).
     """
 
     obs_dim: int = 100
@@ -46,7 +48,7 @@ class VAEConfig:
     encoder_hidden: int = 128
     decoder_hidden: tuple[int, ...] = (256, 256)
     beta: float = 0.01
-    decoder_ignore: tuple[int, ...] = (32, 33, 34)
+    decoder_ignore: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         bad = [i for i in self.decoder_ignore if not 0 <= int(i) < self.obs_dim]

@@ -1,0 +1,104 @@
+"""``"${fit.NAME}"`` references of a ``seal run`` preset: which generators and fitted models the plan uses.
+
+`seal.experiments.pipeline.run` runs the steps and `seal.experiments.pipeline.plan` checks them; both read the
+preset through these helpers.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from typing import Any
+
+from seal.adversaries.base import NO_ADVERSARY
+
+REF = re.compile(r"^\$\{fit\.(\w+)\}(.*)$")
+"""``"${fit.NAME}"`` or ``"${fit.NAME}/file inside it"`` in generator kwargs: a fitted model's path."""
+
+
+VARIANT_KEYS = ("generator", "kwargs", "train")
+
+
+def variant_of(config: Mapping[str, Any], pipeline: str) -> dict[str, Any]:
+    """The ``variants`` entry of ``pipeline`` (empty for a plain pipeline), its keys checked."""
+    variant = (config.get("variants") or {}).get(pipeline)
+    if variant is None:
+        return {}
+    if not isinstance(variant, Mapping) or not variant.get("generator"):
+        raise ValueError(f"variants.{pipeline}: expected a mapping with 'generator' (and optional 'kwargs', 'train')")
+    unknown = sorted(set(variant) - set(VARIANT_KEYS))
+    if unknown:
+        raise ValueError(f"variants.{pipeline}: unknown key(s) {unknown}; known: {list(VARIANT_KEYS)}")
+    for key in ("kwargs", "train"):
+        if not isinstance(variant.get(key) or {}, Mapping):
+            raise ValueError(f"variants.{pipeline}.{key}: expected a mapping, got {variant.get(key)!r}")
+    return dict(variant)
+
+
+def generator_of(pipeline: str, config: Mapping[str, Any] | None = None) -> str | None:
+    """The adversary generator a training pipeline uses (None for ``noadv``; a variant's ``generator``)."""
+    if pipeline == NO_ADVERSARY:
+        return None
+    variant = variant_of(config or {}, pipeline)
+    return str(variant["generator"]) if variant else pipeline
+
+
+def dotted(prefix: str, value: Any) -> dict[str, Any]:
+    """Nested mapping -> ``{"a.b": leaf}`` (a variant's train overrides as `load_train_config` takes them)."""
+    if not isinstance(value, Mapping):
+        return {prefix: value}
+    return {k: v for key, sub in value.items() for k, v in dotted(f"{prefix}.{key}" if prefix else key, sub).items()}
+
+
+def generators_in_use(config: Mapping[str, Any]) -> list[str]:
+    """Generators of the training pipelines and of the eval settings, in order of first use."""
+    from seal.adversaries.base import available_generators
+
+    names = [generator_of(p, config) for p in config["pipelines"]]
+    names += [s for s in (config.get("eval") or {}).get("settings", []) if s in available_generators()]
+    return [n for n in dict.fromkeys(names) if n]
+
+
+def _refs(value: Any) -> list[str]:
+    """Names of the fitted models referenced (``"${fit.NAME}"``) anywhere in ``value``."""
+    if isinstance(value, dict):
+        return [r for v in value.values() for r in _refs(v)]
+    if isinstance(value, list):
+        return [r for v in value for r in _refs(v)]
+    m = REF.match(value) if isinstance(value, str) else None
+    return [m.group(1)] if m else []
+
+
+def fits_needed(config: Mapping[str, Any]) -> list[str]:
+    """Models referenced (``"${fit.NAME}"``) by the kwargs of the generators in use, plus the models those fits'
+    options reference in turn (e.g. ``objective: {prior: "${fit.prior}"}``); ordered so that every model comes
+    after the ones its fit uses."""
+    gens, fit = config.get("generators") or {}, config.get("fit") or {}
+    wanted = [r for name in generators_in_use(config) for r in _refs(gens.get(name) or {})]
+    order: list[str] = []
+
+    def visit(name: str, chain: tuple[str, ...]) -> None:
+        if name in order:
+            return
+        if name in chain:
+            raise ValueError(f"fit: circular references {' -> '.join((*chain, name))}")
+        if name not in fit:
+            raise ValueError(f"the preset references ${{fit.{name}}} but has no fit.{name} entry")
+        spec = fit[name] or {}
+        for dep in ([] if spec.get("path") else _refs(spec)):
+            visit(dep, (*chain, name))
+        order.append(name)
+
+    for name in dict.fromkeys(wanted):
+        visit(name, ())
+    return order
+
+
+def substitute(value: Any, models: Mapping[str, str]) -> Any:
+    """Replace ``"${fit.NAME}"`` strings (at any depth) by the fitted model paths."""
+    if isinstance(value, dict):
+        return {k: substitute(v, models) for k, v in value.items()}
+    if isinstance(value, list):
+        return [substitute(v, models) for v in value]
+    m = REF.match(value) if isinstance(value, str) else None
+    return models[m.group(1)] + m.group(2) if m else value

@@ -1,0 +1,167 @@
+"""Pure-numpy references of the compiled hot-loop kernels (issue 23): the observation's ray casts, box lidar and
+nearest vehicles (`seal.envs.obs_kernels`), the env's box collision test and the route projection
+(`seal.core.kernels`). These are the float64 numpy code paths the kernels replaced, kept here (and only here) as
+the reference the kernels are tested against.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from seal.core.geometry import overlaps_one
+from seal.envs import observation as ob
+from seal.envs.kinematics import MAX_SPEED_MPS, AgentState
+from seal.envs.road_geometry import RoadGeometry
+from seal.envs.route import Route, RouteProjection
+
+_RAY_COS = np.concatenate([np.cos(ob._EDGE_ANG), np.cos(ob._LINE_ANG)])[:, None]  # [42, 1]
+_RAY_SIN_SIGNED = np.array([-1.0, 1.0])[:, None, None] * np.concatenate(
+    [np.sin(ob._EDGE_ANG), np.sin(ob._LINE_ANG)])[:, None]  # [2, 42, 1]: -sin, +sin
+
+
+def _hit_distances(
+    dx: np.ndarray, dy: np.ndarray, ax: np.ndarray, ay: np.ndarray, ex: np.ndarray, ey: np.ndarray, max_range: float,
+) -> np.ndarray:
+    """Distance along each ray ``[K, 1]`` to each segment ``[M]`` it hits, ``max_range`` where it misses."""
+    inv = dx * ey
+    inv -= dy * ex
+    np.reciprocal(inv, out=inv)
+    t = ax * ey
+    t -= ay * ex
+    t = t * inv
+    u = dy * ax
+    u -= dx * ay
+    u *= inv
+    hit = t >= 0.0
+    hit &= u >= 0.0
+    hit &= u <= 1.0
+    return np.where(hit, t, max_range)
+
+
+def _box_lidar(
+    dx: np.ndarray, dy: np.ndarray, rx: np.ndarray, ry: np.ndarray, cos_h: np.ndarray, sin_h: np.ndarray,
+    half_length: np.ndarray, half_width: np.ndarray, max_range: float,
+) -> np.ndarray:
+    """Distance ``[K]`` along rays ``[K, 1]`` to the first of ``n`` oriented boxes (slab test), ``max_range`` when
+    none is hit; ``rx, ry``: ``[n]`` box centres relative to the viewer (m)."""
+    px = -(rx * cos_h + ry * sin_h)
+    py = rx * sin_h - ry * cos_h
+    inv_x = 1.0 / (dx * cos_h + dy * sin_h)
+    inv_y = 1.0 / (dy * cos_h - dx * sin_h)
+    a = (-half_length - px) * inv_x
+    b = (half_length - px) * inv_x
+    c = (-half_width - py) * inv_y
+    d = (half_width - py) * inv_y
+    enter = np.maximum(np.minimum(a, b), np.minimum(c, d))
+    leave = np.minimum(np.maximum(a, b), np.maximum(c, d))
+    hit = (enter <= leave) & (leave >= 0.0)
+    return np.where(hit, np.where(enter >= 0.0, enter, leave), max_range).min(axis=-1)
+
+
+def cast_rays(
+    dx: np.ndarray, dy: np.ndarray, ax: np.ndarray, ay: np.ndarray, ex: np.ndarray, ey: np.ndarray,
+    max_range: float,
+) -> np.ndarray:
+    """Distance (m) along each ray ``[K]`` (unit directions) to the first of the segments ``[M]`` (starts relative to
+    the ray origin ``ax, ay``, vectors ``ex, ey``) hit, ``max_range`` when none within it (the numpy ray caster)."""
+    if ax.shape[0] == 0:
+        return np.full(dx.shape[0], max_range)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / (np.multiply.outer(dx, ey) - np.multiply.outer(dy, ex))  # [K, M]
+        t = (ax * ey - ay * ex) * inv
+        u = (np.multiply.outer(dy, ax) - np.multiply.outer(dx, ay)) * inv
+    hit = (t >= 0.0) & (u >= 0.0) & (u <= 1.0)
+    return np.minimum(np.where(hit, t, max_range).min(axis=1), max_range)
+
+
+def reference_observation(
+    geom: RoadGeometry, state: AgentState, route: Route, projection: RouteProjection, boxes: np.ndarray,
+    self_row: int = -1,
+) -> np.ndarray:
+    """The observation ``[OBS_DIM]`` float32 of one viewer as the numpy builder computed it, ray casts against every
+    road segment (the builder's grid only leaves out segments beyond ray range). ``boxes [N, >=7]``: vehicles in
+    track layout; ``self_row``: the viewer's own row in it, or -1."""
+    obs = np.empty(ob.OBS_DIM, dtype=np.float32)
+    x, y, h = state.x, state.y, state.heading
+    c, s = math.cos(h), math.sin(h)
+    cos_sin = np.array((c, s))[:, None, None]  # [2, 1, 1]
+    dx, dy = cos_sin * _RAY_COS + cos_sin[::-1] * _RAY_SIN_SIGNED  # [42, 1] each
+    dx30, dy30, dx12, dy12 = dx[:30], dy[:30], dx[30:], dy[30:]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for seg, ddx, ddy, rng_m, sl in ((geom.edges.segments, dx30, dy30, ob.EDGE_RANGE_M, ob.EDGE_RAYS),
+                                         (geom.lines.segments, dx12, dy12, ob.LINE_RANGE_M, ob.LINE_RAYS)):
+            if seg.size:
+                obs[sl] = _hit_distances(ddx, ddy, seg.ax - x, seg.ay - y, seg.ex, seg.ey, rng_m).min(-1) / rng_m
+            else:
+                obs[sl] = 1.0
+        herr = (projection.heading - h + math.pi) % (2 * math.pi) - math.pi
+        p1x, p1y = route.point_at(projection.s + ob.CHECKPOINT_SPACING_M)
+        p2x, p2y = route.point_at(projection.s + 2 * ob.CHECKPOINT_SPACING_M)
+        p1x, p1y, p2x, p2y = p1x - x, p1y - y, p2x - x, p2y - y
+        obs[ob.HEADING_ERROR : ob.LINE_RAYS.start] = (
+            herr / math.pi, state.speed / MAX_SPEED_MPS, state.steering, state.steering, state.accel,
+            state.yaw_rate / ob.YAW_RATE_SCALE,
+        )
+        obs[ob.LATERAL : ob.LIDAR.start] = (
+            projection.lateral / ob.LATERAL_SCALE_M,
+            (p1x * c + p1y * s) / ob.NAV_SCALE_M, (p1y * c - p1x * s) / ob.NAV_SCALE_M,
+            (p2x * c + p2y * s) / ob.NAV_SCALE_M, (p2y * c - p2x * s) / ob.NAV_SCALE_M,
+            geom.speed_limit_at(x, y) / MAX_SPEED_MPS, route.speed_at(projection.s) / MAX_SPEED_MPS,
+        )
+        rx, ry = boxes[:, 0] - x, boxes[:, 1] - y
+        d2 = rx * rx + ry * ry
+        if self_row >= 0:
+            d2[self_row] = math.inf
+        near = np.flatnonzero(d2 < ob.LIDAR_REACH2)
+        obs[ob.LIDAR] = 1.0
+        obs[ob.NEAREST] = 0.0
+        if near.size:
+            o = boxes[near]
+            obs[ob.LIDAR] = _box_lidar(dx30, dy30, rx[near], ry[near], np.cos(o[:, 2]), np.sin(o[:, 2]),
+                                       0.5 * o[:, 5], 0.5 * o[:, 6], ob.LIDAR_RANGE_M) / ob.LIDAR_RANGE_M
+            dn = d2[near]
+            slots: list[float] = []
+            vx, vy = state.speed * c, state.speed * s
+            for i in np.argsort(dn, kind="stable")[: ob.N_NEAREST]:
+                if not dn[i] < ob.LIDAR_RANGE2:
+                    break
+                px, py = float(rx[near[i]]), float(ry[near[i]])
+                dvx, dvy = float(o[i, 3]) - vx, float(o[i, 4]) - vy
+                slots += (1.0, (px * c + py * s) / ob.LIDAR_RANGE_M, (py * c - px * s) / ob.LIDAR_RANGE_M,
+                          (dvx * c + dvy * s) / ob.REL_SPEED_SCALE, (dvy * c - dvx * s) / ob.REL_SPEED_SCALE)
+            obs[ob.NEAREST.start : ob.NEAREST.start + len(slots)] = slots
+    np.maximum(obs, ob.OBS_LOW, out=obs)
+    np.minimum(obs, ob.OBS_HIGH, out=obs)
+    return obs
+
+
+def reference_box_hits(state: AgentState, cur: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """Rows in ``idx`` (of the box table ``cur [A, 8]``) whose boxes overlap ``state``'s box: the half-diagonal
+    pre-filter, then the numpy separating-axis test (`seal.core.geometry.overlaps_one`)."""
+    if idx.size == 0:
+        return idx
+    b = cur[idx]
+    reach = 0.5 * (math.hypot(state.length, state.width) + np.hypot(b[:, 5], b[:, 6]))
+    d2 = (b[:, 0] - state.x) ** 2 + (b[:, 1] - state.y) ** 2
+    cand = idx[d2 < reach * reach]
+    if not cand.size:
+        return cand
+    return cand[overlaps_one(state.x, state.y, state.heading, state.length, state.width, cur[cand])]
+
+
+def reference_projection(route: Route, x: float, y: float, hint: int | None = None) -> tuple[int, float, float]:
+    """(segment, s, lateral) of the closest point of ``route`` to (x, y), numpy, windowed around ``hint`` as
+    `Route.project` does (8 segments back, 40 ahead)."""
+    cols = route._cols
+    n = cols.shape[1]
+    lo, hi = (0, n) if hint is None else (max(0, hint - 8), min(n, hint + 40))
+    ax, ay, ex, ey = cols[:, lo:hi]
+    px, py = x - ax, y - ay
+    seg_len = np.hypot(ex, ey)
+    t = np.clip((px * ex + py * ey) / (seg_len * seg_len), 0.0, 1.0)
+    k = int(np.argmin((px - t * ex) ** 2 + (py - t * ey) ** 2))
+    lateral = (float(ex[k]) * float(py[k]) - float(ey[k]) * float(px[k])) / float(seg_len[k])
+    s0 = float(route._cum[lo + k])
+    return lo + k, s0 + float(t[k]) * float(seg_len[k]), lateral
