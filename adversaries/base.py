@@ -113,6 +113,12 @@ GENERATORS: dict[str, GeneratorSpec] = {
     "seal": GeneratorSpec("seal", "seal.adversaries.seal.generator", _opts(
         *_CANDIDATE_OPTIONS, "objective", "skills", "switch", "switch_offset_steps", "noise_scale",
         models=("prior", "objective", "skills"), builtins={"objective": ("cat",)}), pipeline=True),
+    "cat-rcg": GeneratorSpec("cat-rcg", "seal.adversaries.rcg.generator", _opts(
+        "prior", "candidates", "follow", "behavior", "n_knn", "n_int", "distance", models=("prior", "behavior")),
+        pipeline=True),
+    "seal-rcg": GeneratorSpec("seal-rcg", "seal.adversaries.rcg.generator", _opts(
+        "prior", "candidates", "follow", "behavior", "n_knn", "n_int", "distance", "skills", "switch",
+        "switch_offset_steps", "noise_scale", models=("prior", "behavior", "skills")), pipeline=True),
 }
 """The built-in generators, one entry each (add a line per new generator). Each module is imported on first lookup
 (so a name resolves without importing every generator, and even when ``adversaries/__init__.py`` did not run)."""
