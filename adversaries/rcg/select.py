@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import torch
 
 from seal.adversaries.candidate_path import candidate_track
 from seal.adversaries.seal.objective import Ranking
@@ -52,14 +53,15 @@ DISTANCES = tuple(d.value for d in Distance)
 def knn_distance(queries: np.ndarray, cache: np.ndarray, n_knn: int) -> np.ndarray:
     """``[Q]`` mean Euclidean distance of each row of ``queries [Q, D]`` to its ``n_knn`` nearest rows of
     ``cache [N, D]`` (all of them when ``N < n_knn``)."""
-    cache = np.asarray(cache, dtype=np.float64)
-    if cache.shape[0] == 0:
+    if len(cache) == 0:
         raise ValueError("knn_distance: the unsafe cache is empty")
-    q = np.asarray(queries, dtype=np.float64)
-    d2 = (q * q).sum(1)[:, None] + (cache * cache).sum(1)[None] - 2.0 * q @ cache.T
-    dist = np.sqrt(np.maximum(d2, 0.0))
-    k = min(int(n_knn), cache.shape[0])
-    return np.partition(dist, k - 1, axis=1)[:, :k].mean(axis=1)
+    # torch, not numpy: its matrix product runs on the threads the entry point set (numpy's BLAS may start its own
+    # thread pool, which costs far more than the product on a loaded machine).
+    q = torch.as_tensor(np.asarray(queries), dtype=torch.float64)
+    c = torch.as_tensor(np.asarray(cache), dtype=torch.float64)
+    dist = torch.cdist(q, c)
+    k = min(int(n_knn), c.shape[0])
+    return torch.topk(dist, k, dim=1, largest=False).values.mean(dim=1).numpy()
 
 
 def closeness_m(cand_xy: np.ndarray, ego_xy: np.ndarray, ego_valid: np.ndarray) -> np.ndarray:
@@ -71,7 +73,8 @@ def closeness_m(cand_xy: np.ndarray, ego_xy: np.ndarray, ego_valid: np.ndarray) 
     ok = steps < ego_xy.shape[1]
     rows = steps[ok]
     valid = ego_valid[:, rows]  # [K, F']
-    gap = np.linalg.norm(cand_xy[:, None, ok] - ego_xy[None, :, rows], axis=-1)  # [C, K, F']
+    rel = cand_xy[:, None, ok] - ego_xy[None, :, rows]
+    gap = np.hypot(rel[..., 0], rel[..., 1])  # [C, K, F']
     per_roll = np.where(valid[None], gap, np.inf).min(axis=-1)  # [C, K]
     usable = np.isfinite(per_roll)
     with np.errstate(invalid="ignore"):
@@ -96,15 +99,23 @@ def ego_tracks(scenario: Scenario, ego_xy: np.ndarray, ego_heading: np.ndarray, 
     return out * out[..., VALID:VALID + 1]
 
 
-def perturbed_scenes(scenario: Scenario, cand_xy: np.ndarray, egos: np.ndarray) -> np.ndarray:
-    """``[C * K, A, N_STEPS, 8]`` scenes (candidate-major): the base tracks with the adversary on candidate
-    ``cand_xy[i]`` and the ego on roll-out ``egos[k]`` (`ego_tracks`)."""
+def scene_bank(scenario: Scenario, cand_xy: np.ndarray, egos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The perturbed scenes as a bank of tracks and rows: ``bank [A + C + K, N_STEPS, 8]`` (the logged agents, the
+    adversary on each candidate ``cand_xy[i]``, the ego on each roll-out ``egos[k]``) and ``scenes [C * K, A]``
+    (candidate-major), scene ``(i, k)`` being the logged rows with the adversary's and the ego's replaced."""
     adv = np.stack([candidate_track(scenario, scenario.adv_index, xy) for xy in cand_xy])  # [C, T, 8]
-    c, k = adv.shape[0], egos.shape[0]
-    scenes = np.repeat(scenario.tracks[None].astype(np.float64), c * k, axis=0)
-    scenes[:, scenario.adv_index] = np.repeat(adv, k, axis=0)
-    scenes[:, scenario.ego_index] = np.tile(egos, (c, 1, 1))
-    return scenes
+    n, c, k = scenario.n_agents, adv.shape[0], egos.shape[0]
+    bank = np.concatenate([scenario.tracks.astype(np.float64), adv, egos])
+    scenes = np.tile(np.arange(n), (c * k, 1))
+    scenes[:, scenario.adv_index] = n + np.repeat(np.arange(c), k)
+    scenes[:, scenario.ego_index] = n + c + np.tile(np.arange(k), c)
+    return bank, scenes
+
+
+def perturbed_scenes(scenario: Scenario, cand_xy: np.ndarray, egos: np.ndarray) -> np.ndarray:
+    """``[C * K, A, N_STEPS, 8]`` the scenes of `scene_bank` written out (for inspection and tests)."""
+    bank, scenes = scene_bank(scenario, cand_xy, egos)
+    return bank[scenes]
 
 
 @dataclass(frozen=True)
@@ -133,8 +144,8 @@ def rcg_select(
     close = closeness_m(cands.xy, ego_xy, ego_valid)
     kept = np.argsort(close, kind="stable")[: max(1, min(int(n_int), cands.n_candidates))]
     egos = ego_tracks(scenario, ego_xy, ego_heading, ego_valid)
-    scenes = perturbed_scenes(scenario, cands.xy[kept], egos)
-    v = model.embed_tracks(scenes, np.full(scenes.shape[0], scenario.adv_index))
+    bank, scenes = scene_bank(scenario, cands.xy[kept], egos)
+    v = model.embed_scenes(bank, scenes, scenario.adv_index)
     if distance == Distance.PROTOTYPE:
         d = np.linalg.norm(v - model.unsafe_prototype()[None], axis=1)
     else:

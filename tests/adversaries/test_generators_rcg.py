@@ -62,8 +62,8 @@ class EndpointModel:
         self.unsafe_cache = np.array([[x_unsafe, 0.0], [x_unsafe + 1.0, 0.0], [x_unsafe, 1.0]])
         self.x_proto = x_proto
 
-    def embed_tracks(self, tracks: np.ndarray, target: np.ndarray) -> np.ndarray:
-        return tracks[np.arange(len(target)), target, -1][:, [X, Y]]
+    def embed_scenes(self, bank: np.ndarray, scenes: np.ndarray, target_col: int) -> np.ndarray:
+        return bank[scenes[:, target_col], -1][:, [X, Y]]
 
     def unsafe_prototype(self) -> np.ndarray:
         return np.array([self.x_proto, 0.0])
@@ -171,3 +171,24 @@ def test_seal_rcg_ranks_with_rcg_and_keeps_seals_follow_and_switch(tmp_path) -> 
     with pytest.raises(ValueError, match="scenario"):
         rcg(None, (4.0, 2.0), np.zeros((1, 91, 2)), np.zeros((1, 91)), np.ones((1, 91), bool),  # type: ignore[arg-type]
             (4.0, 2.0))
+
+
+def test_the_shared_frame_bank_embeds_like_the_written_out_scenes() -> None:
+    s = sf.highway_scenario(5)
+    cands = _fan(s, [400.0, 420.0, 380.0])
+    ego = s.tracks[s.ego_index].astype(float)
+    egos = ego_tracks(s, np.stack([ego[:, [X, Y]], ego[:, [X, Y]] + [3.0, 0.5]]), np.stack([ego[:, 2]] * 2),
+                      np.stack([ego[:, VALID] > 0.5] * 2))
+    from seal.adversaries.rcg.select import scene_bank
+    from seal.models.behavior.features import shared_frame_inputs, target_inputs
+
+    bank, scenes = scene_bank(s, cands.xy, egos)
+    model = small_model()
+    shared = shared_frame_inputs(bank, scenes, s.adv_index, model.config.features)
+    full = target_inputs(perturbed_scenes(s, cands.xy, egos), np.full(6, s.adv_index), model.config.features)
+    for field in ("agents", "target_xy"):
+        np.testing.assert_allclose(getattr(shared, field), getattr(full, field), atol=1e-5)
+    np.testing.assert_array_equal(shared.mask, full.mask)
+    np.testing.assert_allclose(model.embed_scenes(bank, scenes, s.adv_index),
+                               model.embed_tracks(perturbed_scenes(s, cands.xy, egos), np.full(6, s.adv_index)),
+                               atol=1e-5)

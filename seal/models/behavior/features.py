@@ -98,7 +98,8 @@ def _closest_agents(xy: np.ndarray, valid: np.ndarray, target: np.ndarray, n_age
     """``[P, n_agents]`` agent rows (-1 = none), the target first, then by smallest distance to it over rows where
     both are valid. ``xy [P, A, S, 2]``, ``valid [P, A, S]``, ``target [P]``."""
     p = np.arange(xy.shape[0])
-    gap = np.linalg.norm(xy - xy[p, target][:, None], axis=-1)  # [P, A, S]
+    rel = xy - xy[p, target][:, None]
+    gap = np.hypot(rel[..., 0], rel[..., 1])  # [P, A, S]
     both = valid & valid[p, target][:, None]
     dist = np.where(both, gap, np.inf).min(axis=-1)  # [P, A]
     dist[p, target] = -1.0
@@ -107,6 +108,51 @@ def _closest_agents(xy: np.ndarray, valid: np.ndarray, target: np.ndarray, n_age
     if order.shape[1] < n_agents:
         order = np.pad(order, ((0, 0), (0, n_agents - order.shape[1])), constant_values=-1)
     return order
+
+
+def _in_frame(sub: np.ndarray, ref: np.ndarray, cfg: BehaviorFeatureConfig
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Sub-sampled tracks ``sub [..., S, 8]`` in the frame(s) ``ref [..., 8]`` (broadcast against ``sub[..., 0, :]``):
+    ``(steps [..., S, 7] token features, xy [..., S, 2] (m), valid [..., S], size [..., 2] (length, width, m))``."""
+    valid = sub[..., VALID] > 0.5
+    cos, sin = np.cos(ref[..., HEADING])[..., None], np.sin(ref[..., HEADING])[..., None]
+    dx, dy = sub[..., X] - ref[..., None, X], sub[..., Y] - ref[..., None, Y]
+    xy = np.stack([cos * dx + sin * dy, -sin * dx + cos * dy], axis=-1)
+    dh = sub[..., HEADING] - ref[..., None, HEADING]
+    vx = cos * sub[..., VX] + sin * sub[..., VY]
+    vy = -sin * sub[..., VX] + cos * sub[..., VY]
+    v = valid.astype(np.float64)
+    steps = np.stack([xy[..., 0] / cfg.pos_scale_m, xy[..., 1] / cfg.pos_scale_m, np.cos(dh), np.sin(dh),
+                      vx / cfg.vel_scale_mps, vy / cfg.vel_scale_mps, v], axis=-1) * v[..., None]
+    # Size at the agent's latest valid sub-sampled row (boxes are constant in the data; this skips invalid zeros).
+    last = sub.shape[-2] - 1 - np.argmax(valid[..., ::-1], axis=-1)
+    size = np.take_along_axis(sub[..., [LENGTH, WIDTH]], last[..., None, None], axis=-2)[..., 0, :]
+    return steps, xy, valid, size
+
+
+def _assemble(steps: np.ndarray, xy: np.ndarray, valid: np.ndarray, size: np.ndarray, target: np.ndarray,
+              cfg: BehaviorFeatureConfig) -> BehaviorInputs:
+    """Tokens of the closest agents from per-scene agent features (``[P, A, ...]`` as `_in_frame` gives them)."""
+    p = np.arange(target.size)
+    chosen = _closest_agents(xy, valid, target, cfg.n_agents)  # [P, N]
+    present = chosen >= 0
+    rows = np.where(present, chosen, 0)
+    tok_steps = steps[p[:, None], rows].reshape(target.size, cfg.n_agents, -1)  # [P, N, S * 7]
+    static = np.concatenate([size[p[:, None], rows] / np.array([5.0, 2.0]),
+                             (np.arange(cfg.n_agents) == 0)[None, :, None].repeat(target.size, 0)], axis=-1)
+    agents = np.concatenate([tok_steps, static], axis=-1) * present[..., None]
+    return BehaviorInputs(
+        agents=agents.astype(np.float32),
+        mask=present,
+        target_xy=(xy[p, target] * valid[p, target][..., None]).astype(np.float32),
+        target_valid=valid[p, target],
+    )
+
+
+def _check_targets(ref: np.ndarray, target: np.ndarray) -> None:
+    if (ref[..., VALID] < 0.5).any():
+        raise ValueError("target_inputs: every target must be valid at the current step "
+                         f"{CURRENT_STEP} (targets {np.unique(target[ref[..., VALID] < 0.5]).tolist()})")
 
 
 def target_inputs(tracks: np.ndarray, target: np.ndarray, cfg: BehaviorFeatureConfig) -> BehaviorInputs:
@@ -122,39 +168,34 @@ def target_inputs(tracks: np.ndarray, target: np.ndarray, cfg: BehaviorFeatureCo
     if tracks.ndim != 4 or tracks.shape[2] != N_STEPS or tracks.shape[0] != target.size:
         raise ValueError(f"target_inputs: expected tracks [P, A, {N_STEPS}, 8] and target [P], got "
                          f"{tracks.shape} and {target.shape}")
-    p = np.arange(target.size)
-    ref = tracks[p, target, CURRENT_STEP].astype(np.float64)  # [P, 8]
-    if (ref[:, VALID] < 0.5).any():
-        raise ValueError("target_inputs: every target must be valid at the current step "
-                         f"{CURRENT_STEP} (targets {target[ref[:, VALID] < 0.5].tolist()})")
+    ref = tracks[np.arange(target.size), target, CURRENT_STEP].astype(np.float64)  # [P, 8]
+    _check_targets(ref, target)
     sub = tracks[:, :, cfg.rows].astype(np.float64)  # [P, A, S, 8]
-    valid = sub[..., VALID] > 0.5
-    cos, sin = np.cos(ref[:, HEADING])[:, None, None], np.sin(ref[:, HEADING])[:, None, None]
-    dx, dy = sub[..., X] - ref[:, None, None, X], sub[..., Y] - ref[:, None, None, Y]
-    xy = np.stack([cos * dx + sin * dy, -sin * dx + cos * dy], axis=-1)  # [P, A, S, 2] (m, target frame)
-    dh = sub[..., HEADING] - ref[:, None, None, HEADING]
-    vx = cos * sub[..., VX] + sin * sub[..., VY]
-    vy = -sin * sub[..., VX] + cos * sub[..., VY]
-    v = valid.astype(np.float64)
-    steps = np.stack([xy[..., 0] / cfg.pos_scale_m, xy[..., 1] / cfg.pos_scale_m, np.cos(dh), np.sin(dh),
-                      vx / cfg.vel_scale_mps, vy / cfg.vel_scale_mps, v], axis=-1) * v[..., None]
+    return _assemble(*_in_frame(sub, ref[:, None], cfg), target, cfg)
 
-    chosen = _closest_agents(xy, valid, target, cfg.n_agents)  # [P, N]
-    present = chosen >= 0
-    rows = np.where(present, chosen, 0)
-    tok_steps = steps[p[:, None], rows].reshape(target.size, cfg.n_agents, -1)  # [P, N, S * 7]
-    # Size at the agent's latest valid sub-sampled row (boxes are constant in the data; this skips invalid zeros).
-    last = sub.shape[2] - 1 - np.argmax(valid[..., ::-1], axis=-1)  # [P, A]
-    size = np.take_along_axis(sub[..., [LENGTH, WIDTH]], last[..., None, None], axis=2)[:, :, 0]  # [P, A, 2]
-    static = np.concatenate([size[p[:, None], rows] / np.array([5.0, 2.0]),
-                             (np.arange(cfg.n_agents) == 0)[None, :, None].repeat(target.size, 0)], axis=-1)
-    agents = np.concatenate([tok_steps, static], axis=-1) * present[..., None]
-    return BehaviorInputs(
-        agents=agents.astype(np.float32),
-        mask=present,
-        target_xy=(xy[p, target] * valid[p, target][..., None]).astype(np.float32),
-        target_valid=valid[p, target],
-    )
+
+def shared_frame_inputs(bank: np.ndarray, scenes: np.ndarray, target_col: int, cfg: BehaviorFeatureConfig
+                        ) -> BehaviorInputs:
+    """`target_inputs` of scenes assembled from a bank of tracks whose target has the same pose at `CURRENT_STEP`
+    in every scene (RCG's perturbed scenes: every candidate continues the adversary's logged history), so every
+    track is put into the frame once instead of once per scene.
+
+    Args:
+        bank: ``[R, N_STEPS, 8]`` tracks.
+        scenes: ``[P, A]`` rows of ``bank`` forming each scene.
+        target_col: column of the target in every scene (``bank[scenes[p, target_col]]``).
+        cfg: the feature settings.
+    """
+    bank = np.asarray(bank, dtype=np.float64)
+    scenes = np.asarray(scenes, dtype=np.int64)
+    targets = scenes[:, target_col]
+    ref = bank[targets, CURRENT_STEP]  # [P, 8]
+    _check_targets(ref, targets)
+    if not np.allclose(ref[:, [X, Y, HEADING]], ref[:1, [X, Y, HEADING]], atol=1e-6):
+        raise ValueError("shared_frame_inputs: the targets' poses at the current step differ between scenes")
+    steps, xy, valid, size = _in_frame(bank[:, cfg.rows], ref[0], cfg)  # [R, ...]
+    target = np.full(scenes.shape[0], target_col)
+    return _assemble(steps[scenes], xy[scenes], valid[scenes], size[scenes], target, cfg)
 
 
 def scene_targets(tracks: np.ndarray, min_valid_rows: int, cfg: BehaviorFeatureConfig) -> np.ndarray:

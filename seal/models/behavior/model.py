@@ -20,7 +20,7 @@ import torch
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
 from seal.core.errors import SealError
 from seal.core.weights_file import check_header, read_weights_file
-from seal.models.behavior.features import BehaviorInputs, target_inputs
+from seal.models.behavior.features import BehaviorInputs, shared_frame_inputs, target_inputs
 from seal.models.behavior.losses import Prototypes
 from seal.models.behavior.network import BehaviorConfig, BehaviorNet
 
@@ -70,6 +70,11 @@ class BehaviorModel:
     def embed_tracks(self, tracks: np.ndarray, target: np.ndarray) -> np.ndarray:
         """``v [P, proj_dim]`` of agent ``target[p]`` in scene ``tracks[p]`` (``[P, A, N_STEPS, 8]``)."""
         return self.embed(target_inputs(tracks, target, self.config.features))
+
+    def embed_scenes(self, bank: np.ndarray, scenes: np.ndarray, target_col: int) -> np.ndarray:
+        """``v [P, proj_dim]`` of the target (column ``target_col``) of scenes assembled from a bank of tracks whose
+        target has one pose at the current step (`seal.models.behavior.features.shared_frame_inputs`)."""
+        return self.embed(shared_frame_inputs(bank, scenes, target_col, self.config.features))
 
     def set_unsafe_cache(self, embeddings: np.ndarray) -> None:
         self.unsafe_cache = np.asarray(embeddings, dtype=np.float32).reshape(-1, self.config.proj_dim)
