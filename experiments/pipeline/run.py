@@ -91,7 +91,8 @@ class RunPreset:
 
 
 SECTIONS = tuple(f.name for f in fields(RunPreset))
-FIT_OUTPUTS = {"prior": "prior.pt", "goose": "goose.zip", "skills": "skills", "objective": "objective"}
+FIT_OUTPUTS = {"prior": "prior.pt", "goose": "goose.zip", "skills": "skills", "objective": "objective",
+               "behavior": "behavior"}
 """Model name -> file or folder written under OUT/models by the fit of that model."""
 REF = re.compile(r"^\$\{fit\.(\w+)\}(.*)$")
 """``"${fit.NAME}"`` or ``"${fit.NAME}/file inside it"`` in generator kwargs: a fitted model's path."""
