@@ -166,8 +166,10 @@ def _unsafe_cache(model: BehaviorModel, data: Data, cache_max: int, seed: int) -
     return {"everyday_unsafe": int(rows.size), "crash_unsafe": int(crash_rows.size)}
 
 
-def fit_variants(data: Data, config: BehaviorFitConfig, seed: int) -> tuple[dict[str, BehaviorModel], list[dict]]:
-    """The four variants of one seed (see the module docstring) and their training log rows."""
+def fit_variants(data: Data, config: BehaviorFitConfig, seed: int, bar: Any = None
+                 ) -> tuple[dict[str, BehaviorModel], list[dict]]:
+    """The four variants of one seed (see the module docstring) and their training log rows; ``bar`` (a tqdm
+    bar) advances once per training stage."""
     import torch
 
     from seal.models.behavior.model import BehaviorModel
@@ -186,12 +188,16 @@ def fit_variants(data: Data, config: BehaviorFitConfig, seed: int) -> tuple[dict
         net = BehaviorNet(net_cfg)
         start = time.monotonic()
         protos, rows = pretrain(net, train_t, tcfg)
+        if bar is not None:
+            bar.update()
         log += [{"variant": base, "seed": seed, **r} for r in rows]
         info = {"variant": base, "seed": seed, "train_seconds": round(time.monotonic() - start, 1)}
         models[base] = BehaviorModel(net_cfg, net, protos, lora=False, info=info)
         tuned_net = copy.deepcopy(net)
         start = time.monotonic()
         tuned_protos, rows = finetune(tuned_net, crash_t, tcfg, protos)
+        if bar is not None:
+            bar.update()
         log += [{"variant": tuned, "seed": seed, **r} for r in rows]
         models[tuned] = BehaviorModel(net_cfg, tuned_net, tuned_protos, lora=True,
                                       info={"variant": tuned, "seed": seed,
@@ -219,8 +225,12 @@ def analyse(model: BehaviorModel, data: Data, config: BehaviorFitConfig, seed: i
     return {**quality, "probe_accuracy": probe}
 
 
-def fit_behavior(dataset: str | Path, out: str | Path, config: BehaviorFitConfig) -> dict[str, Any]:
-    """Run the whole job (see the module docstring); returns the report."""
+def fit_behavior(dataset: str | Path, out: str | Path, config: BehaviorFitConfig, progress: bool = False
+                 ) -> dict[str, Any]:
+    """Run the whole job (see the module docstring); returns the report. ``progress``: a bar over the training
+    stages and analyses (4 stages + 4 analyses per seed)."""
+    from tqdm import tqdm
+
     out = Path(out)
     (out / "variants").mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(out / "config.yaml", yaml.safe_dump(config.to_dict(), sort_keys=False).encode())
@@ -230,15 +240,18 @@ def fit_behavior(dataset: str | Path, out: str | Path, config: BehaviorFitConfig
                 len(data.crash), data.delta)
     metrics: dict[str, list[dict[str, float]]] = {v: [] for v in VARIANTS}
     log: list[dict] = []
+    bar = tqdm(total=8 * len(config.seeds), desc="fit behavior", unit="stage", disable=not progress)
     for seed in config.seeds:
-        models, rows = fit_variants(data, config, seed)
+        models, rows = fit_variants(data, config, seed, bar)
         log += rows
         for name, model in models.items():
             model.save(out / "variants" / f"{name}-s{seed}.pt")
             metrics[name].append(analyse(model, data, config, seed))
+            bar.update()
             logger.info("seed %d %s: %s", seed, name, metrics[name][-1])
         if seed == config.seeds[0]:
             models["full"].save(out / MODEL_FILE)
+    bar.close()
     table = {v: _mean_std(metrics[v]) for v in VARIANTS}
     report: dict[str, Any] = {
         "dataset": str(dataset), "seeds": list(config.seeds), "delta": data.delta,

@@ -192,7 +192,7 @@ def fit_behavior(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
         threads=o.get("threads"),
     )
     _torch_threads(config.threads)
-    return fit_behavior(dataset, out, config)
+    return fit_behavior(dataset, out, config, progress=not o.get("no_progress", False))
 
 
 FITS: dict[str, Callable[[str, str, dict[str, Any]], Any]] = {

@@ -20,7 +20,7 @@ def cmd_fit_behavior(args: argparse.Namespace) -> int:
         seeds=None if args.seed is None else [args.seed], threads=args.threads,
     )
     set_torch_threads(config.threads)
-    report = fit_behavior(args.dataset, args.out, config)
+    report = fit_behavior(args.dataset, args.out, config, progress=not args.no_progress)
     print(json.dumps(report, indent=2, default=str) if args.json else format_summary(report))
     return 0
 
