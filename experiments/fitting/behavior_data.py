@@ -114,9 +114,8 @@ def crash_set(scenarios: Sequence[Scenario], extra: Sequence[str | Path], cfg: B
         summary[name] = {
             "pairs": len(samples) // 2,
             "labels": {SAFETY_CLASSES[k]: v for k, v in sorted(Counter(x.label for x in samples).items())},
-            "cause": dict(Counter(x.reason.split(" ")[0] if x.role == "aggressor" and x.reason.startswith("driver")
-                                  else ("lateral" if "laterally" in x.reason else "behind")
-                                  for x in samples if x.role == "aggressor")),
+            "cause": dict(Counter(x.basis for x in samples if x.role == "aggressor")),
+            "recipient": dict(Counter(x.basis for x in samples if x.role == "recipient")),
         }
     if not parts:
         raise ValueError("the crash set is empty: no logged pair collides or comes within near_miss_m "

@@ -55,12 +55,23 @@ class CrashSetConfig:
 
 @dataclass(frozen=True)
 class CrashSample:
-    """One crash-set agent: scenario, agent row, label and why."""
+    """One crash-set agent.
+
+    Attributes:
+        scenario_id: its scenario.
+        agent: its row in the scenario's tracks.
+        label: `UNSAFE`, `SAFE` or `NEUTRAL`.
+        role: ``"aggressor"`` (caused it) or ``"recipient"``.
+        basis: what decided: ``"driver"``, ``"lateral"`` or ``"behind"`` for the aggressor; ``"reacted"`` or
+            ``"no reaction"`` for the recipient.
+        reason: a readable account with the numbers.
+    """
 
     scenario_id: str
     agent: int
     label: int
     role: str
+    basis: str
     reason: str
 
 
@@ -102,21 +113,23 @@ def label_pair(scenario: Scenario, step: int, cfg: CrashSetConfig) -> list[Crash
     drivers = [str(scenario.metadata.get(k, "")) for k in ("ego_driver", "adv_driver")]
     risky = [d in RISKY_DRIVERS for d in drivers]
     if risky[0] != risky[1]:
-        cause, reason = (0 if risky[0] else 1), f"driver model {drivers[0] if risky[0] else drivers[1]}"
+        cause = 0 if risky[0] else 1
+        basis, reason = "driver", f"driver model {drivers[cause]}"
     elif max(m[0] for m in motion) > cfg.lateral_m:
         cause = int(np.argmax([m[0] for m in motion]))
-        reason = f"moved {motion[cause][0]:.1f} m laterally towards the other"
+        basis, reason = "lateral", f"moved {motion[cause][0]:.1f} m laterally towards the other"
     else:
+        # The other agent is ahead in this one's frame (forward offset >= 0): this one closed the gap from behind.
         cause = 0 if motion[0][2] >= motion[1][2] else 1
-        reason = "closed the gap from behind"
+        basis, reason = "behind", "closed the gap from behind"
     other = 1 - cause
     lateral, decel, _ = motion[other]
     reacted = decel > cfg.brake_mps2 or -lateral > cfg.swerve_m
-    out = [CrashSample(scenario.scenario_id, rows[cause], UNSAFE, "aggressor", reason)]
-    out.append(CrashSample(scenario.scenario_id, rows[other], SAFE if reacted else NEUTRAL, "recipient",
-                           f"braked {decel:.1f} m/s^2, moved {-lateral:.1f} m away" + ("" if reacted else
-                                                                                        " (no reaction)")))
-    return out
+    return [
+        CrashSample(scenario.scenario_id, rows[cause], UNSAFE, "aggressor", basis, reason),
+        CrashSample(scenario.scenario_id, rows[other], SAFE if reacted else NEUTRAL, "recipient",
+                    "reacted" if reacted else "no reaction", f"braked {decel:.1f} m/s^2, moved {-lateral:.1f} m away"),
+    ]
 
 
 def crash_samples(scenarios: list[Scenario], cfg: CrashSetConfig) -> list[CrashSample]:
