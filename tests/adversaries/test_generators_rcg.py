@@ -151,6 +151,15 @@ def test_cat_rcg_generates_the_rcg_choice_and_checks_options(tmp_path) -> None:
     cands = adversary_candidates(gen.candidate_source, s, "cat-rcg")
     sel = rcg_select(BehaviorModel.load(path), s, cands, *stack_ego_rollouts(queue), n_knn=15)
     assert generation.chosen_candidate == sel.index
+    # In the env the adversary drives the chosen candidate (replayed open loop, as CAT).
+    from seal.envs.scenario_env import ScenarioEnv
+    from seal.experiments.evaluation.episodes import run_episode
+    from seal.experiments.training.egos import ReplayEgo
+
+    rollout = run_episode(ScenarioEnv(s), s, ReplayEgo(), generation.behavior)
+    steps = np.arange(CURRENT_STEP + 1, rollout.last_step + 1)
+    adv = rollout.tracks[s.adv_index, steps][:, [X, Y]]
+    np.testing.assert_allclose(adv, cands.xy[sel.index, steps - CURRENT_STEP - 1], atol=1e-3)
     with pytest.raises(ValueError, match="behavior"):
         make_generator("cat-rcg", candidates="constant_velocity")
     with pytest.raises(ValueError, match="does not exist"):
