@@ -86,6 +86,8 @@ class GeneratorSpec:
     """Constructor options settable from configs (``--gen-opt NAME.KEY=VALUE``, ``train.pipelines.NAME.kwargs``)."""
     pipeline: bool = False
     """A ``seal train`` / ``seal run`` pipeline of the same name trains the ego against this generator."""
+    base: str | None = None
+    """The generator this one modifies (``cat`` for ``cat-rcg``): the report compares their pipelines."""
 
     def model_files(self) -> tuple[str, ...]:
         """Names of the options that are model files."""
@@ -120,6 +122,12 @@ GENERATORS: dict[str, GeneratorSpec] = {
     "steered": GeneratorSpec("steered", "seal.adversaries.steered",
                              _opts(*_CANDIDATE_OPTIONS, "steer_random_seed", models=("prior", "steer")),
                              pipeline=True),
+    "cat-rcg": GeneratorSpec("cat-rcg", "seal.adversaries.rcg.generator", _opts(
+        "prior", "candidates", "follow", "behavior", "n_knn", "n_int", "distance", models=("prior", "behavior")),
+        pipeline=True, base="cat"),
+    "seal-rcg": GeneratorSpec("seal-rcg", "seal.adversaries.rcg.generator", _opts(
+        "prior", "candidates", "follow", "behavior", "n_knn", "n_int", "distance", "skills", "switch",
+        "switch_offset_steps", "noise_scale", models=("prior", "behavior", "skills")), pipeline=True, base="seal"),
 }
 """The built-in generators, one entry each (add a line per new generator). Each module is imported on first lookup
 (so a name resolves without importing every generator, and even when ``adversaries/__init__.py`` did not run)."""

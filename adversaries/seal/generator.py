@@ -31,7 +31,7 @@ from seal.adversaries.candidate_path import candidate_track
 from seal.adversaries.candidate_sources import DEFAULT_STEER_ALPHA, DEFAULT_STEER_VECTOR, CandidateSource
 from seal.adversaries.cat.select import DECAY, N_KEPT_MODES, STRIDE_STEPS
 from seal.adversaries.seal.contact import predict_contact
-from seal.adversaries.seal.objective import Objective, make_objective
+from seal.adversaries.seal.objective import Objective, Ranking, make_objective
 from seal.envs.behaviors import AdversaryBehavior
 from seal.envs.skill_behavior import SWITCH_OFFSET_STEPS, SkillSwitchBehavior, switch_step_for
 
@@ -122,10 +122,16 @@ class SEALGenerator(CandidateGenerator):
             skills, switch, noise_scale, None if skill_horizon is None else int(skill_horizon))
         super().__init__(candidate_source, prior, candidates, follow, steer, steer_vector, steer_alpha)
 
+    def _rank(self, context: CandidateContext) -> Ranking:
+        """The objective's ranking of the candidates against the past ego roll-outs (a subclass whose objective
+        also needs the scenario, e.g. ``seal-rcg``, overrides this)."""
+        return self.objective(context.cands, context.adv_size_m, context.ego_xy, context.ego_heading,
+                              context.ego_valid, context.ego_size_m)
+
     def _choose(self, context: CandidateContext, rng: np.random.Generator) -> Generation:
         cands, scenario = context.cands, context.scenario
         ego_rollouts = (context.ego_xy, context.ego_heading, context.ego_valid)
-        ranking = self.objective(cands, context.adv_size_m, *ego_rollouts, context.ego_size_m)
+        ranking = self._rank(context)
         rank_s = context.since_candidates_s()
         chosen = ranking.index
         contact = predict_contact(cands.xy[chosen], cands.heading[chosen], context.adv_size_m, *ego_rollouts,

@@ -13,6 +13,7 @@ shares of the cold calls (SEAL: also its objective's ranking time). The referenc
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -42,15 +43,17 @@ def bench_generators(
     """Latency table: ``{name: {mean, p50, p95, max, [candidate_ms_mean, select_ms_mean], within_budget}}``."""
     history = RolloutHistory()
     queues = [history.queue(s) for s in scenarios]  # built before timing
-    result: dict[str, Any] = {"scenarios": len(scenarios), "budget_ms": budget_ms}
+    result: dict[str, Any] = {"scenarios": len(scenarios), "budget_ms": budget_ms,
+                              "load_avg": round(os.getloadavg()[0], 2)}
     for name, generator in generators.items():
         rng = np.random.default_rng(seed)
         generator.generate(scenarios[0], queues[0], rng)  # warm-up
-        total, warm, cand, select, rank = [], [], [], [], []
+        total, cpu, warm, cand, select, rank = [], [], [], [], [], []
         for scenario, queue in zip(scenarios, queues, strict=True):
-            start = time.perf_counter()
+            start, cpu_start = time.perf_counter(), time.process_time()
             generation = generator.generate(scenario, queue, rng)
             total.append(time.perf_counter() - start)
+            cpu.append(time.process_time() - cpu_start)
             start = time.perf_counter()
             generator.generate(scenario, queue, rng)
             warm.append(time.perf_counter() - start)
@@ -63,6 +66,10 @@ def bench_generators(
         row: dict[str, Any] = {f"ms_{k}": v for k, v in _stats(ms).items()}
         warm_stats = _stats(1e3 * np.asarray(warm))
         row["warm_ms_mean"], row["warm_ms_p95"] = warm_stats["mean"], warm_stats["p95"]
+        # CPU time of the cold calls: what the generator costs without the other processes' share of a loaded
+        # machine (wall time = CPU time on an idle one; the load average is in the result).
+        cpu_stats = _stats(1e3 * np.asarray(cpu))
+        row["cpu_ms_mean"], row["cpu_ms_p95"] = cpu_stats["mean"], cpu_stats["p95"]
         if cand:
             row["candidate_ms_mean"] = round(1e3 * float(np.mean(cand)), 3)
             row["select_ms_mean"] = round(1e3 * float(np.mean(select)), 3)
@@ -81,13 +88,14 @@ def bench_generators(
 def format_bench(result: dict[str, Any]) -> str:
     """Aligned text table of `bench_generators`."""
     names = [k for k, v in result.items() if isinstance(v, dict)]
-    cols = ("ms_mean", "ms_p50", "ms_p95", "ms_max", "warm_ms_mean", "warm_ms_p95", "candidate_ms_mean",
+    cols = ("ms_mean", "ms_p50", "ms_p95", "ms_max", "cpu_ms_mean", "cpu_ms_p95", "warm_ms_mean", "warm_ms_p95",
+            "candidate_ms_mean",
             "select_ms_mean", "rank_ms_mean", "rank_ms_p95", "x_replay", "p95_within_budget")
     lines = [
         f"generation latency per scenario (batch of one, CPU), {result['scenarios']} scenarios, "
-        f"budget {result['budget_ms']:.0f} ms",
-        "(ms_*: first call per scenario; warm_*: second call; candidate / select: shares of the first call; "
-        "rank: SEAL's objective within select)",
+        f"budget {result['budget_ms']:.0f} ms, load average {result.get('load_avg', '-')}",
+        "(ms_*: first call per scenario, wall; cpu_ms_*: its CPU time; warm_*: second call; candidate / select: "
+        "shares of the first call; rank: SEAL's objective within select)",
         f"{'generator':<12}" + "".join(f"{c:>18}" for c in cols),
     ]
     for name in names:

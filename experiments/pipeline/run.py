@@ -103,7 +103,8 @@ class RunPreset:
 
 
 SECTIONS = tuple(f.name for f in fields(RunPreset))
-FIT_OUTPUTS = {"prior": "prior.pt", "goose": "goose.zip", "skills": "skills", "objective": "objective"}
+FIT_OUTPUTS = {"prior": "prior.pt", "goose": "goose.zip", "skills": "skills", "objective": "objective",
+               "behavior": "behavior"}
 """Model name -> file or folder written under OUT/models by the fit of that model."""
 
 # ---------------------------------------------------------------------------------------------- config

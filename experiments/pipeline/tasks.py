@@ -1,6 +1,6 @@
 """The data and model-fit steps of ``seal run`` as Python calls: one picklable job function, `run_task`, that a
 backend runs in a worker process (`seal.experiments.backends`), with the same defaults as the matching ``seal``
-commands (``seal data generate | score | split``, ``seal fit prior | goose | skills | objective``).
+commands (``seal data generate | score | split``, ``seal fit prior | goose | skills | objective | behavior``).
 
 A job is a dict: ``task`` (``generate``, ``score``, ``split``, ``fit``), ``dataset`` (the dataset folder),
 ``model`` and ``out`` (fits: which model and the file or folder to write) and ``options`` (the preset's options of
@@ -35,6 +35,8 @@ OPTIONS: dict[str, tuple[str, ...]] = {
     "skills": ("preset", "config", "split", "limit", "demos", "workers", "seed", "no_progress"),
     "objective": ("preset", "config", "prior", "candidates", "eval_split", "eval_limit", "workers", "seed", "split",
                   "limit", "skills", "behavior", "egos", "no_progress"),
+    "behavior": ("preset", "config", "split", "limit", "eval_split", "eval_limit", "max_samples", "crash_datasets",
+                 "seed", "threads", "no_progress"),
 }
 """Known options per task / fitted model (the options of the matching ``seal`` command)."""
 
@@ -180,6 +182,21 @@ def fit_objective(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
     return fit_objective(dataset, out, config, progress=not o.get("no_progress", False))
 
 
+def fit_behavior(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
+    """``seal fit behavior DATASET --out OUT`` (RCG's behaviour embedding; ``crash_datasets``: a list of folders)."""
+    from seal.experiments.fitting.behavior import fit_behavior, resolve_config
+
+    config = resolve_config(
+        preset=o.get("preset", "standard"), config_file=o.get("config"), split=o.get("split"), limit=o.get("limit"),
+        eval_split=o.get("eval_split"), eval_limit=o.get("eval_limit"), max_samples=o.get("max_samples"),
+        crash_datasets=o.get("crash_datasets"), seeds=None if o.get("seed") is None else [o["seed"]],
+        threads=o.get("threads"),
+    )
+    _torch_threads(config.threads)
+    return fit_behavior(dataset, out, config, progress=not o.get("no_progress", False))
+
+
 FITS: dict[str, Callable[[str, str, dict[str, Any]], Any]] = {
     "prior": fit_prior, "goose": fit_goose, "skills": fit_skills, "objective": fit_objective,
+    "behavior": fit_behavior,
 }

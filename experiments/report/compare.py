@@ -156,7 +156,9 @@ def generator_table(rows: Sequence[Mapping[str, Any]], settings_info: Sequence[M
             "ego_crash": float(np.mean([np.mean([bool(e["crash"]) for e in v]) for v in per_run.values()])),
             "adv_collision_rate": sum(bool(e["adv_collision"]) for e in eps) / n,
             "close_call_rate": sum(bool(e["close_call"]) for e in eps) / n,
-            **pooled_realism([dict(e) for e in eps]),
+            **(realism := pooled_realism([dict(e) for e in eps])),
+            # Thesis Table 7.6: yaw and acceleration only (out-of-road adversaries are common in real crashes).
+            "realism_yaw_acc": float(np.nanmean([realism["yaw_wd"], realism["acc_wd"]])),
             "collision_speed_mps": float(np.mean(speeds)) if speeds else math.nan,
             "head_on_rate": sum(bool(e["head_on"]) for e in eps) / n,
             "severe_head_on_rate": sum(bool(e["severe_head_on"]) for e in eps) / n,
@@ -177,6 +179,7 @@ GENERATOR_COLUMNS = (
     ("acc_wd", "acc WD", "{:.3f}"),
     ("road_wd", "road WD", "{:.3f}"),
     ("realism", "realism (mean WD)", "{:.3f}"),
+    ("realism_yaw_acc", "yaw+acc WD", "{:.3f}"),
     ("collision_speed_mps", "coll. speed (m/s)", "{:.2f}"),
     ("head_on_rate", "head-on", "{:.1%}"),
     ("severe_head_on_rate", "severe head-on", "{:.1%}"),

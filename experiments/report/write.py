@@ -21,6 +21,7 @@ from seal.experiments.report.compare import (
     to_csv,
 )
 from seal.experiments.report.compare_plots import plot_setting_bars, plot_training_curves, render_generator_videos
+from seal.experiments.report.stats import ci_markdown, ego_ci_table, improvement_markdown, improvement_table
 
 
 def write_report(
@@ -49,6 +50,9 @@ def write_report(
     atomic_write_bytes(out / "table_6_1.csv", to_csv(t61))
     atomic_write_bytes(out / "table_6_2.csv", to_csv(t62))
     atomic_write_bytes(out / "rates_per_run.csv", to_csv(per_run))
+    cis, poi = ego_ci_table(rows), improvement_table(rows)
+    atomic_write_bytes(out / "ego_ci.csv", to_csv(cis))
+    atomic_write_bytes(out / "improvement.csv", to_csv(poi))
     figures: list[str] = []
     video_files: list[str] = []
     if plots:
@@ -69,11 +73,18 @@ def write_report(
         "Rates in %: median over seeds, [25th-75th percentile]; each seed's rate is over the setting's "
         "scenarios. Generator settings: the last of K perturbation passes against the same ego.\n",
         ego_markdown(t61),
+        "## Uncertainty\n",
+        "Success rate in %: mean over seeds [95 % bootstrap interval; seeds and scenarios resampled].\n",
+        ci_markdown(cis) if cis else "(none)\n",
+        "Probability that a pipeline's ego beats the reference's (success rate per seed, pairs of seeds, averaged "
+        "over the settings both were evaluated on; 95 % stratified bootstrap interval; 0.5 = no difference).\n",
+        improvement_markdown(poi) if poi else "(no pipeline with a reference)\n",
         "## Generators (thesis Table 6.2)\n",
         "Ego success / crash averaged over egos; realism = Wasserstein distances of the pooled adversary yaw rate, "
         "acceleration and out-of-road rate to the logged adversaries (lower = more realistic); collision speed "
         "along the contact normal over colliding episodes; head-on rates of all episodes. `normal` = logged "
-        "adversary (reference).\n",
+        "adversary (reference). yaw+acc WD: the mean of the yaw and acceleration distances alone (thesis Table "
+        "7.6 leaves the out-of-road term out).\n",
         generator_markdown(t62) if t62 else "(no generator settings evaluated)\n",
     ]
     if figures:
@@ -84,7 +95,8 @@ def write_report(
         md += [f"- [{v}]({v})" for v in video_files]
         md.append("")
     atomic_write_bytes(out / "report.md", "\n".join(md).encode())
-    return {"table_6_1": t61, "table_6_2": t62, "figures": figures, "videos": video_files, "episodes": len(rows)}
+    return {"table_6_1": t61, "table_6_2": t62, "ego_ci": cis, "improvement": poi, "figures": figures,
+            "videos": video_files, "episodes": len(rows)}
 
 
 def _expand_settings(settings: Sequence[str], store: Any) -> list[str]:

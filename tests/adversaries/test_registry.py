@@ -16,7 +16,7 @@ from seal.adversaries.base import (
 
 
 def test_pipelines_come_from_the_registry() -> None:
-    assert pipeline_names() == (NO_ADVERSARY, "goose", "cat", "seal", "steered")
+    assert pipeline_names() == (NO_ADVERSARY, "goose", "cat", "seal", "steered", "cat-rcg", "seal-rcg")
     from seal.experiments.training.config import PIPELINES, EgoTrainConfig
 
     assert pipeline_names() == PIPELINES

@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 
 from seal.core.config import to_dict
-from seal.experiments.fitting import goose, objective, skills
+from seal.experiments.fitting import behavior, goose, objective, skills
 from seal.experiments.training.config import PIPELINES, load_train_config
 
 RECORDED = json.loads((Path(__file__).parent / "data" / "resolved_presets.json").read_text())
@@ -30,6 +30,9 @@ def _resolved(key: str) -> dict[str, Any]:
     if kind == "goose":
         extra = dict(algo="td3", total_steps=10, seed=2, split="s", limit=3, eval_split="e", eval_limit=4)
         return to_dict(goose.resolve_config(preset, **(extra if rest else {})))
+    if kind == "behavior":
+        cli = dict(split="s", limit=5, eval_split="e", eval_limit=3, seeds=[4], threads=1, max_samples=50)
+        return to_dict(behavior.resolve_config(preset, **(cli if rest else {})))
     if kind == "skills":
         return to_dict(skills.resolve_config(preset, **(dict(split="s", limit=3, seed=2, workers=1) if rest else {})))
     extra = dict(prior="p.pt", eval_split="e", eval_limit=3, workers=1, seed=4, split="s", limit=5)

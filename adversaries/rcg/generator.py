@@ -1,0 +1,111 @@
+"""``cat-rcg`` and ``seal-rcg``: RCG's crash-grounded selection (`seal.adversaries.rcg.select`) in place of the base
+generators' scoring (thesis 7.5.3).
+
+* ``cat-rcg``: candidates from the prior, RCG selection with ``n_knn = 15``, the adversary follows the chosen
+  candidate open loop (as CAT; ``follow`` as in `seal.adversaries.candidate_generator`).
+* ``seal-rcg``: SEAL's generator (`seal.adversaries.seal.generator`) with RCG as its objective (``n_knn = 8``): the
+  adversary follows the chosen candidate and hands over to the adversarial skill policy before the predicted
+  contact, so it reacts to the ego.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from seal.adversaries.base import Generation, register
+from seal.adversaries.candidate_generator import CandidateContext, CandidateGenerator, Follow
+from seal.adversaries.candidate_sources import CandidateSource
+from seal.adversaries.rcg.select import N_INT, N_KNN_CAT, N_KNN_SEAL, Distance, RCGObjective, selection_extra
+from seal.adversaries.seal.contact import predict_contact
+from seal.adversaries.seal.generator import SEALGenerator, Switch
+from seal.adversaries.seal.objective import Ranking
+from seal.envs.skill_behavior import SWITCH_OFFSET_STEPS
+
+
+def _objective(behavior: Any, n_knn: int, n_int: int, distance: str, generator: str) -> RCGObjective:
+    if behavior is None:
+        raise ValueError(f"{generator}: option 'behavior' is required: a behaviour model file (seal fit behavior)")
+    return behavior if isinstance(behavior, RCGObjective) else RCGObjective(behavior, n_knn, n_int, distance)
+
+
+@register("cat-rcg")
+class CATRCGGenerator(CandidateGenerator):
+    """CAT-RCG (see the module docstring).
+
+    Args:
+        candidate_source, prior, candidates: the candidate source, exactly one (as `CandidateGenerator`).
+        behavior: a behaviour model file (``seal fit behavior``) or a ready `RCGObjective`.
+        n_knn: neighbours of KNN_dist (thesis 15 for CAT).
+        n_int: candidates kept by collision closeness (thesis 6).
+        distance: ``"knn"`` or ``"prototype"`` (the Table 7.4 ablation).
+        follow: ``"replay"`` or ``"track"``.
+    """
+
+    def __init__(
+        self,
+        candidate_source: CandidateSource | None = None,
+        prior: str | Path | None = None,
+        candidates: str | None = None,
+        behavior: str | Path | RCGObjective | None = None,
+        n_knn: int = N_KNN_CAT,
+        n_int: int = N_INT,
+        distance: str = Distance.KNN,
+        follow: str = Follow.REPLAY,
+    ) -> None:
+        self.rcg = _objective(behavior, n_knn, n_int, distance, "cat-rcg")
+        super().__init__(candidate_source, prior, candidates, follow)
+
+    def _choose(self, context: CandidateContext, rng: np.random.Generator) -> Generation:
+        cands = context.cands
+        sel = self.rcg.select(context.scenario, cands, context.ego_xy, context.ego_heading, context.ego_valid)
+        contact = predict_contact(cands.xy[sel.index], cands.heading[sel.index], context.adv_size_m,
+                                  context.ego_xy, context.ego_heading, context.ego_valid, context.ego_size_m)
+        return Generation(
+            behavior=self.follow_behavior(context.scenario, cands.xy[sel.index]),
+            chosen_candidate=sel.index,
+            predicted_step=contact.step,
+            extra={
+                "collision_predicted": contact.collided,
+                "prior_prob": float(cands.probs[sel.index]),
+                "min_distance_m": contact.min_distance_m,
+                "distance": str(self.rcg.distance),
+                **selection_extra(sel),
+                **context.candidate_extra(),
+                "select_time_s": context.since_candidates_s(),
+            },
+        )
+
+
+@register("seal-rcg")
+class SEALRCGGenerator(SEALGenerator):
+    """SEAL-RCG (see the module docstring); options as `SEALGenerator` without ``objective``, plus ``behavior``,
+    ``n_knn`` (thesis 8 for SEAL), ``n_int`` and ``distance`` as `CATRCGGenerator`."""
+
+    def __init__(
+        self,
+        candidate_source: CandidateSource | None = None,
+        prior: str | Path | None = None,
+        candidates: str | None = None,
+        behavior: str | Path | RCGObjective | None = None,
+        n_knn: int = N_KNN_SEAL,
+        n_int: int = N_INT,
+        distance: str = Distance.KNN,
+        skills: str | Path | None = None,
+        switch: str = Switch.ADVERSARIAL,
+        switch_offset_steps: int = SWITCH_OFFSET_STEPS,
+        follow: str = Follow.REPLAY,
+        noise_scale: float = 1.0,
+        policy: Any = None,
+    ) -> None:
+        rcg = _objective(behavior, n_knn, n_int, distance, "seal-rcg")
+        super().__init__(candidate_source, prior, candidates, objective=rcg, skills=skills, switch=switch,
+                         switch_offset_steps=switch_offset_steps, follow=follow, noise_scale=noise_scale,
+                         policy=policy)
+        self.rcg = rcg
+
+    def _rank(self, context: CandidateContext) -> Ranking:
+        return self.rcg(context.cands, context.adv_size_m, context.ego_xy, context.ego_heading, context.ego_valid,
+                        context.ego_size_m, scenario=context.scenario)

@@ -1,0 +1,83 @@
+"""`seal fit behavior` on a tiny scored dataset: report, variants, unsafe cache, the model cat-rcg loads; errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scenario_factory as sf
+
+from seal.cli import main
+from seal.core.dataset import Dataset, write_dataset
+from seal.scoring.store import score_dataset
+
+TINY = ["--preset", "quick", "--set", "model.d_model=16", "--set", "model.n_heads=2", "--set", "model.latent_dim=32",
+        "--set", "train.epochs=2", "--set", "train.finetune_epochs=2", "--set", "analysis_max=200",
+        "--no-progress"]
+
+
+def _rear_end(i: int):
+    road = sf.straight_road(3)
+    lane = road.lanes[1].centerline
+    lead = sf.simulate_track(lane, 60.0 + 5 * i, 10.0, substeps=2)
+    follow = sf.simulate_track(lane, 30.0, 20.0, substeps=2)
+    side = sf.simulate_track(road.lanes[0].centerline, 20.0, 15.0, substeps=2)
+    return sf.make_scenario(road, [follow, lead, side], f"crash{i}")
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("behavior_cli") / "ds"
+    scenarios = [sf.highway_scenario(i, scenario_id=f"h{i}") for i in range(5)] + [_rear_end(i) for i in range(2)]
+    write_dataset(root, scenarios)
+    Dataset.open(root).update_manifest(splits={"train": ["h0", "h1", "h2", "crash0", "crash1"], "eval": ["h3", "h4"],
+                                               "hard": []})
+    score_dataset(root, workers=1, progress=False)
+    return root
+
+
+def test_fit_behavior_writes_models_report_and_cache(dataset: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "b"
+    assert main(["fit", "behavior", str(dataset), "--out", str(out), "--split", "train", *TINY, "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["samples"]["crash"]["samples"] == 4  # two rear-end pairs, both agents each
+    assert report["crash_sources"]["training split"]["cause"] == {"behind": 2}
+    assert set(report["table_7_5"]) == {"no_cl", "no_cl_ft", "cl", "full"}
+    for row in report["table_7_5"].values():
+        assert -1.0 <= row["silhouette"] <= 1.0 and row["davies_bouldin"] > 0 and 0.0 <= row["probe_accuracy"] <= 1.0
+    assert {p.name for p in (out / "variants").glob("*.pt")} == {f"{v}-s0.pt" for v in report["table_7_5"]}
+    for name in ("report.md", "train_log.csv", "config.yaml", "behavior.json"):
+        assert (out / name).is_file()
+    from seal.models.behavior.model import BehaviorModel
+
+    model = BehaviorModel.load(out / "behavior.pt")
+    counts = model.info["unsafe_cache"]
+    assert model.lora and counts["crash_unsafe"] == 2
+    assert model.unsafe_cache is not None and len(model.unsafe_cache) == counts["everyday_unsafe"] + 2
+    assert not BehaviorModel.load(out / "variants" / "cl-s0.pt").lora
+    # Pre-training leaves the adapter alone: the no-fine-tuning variant's B is still zero.
+    assert not np.any(BehaviorModel.load(out / "variants" / "cl-s0.pt").net.lora_b.weight.detach().numpy())
+    # The model drives cat-rcg.
+    from seal.adversaries.base import make_generator
+    from seal.adversaries.history import RolloutHistory
+
+    s = Dataset.open(dataset).get("h3")
+    gen = make_generator("cat-rcg", candidates="constant_velocity", behavior=str(out / "behavior.pt"))
+    assert gen.generate(s, RolloutHistory().queue(s), np.random.default_rng(0)).chosen_candidate is not None
+
+
+def test_fit_behavior_errors_name_the_culprit(dataset: Path, tmp_path: Path, capsys) -> None:
+    unscored = tmp_path / "unscored"
+    write_dataset(unscored, [sf.highway_scenario(0, scenario_id="h0")])
+    Dataset.open(unscored).update_manifest(splits={"train": ["h0"], "eval": ["h0"], "hard": []})
+    assert main(["fit", "behavior", str(unscored), "--out", str(tmp_path / "o"), "--split", "train", *TINY]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "seal data score" in err[0]
+    assert main(["fit", "behavior", str(dataset), "--out", str(tmp_path / "o"), "--set", "train.tau=0",
+                 *TINY]) == 2
+    assert "tau" in capsys.readouterr().err
+    assert main(["fit", "behavior", str(dataset), "--out", str(tmp_path / "o"), "--split", "train",
+                 "--set", "crash.near_miss_m=-1", *TINY]) == 2
+    assert "crash set is empty" in capsys.readouterr().err
