@@ -84,7 +84,9 @@ def test_bench_prints_latencies(model: Path, dataset: Path, capsys: pytest.Captu
     assert main(["bench", "prior", "--model", str(model), "--dataset", str(dataset), "--repeats", "3",
                  "--batch", "4", "--json"]) == 0
     res = json.loads(capsys.readouterr().out)
-    assert res["candidates"] == 32 and res["target_single_ms"] == 10.0
+    assert res["candidates"] == 32
+    # The verdict follows the measured numbers (the target itself is a constant).
+    assert res["meets_target"] == (res["single_scenario_ms"] < res["target_single_ms"])
     assert res["single_scenario_ms"] > 0 and res["batch_4_ms"] > 0
 
 
