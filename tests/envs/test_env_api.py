@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pickle
+import warnings
 
 import gymnasium
 import numpy as np
@@ -21,11 +22,15 @@ INFO_KEYS = {"is_success", "crashed", "out_of_road", "route_completion", "crash_
 
 
 def test_gymnasium_env_checker(all_scenarios: list[Scenario]) -> None:
-    gym_check_env(ScenarioEnv(all_scenarios), skip_render_check=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a checker warning is a failure, not a note in the log
+        gym_check_env(ScenarioEnv(all_scenarios), skip_render_check=True)
 
 
 def test_sb3_env_checker(all_scenarios: list[Scenario]) -> None:
-    sb3_check_env(ScenarioEnv(all_scenarios), warn=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sb3_check_env(ScenarioEnv(all_scenarios), warn=True)
 
 
 def test_registered_with_gymnasium(lane_change: Scenario) -> None:
