@@ -112,8 +112,8 @@ def current_deceleration(gt: AgentTracks, agent: int, current: int = CURRENT_STE
         k -= 1
     if k == 0:
         return 0.0
-    speed = np.hypot(gt.vel[agent, :, 0], gt.vel[agent, :, 1])
-    return float(speed[current - k] - speed[current]) / (k * dt)
+    before, now = gt.vel[agent, current - k], gt.vel[agent, current]
+    return float(np.hypot(before[0], before[1]) - np.hypot(now[0], now[1])) / (k * dt)
 
 
 def stopping_deceleration(chain: LaneChain, s0: float, length_m: float, v_mps: float, decel_mps2: float) -> float:

@@ -154,7 +154,7 @@ class RoadIndex:
         # A cached chain serves if it is long enough or ended at a dead end (it cannot grow).
         if hit is not None and (hit.polyline.length >= min_length_m or hit.dead_end):
             return hit
-        rank = {r: k for k, r in reversed(list(enumerate(route)))}
+        rank = {r: k for k, r in enumerate(route)}  # route lanes are distinct
         # Build generously (8 s at 50 m/s past the lane) so that one build serves every agent on the lane.
         target = max(min_length_m, float(self.lane_lengths[lane]) + 400.0)
         pts = [self.centerlines[lane]]

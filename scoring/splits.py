@@ -107,7 +107,7 @@ def make_splits(
         "shared_groups": shared,
     }
     ds.update_manifest(splits=splits, split_params=params, roles=roles)
-    members = {name: [ds._with_roles(scenarios[k]) for k in rows[name]] for name in SPLIT_NAMES}
+    members = {name: [ds.apply_roles(scenarios[k]) for k in rows[name]] for name in SPLIT_NAMES}
     return {
         "hard_by": hard_by,
         "score": variant,
@@ -115,7 +115,7 @@ def make_splits(
         **{name: len(splits[name]) for name in SPLIT_NAMES},
         "groups": params["groups"],
         "threshold": threshold,
-        "roles_exchanged": sum(1 for sid, (ego, _) in roles.items() if ego != scenarios[ids.index(sid)].ego_id),
+        "roles_exchanged": sum(ranked_pairs[k][0] != scenarios[k].ego_id for k in rows["hard"] if k in ranked_pairs),
         "mean_score": {name: float(np.mean(rank_score[rows[name]])) if rows[name] else float("nan")
                        for name in SPLIT_NAMES},
         "close_calls": {name: split_close_calls(members[name]) for name in SPLIT_NAMES},

@@ -218,7 +218,7 @@ class Dataset:
             if limit is not None and len(out) >= limit:
                 return out[:limit]
             scenarios = read_shard(self.root / entry["file"], entry)
-            out.extend(self._with_roles(s) for s in scenarios if wanted is None or s.scenario_id in wanted)
+            out.extend(self.apply_roles(s) for s in scenarios if wanted is None or s.scenario_id in wanted)
         if limit is not None:
             out = out[:limit]
         if ids is not None:
@@ -233,7 +233,8 @@ class Dataset:
         `seal data split --hard-by pair`, which makes the higher-scoring agent of a Hard pair the ego)."""
         return self.manifest.get("roles") or {}
 
-    def _with_roles(self, s: Scenario) -> Scenario:
+    def apply_roles(self, s: Scenario) -> Scenario:
+        """``s`` with the manifest's role assignment for it (`roles`), if any."""
         roles = self.roles.get(s.scenario_id)
         if roles is None:
             return s

@@ -11,6 +11,7 @@ steps are ignored (stored as 0).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -117,17 +118,7 @@ class Scenario:
                 if twin in self.metadata:
                     meta[key], meta[twin] = self.metadata[twin], self.metadata[key]
             meta["roles_swapped"] = not bool(self.metadata.get("roles_swapped", False))
-        return Scenario(
-            scenario_id=self.scenario_id,
-            tracks=self.tracks,
-            agent_ids=self.agent_ids,
-            agent_types=self.agent_types,
-            ego_id=ego_id,
-            adv_id=adv_id,
-            road=self.road,
-            source=self.source,
-            metadata=meta,
-        )
+        return dataclasses.replace(self, ego_id=ego_id, adv_id=adv_id, metadata=meta)
 
     def with_metadata(self, **updates: Any) -> Scenario:
         """A copy with ``metadata`` updated (tracks are shared, they are never modified in place)."""
