@@ -29,6 +29,7 @@ from seal.adversaries.base import pipeline_names
 from seal.experiments.evaluation.evaluate import REAL_PREFIX, REPLAY_SETTINGS
 from seal.experiments.evaluation.generator_metrics import format_markdown_table
 from seal.experiments.evaluation.metrics import pooled_realism
+from seal.experiments.report.groups import algo_of, base_pipeline
 
 EGO_METRICS = ("success", "crash", "out_of_road")
 PIPELINE_ORDER = ("replay", "heuristic", *pipeline_names())
@@ -55,9 +56,14 @@ def ordered_settings(settings: Iterable[str]) -> list[str]:
 
 
 def ordered_pipelines(pipelines: Iterable[str]) -> list[str]:
-    unique = set(pipelines)
-    known = [p for p in PIPELINE_ORDER if p in unique]
-    return known + sorted(unique - set(known))
+    """Registry order (`PIPELINE_ORDER`), unknown names after it alphabetically; labels ``<pipeline> (<algo>)``
+    (`seal.experiments.report.groups`) sort by their pipeline, then by algorithm."""
+
+    def rank(label: str) -> tuple[int, str, str]:
+        base = base_pipeline(label)
+        return (PIPELINE_ORDER.index(base) if base in PIPELINE_ORDER else len(PIPELINE_ORDER), base, algo_of(label))
+
+    return sorted(set(pipelines), key=rank)
 
 
 def quartiles(values: Sequence[float]) -> tuple[float, float, float]:

@@ -1,132 +1,224 @@
-"""Uncertainty of the ego comparison: bootstrap confidence intervals and the probability of improvement.
+"""Uncertainty of the ego comparison with rliable (Agarwal et al. 2021, "Deep RL at the edge of the statistical
+precipice"): the field's interval estimates, not hand-written ones.
 
-* `ego_ci_table`: per (pipeline, setting, metric) the mean over seeds of each seed's rate, with a 95 % percentile
-  bootstrap interval from a two-level resampling (seeds with replacement, then each drawn seed's scenarios with
-  replacement), so both the seed-to-seed and the scenario-to-scenario variation enter.
-* `improvement_table`: the probability of improvement of a pipeline X over a reference Y (Agarwal et al. 2021,
-  rliable): per setting ``P(X > Y) = mean over seed pairs (m, n) of 1[x_m > y_n] + 0.5 * 1[x_m = y_n]`` of the
-  seeds' success rates, averaged over the settings both were evaluated on; its 95 % interval from a stratified
-  bootstrap (each pipeline's seeds resampled per setting). References: each pipeline's base in the registry
-  (`seal.adversaries.base.GeneratorSpec.base`, e.g. ``cat`` for ``cat-rcg``) and ``noadv``.
+What the estimators see. An evaluation episode is a 0/1 outcome (success, crash, out of road) of one ego (a seed of
+a training pipeline) on one scenario of a setting. Per (pipeline, setting) the scores are the matrix
+``scenarios x seeds`` of those outcomes (only the scenarios every seed played, so the matrix is rectangular):
+
+* **mean**: the rate over all its episodes, which is the mean of the seeds' rates (every seed plays the same
+  scenarios).
+* **IQM**: rliable's interquartile mean (`rliable.metrics.aggregate_iqm`, a 25 % trimmed mean) of the *seeds'
+  rates*, so one outlying seed does not move it (with 4 seeds: the mean of the middle two). The IQM of the 0/1
+  episodes themselves would be ``clip((p - 0.25) / 0.5, 0, 1)`` of the mean ``p``: a clipped rescaling that carries
+  nothing the mean does not.
+* **95 % intervals**: rliable's stratified bootstrap (`rliable.library.get_interval_estimates`, percentile method)
+  with ``task_bootstrap`` on the ``scenarios x seeds`` matrix: rliable's "tasks" are the seeds (drawn with
+  replacement) and its "runs" the scenarios, resampled within each drawn seed, so both the seed-to-seed and the
+  scenario-to-scenario variation enter.
+* **probability of improvement** P(X > Y) (`rliable.metrics.probability_of_improvement`): per setting the
+  Mann-Whitney statistic of the two pipelines' per-seed success rates over all seed pairs (ties count one half),
+  averaged over the settings both were evaluated on; its interval from rliable's stratified independent bootstrap
+  (each pipeline's seeds resampled per setting). ``P(Y > X) = 1 - P(X > Y)`` exactly, resamples included, so each
+  unordered pair is bootstrapped once.
+
+rliable draws from NumPy's global generator; `_seeded` seeds it for each estimate and restores it afterwards, so
+the intervals are reproducible and the caller's random stream is untouched. Egos with another algorithm are
+labelled apart by `seal.experiments.report.groups` before they get here and are only compared within their algorithm.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from seal.adversaries.base import NO_ADVERSARY, generator_spec
 from seal.experiments.report.compare import EGO_METRICS, ordered_pipelines, ordered_settings, setting_label
+from seal.experiments.report.groups import comparable, is_trained
 
 N_BOOT = 2000
-ALPHA = 0.05
+"""Bootstrap resamples of the mean / IQM intervals."""
+N_BOOT_POI = 1000
+"""Bootstrap resamples of the probability of improvement (rliable's estimator calls scipy's Mann-Whitney test once
+per setting and resample, ~1 ms each)."""
+CONFIDENCE = 0.95
 
 
-def _outcomes(rows: Sequence[Mapping[str, Any]], metric: str) -> dict[tuple[str, str], dict[str, np.ndarray]]:
-    """``{(pipeline, setting): {run: [episodes] 0/1 outcomes of metric}}``."""
-    out: dict[tuple[str, str], dict[str, list[float]]] = {}
+@contextmanager
+def _seeded(seed: int) -> Iterator[None]:
+    """rliable samples from ``np.random``'s global state: seed it for one estimate, then put it back."""
+    state = np.random.get_state()
+    np.random.seed(seed)
+    try:
+        yield
+    finally:
+        np.random.set_state(state)
+
+
+@dataclass(frozen=True)
+class ScoreMatrix:
+    """The episodes of one (pipeline, setting): ``values [scenarios, seeds, metrics]`` 0/1 outcomes of
+    ``EGO_METRICS`` for the scenarios every seed played (``scenario_ids``, sorted) and the seeds' ``runs``."""
+
+    scenario_ids: tuple[str, ...]
+    runs: tuple[str, ...]
+    values: np.ndarray
+
+    def rates(self, metric: str = "success") -> np.ndarray:
+        """Each seed's rate of ``metric`` over the scenarios, ``[seeds]``."""
+        return self.values[:, :, EGO_METRICS.index(metric)].mean(axis=0)
+
+
+def score_matrices(rows: Sequence[Mapping[str, Any]]) -> dict[tuple[str, str], ScoreMatrix]:
+    """``{(pipeline, setting): ScoreMatrix}`` from the store's episode rows (keys ``pipeline``, ``setting``,
+    ``run``, ``scenario_id`` and the metrics); a scenario some seed has not played yet is left out of its cell."""
+    cells: dict[tuple[str, str], dict[str, dict[str, Mapping[str, Any]]]] = {}
     for r in rows:
-        out.setdefault((r["pipeline"], r["setting"]), {}).setdefault(r["run"], []).append(float(bool(r[metric])))
-    return {k: {run: np.asarray(v) for run, v in runs.items()} for k, runs in out.items()}
+        cells.setdefault((r["pipeline"], r["setting"]), {}).setdefault(r["run"], {})[str(r["scenario_id"])] = r
+    out = {}
+    for key, by_run in cells.items():
+        runs = sorted(by_run)
+        common = sorted(set.intersection(*(set(v) for v in by_run.values())))
+        values = np.array([[[float(bool(by_run[run][sid][m])) for m in EGO_METRICS] for run in runs]
+                           for sid in common], dtype=np.float64).reshape(len(common), len(runs), len(EGO_METRICS))
+        out[key] = ScoreMatrix(tuple(common), tuple(runs), values)
+    return out
 
 
-def bootstrap_mean_ci(runs: Sequence[np.ndarray], n_boot: int = N_BOOT, seed: int = 0, alpha: float = ALPHA
-                      ) -> tuple[float, float, float]:
-    """``(mean over runs of the run means, low, high)``: two-level percentile bootstrap (runs, then episodes)."""
-    if not runs:
-        return math.nan, math.nan, math.nan
-    rng = np.random.default_rng(seed)
-    point = float(np.mean([r.mean() for r in runs]))
-    stats = np.empty(n_boot)
-    for b in range(n_boot):
-        picked = rng.integers(len(runs), size=len(runs))
-        stats[b] = np.mean([runs[i][rng.integers(runs[i].size, size=runs[i].size)].mean() for i in picked])
-    lo, hi = np.quantile(stats, [alpha / 2, 1 - alpha / 2])
-    return point, float(lo), float(hi)
+def _mean_and_iqm(values: np.ndarray) -> np.ndarray:
+    """``[mean of metric 0, IQM over seeds of metric 0, mean of metric 1, ...]`` of ``values [scenarios, seeds,
+    metrics]`` (the aggregate function handed to rliable)."""
+    from rliable import metrics
+
+    rates = values.mean(axis=0)  # [seeds, metrics]
+    return np.array([v for m in range(values.shape[2])
+                     for v in (float(rates[:, m].mean()), float(metrics.aggregate_iqm(rates[:, m])))])
+
+
+def mean_iqm_intervals(matrix: ScoreMatrix, n_boot: int = N_BOOT, seed: int = 0) -> dict[str, dict[str, float]]:
+    """Per metric ``{mean, mean_low, mean_high, iqm, iqm_low, iqm_high}`` (rates in [0, 1]) with rliable's
+    stratified bootstrap over seeds and scenarios; NaNs when the matrix has no scenario."""
+    from rliable import library as rly
+
+    names = [f"{m}_{s}" for m in EGO_METRICS for s in ("mean", "iqm")]
+    if matrix.values.shape[0] == 0:
+        return {m: {k: math.nan for k in ("mean", "mean_low", "mean_high", "iqm", "iqm_low", "iqm_high")}
+                for m in EGO_METRICS}
+    with _seeded(seed):
+        points, intervals = rly.get_interval_estimates(
+            {"x": matrix.values}, _mean_and_iqm, task_bootstrap=True, reps=n_boot,
+            confidence_interval_size=CONFIDENCE)
+    flat = {n: (float(points["x"][i]), float(intervals["x"][0, i]), float(intervals["x"][1, i]))
+            for i, n in enumerate(names)}
+    return {m: {k: v for s in ("mean", "iqm") for k, v in zip((s, f"{s}_low", f"{s}_high"), flat[f"{m}_{s}"],
+                                                               strict=True)} for m in EGO_METRICS}
 
 
 def ego_ci_table(rows: Sequence[Mapping[str, Any]], n_boot: int = N_BOOT, seed: int = 0) -> list[dict[str, Any]]:
-    """One row per (pipeline, setting, metric): ``mean``, ``ci_low``, ``ci_high`` (rates in [0, 1]), ``seeds``."""
+    """One row per (pipeline, setting, metric): ``seeds``, ``scenarios`` (per seed), ``mean`` with ``ci_low`` /
+    ``ci_high``, ``iqm`` with ``iqm_low`` / ``iqm_high`` (rates in [0, 1]) and ``half_width`` (of the mean's
+    interval)."""
+    matrices = score_matrices(rows)
     table = []
-    for metric in EGO_METRICS:
-        outcomes = _outcomes(rows, metric)
-        for pipeline in ordered_pipelines(p for p, _ in outcomes):
-            for setting in ordered_settings(s for p, s in outcomes if p == pipeline):
-                runs = list(outcomes[(pipeline, setting)].values())
-                mean, lo, hi = bootstrap_mean_ci(runs, n_boot, seed)
-                table.append({"pipeline": pipeline, "setting": setting_label(setting), "metric": metric,
-                              "seeds": len(runs), "mean": mean, "ci_low": lo, "ci_high": hi})
+    for pipeline in ordered_pipelines(p for p, _ in matrices):
+        for setting in ordered_settings(s for p, s in matrices if p == pipeline):
+            m = matrices[(pipeline, setting)]
+            est = mean_iqm_intervals(m, n_boot, seed)
+            for metric in EGO_METRICS:
+                e = est[metric]
+                table.append({
+                    "pipeline": pipeline, "setting": setting_label(setting), "metric": metric,
+                    "seeds": len(m.runs), "scenarios": len(m.scenario_ids),
+                    "mean": e["mean"], "ci_low": e["mean_low"], "ci_high": e["mean_high"],
+                    "half_width": (e["mean_high"] - e["mean_low"]) / 2,
+                    "iqm": e["iqm"], "iqm_low": e["iqm_low"], "iqm_high": e["iqm_high"],
+                })
     return table
 
 
-def probability_of_improvement(x: np.ndarray, y: np.ndarray) -> float:
-    """``P(X > Y)`` over all pairs of the samples ``x [m]``, ``y [n]`` (ties count one half)."""
-    x, y = np.asarray(x, dtype=np.float64)[:, None], np.asarray(y, dtype=np.float64)[None]
-    return float(((x > y) + 0.5 * (x == y)).mean())
+def poi_interval(x: Sequence[np.ndarray], y: Sequence[np.ndarray], n_boot: int = N_BOOT_POI, seed: int = 0
+                 ) -> tuple[float, float, float]:
+    """``(P(X > Y), low, high)``: rliable's average probability of improvement over tasks of the per-seed scores
+    ``x[t] [seeds_x]``, ``y[t] [seeds_y]`` (every task with the same seed counts on each side), with rliable's
+    stratified independent bootstrap interval."""
+    from rliable import library as rly
+    from rliable import metrics
+
+    sx, sy = np.stack([np.asarray(v, np.float64) for v in x], 1), np.stack([np.asarray(v, np.float64) for v in y], 1)
+    with _seeded(seed):
+        points, intervals = rly.get_interval_estimates(
+            {"xy": (sx, sy)}, metrics.probability_of_improvement, reps=n_boot, confidence_interval_size=CONFIDENCE)
+    ci = np.asarray(intervals["xy"]).ravel()
+    return float(points["xy"]), float(ci[0]), float(ci[1])
 
 
-def average_poi(x_tasks: Sequence[np.ndarray], y_tasks: Sequence[np.ndarray], n_boot: int = N_BOOT, seed: int = 0,
-                alpha: float = ALPHA) -> tuple[float, float, float]:
-    """Mean over tasks of `probability_of_improvement` and its stratified-bootstrap interval."""
-    point = float(np.mean([probability_of_improvement(x, y) for x, y in zip(x_tasks, y_tasks, strict=True)]))
-    rng = np.random.default_rng(seed)
-    stats = np.empty(n_boot)
-    for b in range(n_boot):
-        stats[b] = np.mean([probability_of_improvement(x[rng.integers(x.size, size=x.size)],
-                                                       y[rng.integers(y.size, size=y.size)])
-                            for x, y in zip(x_tasks, y_tasks, strict=True)])
-    lo, hi = np.quantile(stats, [alpha / 2, 1 - alpha / 2])
-    return point, float(lo), float(hi)
+def _common_seed_count(matrices: Mapping[tuple[str, str], ScoreMatrix], pipeline: str, settings: Sequence[str]
+                       ) -> bool:
+    return len({len(matrices[(pipeline, s)].runs) for s in settings}) == 1
 
 
-def references(pipeline: str) -> list[str]:
-    """What ``pipeline`` is compared with: its registry base (if any), then ``noadv``."""
-    spec = generator_spec(pipeline)
-    refs = [spec.base] if spec is not None and spec.base else []
-    return [r for r in refs if r != pipeline] + ([NO_ADVERSARY] if pipeline != NO_ADVERSARY else [])
-
-
-def improvement_table(rows: Sequence[Mapping[str, Any]], n_boot: int = N_BOOT, seed: int = 0
-                      ) -> list[dict[str, Any]]:
-    """One row per (pipeline, reference) evaluated on common settings: average probability of improvement in
-    success rate over those settings, its interval, the settings and the seeds on each side."""
-    success = _outcomes(rows, "success")
-    rates = {k: np.array([v.mean() for v in runs.values()]) for k, runs in success.items()}
-    pipelines = ordered_pipelines(p for p, _ in rates)
+def improvement_table(rows: Sequence[Mapping[str, Any]], n_boot: int = N_BOOT_POI, seed: int = 0,
+                      per_setting: bool = False) -> list[dict[str, Any]]:
+    """Probability that ``pipeline``'s ego beats ``reference``'s in success rate, for every ordered pair of trained
+    pipelines of the same algorithm: ``p_improvement`` with ``ci_low`` / ``ci_high``, averaged over the ``settings``
+    (count) both were evaluated on with the same seed count (``per_setting``: one row per pair and setting, with
+    ``setting``), and the seeds on each side. Pairs evaluated on no common setting are left out."""
+    matrices = score_matrices(rows)
+    pipelines = [p for p in ordered_pipelines(p for p, _ in matrices) if is_trained(p)]
     table = []
-    for pipeline in pipelines:
-        for ref in references(pipeline):
-            settings = [s for s in ordered_settings(s for p, s in rates if p == pipeline) if (ref, s) in rates]
-            if not settings:
+    for i, a in enumerate(pipelines):
+        for b in pipelines[i + 1:]:
+            if not comparable(a, b):
                 continue
-            x = [rates[(pipeline, s)] for s in settings]
-            y = [rates[(ref, s)] for s in settings]
-            poi, lo, hi = average_poi(x, y, n_boot, seed)
-            table.append({"pipeline": pipeline, "reference": ref, "settings": len(settings),
-                          "seeds": int(x[0].size), "reference_seeds": int(y[0].size),
-                          "p_improvement": poi, "ci_low": lo, "ci_high": hi})
+            common = [s for s in ordered_settings(s for p, s in matrices if p == a) if (b, s) in matrices
+                      and matrices[(a, s)].scenario_ids and matrices[(b, s)].scenario_ids]
+            groups = [[s] for s in common] if per_setting else [common]
+            for settings in groups:
+                if not settings or not (_common_seed_count(matrices, a, settings)
+                                        and _common_seed_count(matrices, b, settings)):
+                    continue
+                p, lo, hi = poi_interval([matrices[(a, s)].rates() for s in settings],
+                                         [matrices[(b, s)].rates() for s in settings], n_boot, seed)
+                base = {"settings": len(settings), **({"setting": setting_label(settings[0])} if per_setting else {})}
+                na, nb = len(matrices[(a, settings[0])].runs), len(matrices[(b, settings[0])].runs)
+                table.append({"pipeline": a, "reference": b, **base, "seeds": na, "reference_seeds": nb,
+                              "p_improvement": p, "ci_low": lo, "ci_high": hi})
+                table.append({"pipeline": b, "reference": a, **base, "seeds": nb, "reference_seeds": na,
+                              "p_improvement": 1 - p, "ci_low": 1 - hi, "ci_high": 1 - lo})
     return table
 
 
-def ci_markdown(table: Sequence[Mapping[str, Any]], metric: str = "success") -> str:
-    """Pipelines x settings, cells ``mean % [low-high]`` of ``metric``."""
+def _ci_cell(point: float, low: float, high: float, scale: float = 100.0, digits: int = 1) -> str:
+    if not math.isfinite(point):
+        return "-"
+    return f"{scale * point:.{digits}f} [{scale * low:.{digits}f}-{scale * high:.{digits}f}]"
+
+
+def ci_markdown(table: Sequence[Mapping[str, Any]], metric: str = "success", statistic: str = "mean") -> str:
+    """Pipelines x settings, cells ``estimate % [low-high]`` of ``metric``'s ``statistic`` (``mean`` or ``iqm``)."""
     rows = [r for r in table if r["metric"] == metric]
     settings = list(dict.fromkeys(r["setting"] for r in rows))
-    out = ["| pipeline | " + " | ".join(settings) + " |", "|---|" + "---:|" * len(settings)]
+    low, high = ("ci_low", "ci_high") if statistic == "mean" else ("iqm_low", "iqm_high")
+    out = ["| pipeline | seeds | " + " | ".join(settings) + " |", "|---|---:|" + "---:|" * len(settings)]
     for pipeline in dict.fromkeys(r["pipeline"] for r in rows):
         cells = {r["setting"]: r for r in rows if r["pipeline"] == pipeline}
-        out.append(f"| {pipeline} | " + " | ".join(
-            f"{100 * c['mean']:.1f} [{100 * c['ci_low']:.1f}-{100 * c['ci_high']:.1f}]" if (c := cells.get(s))
-            else "-" for s in settings) + " |")
+        seeds = max(r["seeds"] for r in cells.values())
+        out.append(f"| {pipeline} | {seeds} | " + " | ".join(
+            _ci_cell(c[statistic], c[low], c[high]) if (c := cells.get(s)) else "-" for s in settings) + " |")
     return "\n".join(out) + "\n"
 
 
 def improvement_markdown(table: Sequence[Mapping[str, Any]]) -> str:
-    out = ["| pipeline | over | settings | seeds | P(improvement) [95 % CI] |", "|---|---|---:|---:|---:|"]
-    for r in table:
-        out.append(f"| {r['pipeline']} | {r['reference']} | {r['settings']} | {r['seeds']} vs "
-                   f"{r['reference_seeds']} | {r['p_improvement']:.2f} [{r['ci_low']:.2f}-{r['ci_high']:.2f}] |")
+    """The averaged probabilities of improvement as a matrix: row X, column Y, cell ``P(X > Y) [low-high]``."""
+    rows = [r for r in table if "setting" not in r]
+    names = ordered_pipelines({r["pipeline"] for r in rows})
+    cells = {(r["pipeline"], r["reference"]): r for r in rows}
+    out = ["| P(row > column) | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
+    for a in names:
+        out.append(f"| {a} | " + " | ".join(
+            _ci_cell(c["p_improvement"], c["ci_low"], c["ci_high"], 1.0, 2) if (c := cells.get((a, b))) else "-"
+            for b in names) + " |")
     return "\n".join(out) + "\n"

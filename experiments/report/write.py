@@ -21,16 +21,20 @@ from seal.experiments.report.compare import (
     to_csv,
 )
 from seal.experiments.report.compare_plots import plot_setting_bars, plot_training_curves, render_generator_videos
-from seal.experiments.report.stats import ci_markdown, ego_ci_table, improvement_markdown, improvement_table
+from seal.experiments.report.groups import label_by_algo
+from seal.experiments.report.stats import N_BOOT, N_BOOT_POI
+from seal.experiments.report.uncertainty import uncertainty_report
 
 
 def write_report(
     store_path: str | Path, out: str | Path, pipelines: Sequence[str] | None = None,
     settings: Sequence[str] | None = None, plots: bool = True, videos: int = 0, video_format: str = "mp4",
-    progress: bool = True,
+    progress: bool = True, n_boot: int = N_BOOT, n_boot_poi: int = N_BOOT_POI,
 ) -> dict[str, Any]:
-    """Write ``report.md``, ``table_6_1.csv``, ``table_6_2.csv``, ``episodes_per_run.csv`` and (``plots``)
-    the figures, (``videos`` > 0) that many videos per generator, into ``out``; returns the tables."""
+    """Write ``report.md`` (first page: `seal.experiments.report.first_page`), ``table_6_1.csv``,
+    ``table_6_2.csv``, ``rates_per_run.csv``, the statistics files of `seal.experiments.report.uncertainty` and
+    (``plots``) the figures, (``videos`` > 0) that many videos per generator, into ``out``; returns the tables.
+    ``n_boot`` / ``n_boot_poi``: bootstrap resamples of the intervals / of the probabilities of improvement."""
     out = Path(out)
     with ResultsStore(store_path) as store:
         setting_filter = _expand_settings(settings, store) if settings else None
@@ -42,18 +46,17 @@ def write_report(
             f"{store_path}: no evaluation episodes match (pipelines {pipelines or 'all'}, settings "
             f"{settings or 'all'}); run `seal eval runs ...` first"
         )
-    t61, t62 = ego_table(rows), generator_table(rows, settings_info)
+    ego_rows = label_by_algo(rows, runs)  # egos of different algorithms stay apart in the ego tables
+    t61, t62 = ego_table(ego_rows), generator_table(rows, settings_info)
     per_run = [
         {"pipeline": p, "setting": setting_label(s), "run": run, **rates}
-        for (p, s), by_run in per_run_rates(rows).items() for run, rates in by_run.items()
+        for (p, s), by_run in per_run_rates(ego_rows).items() for run, rates in by_run.items()
     ]
     atomic_write_bytes(out / "table_6_1.csv", to_csv(t61))
     atomic_write_bytes(out / "table_6_2.csv", to_csv(t62))
     atomic_write_bytes(out / "rates_per_run.csv", to_csv(per_run))
-    cis, poi = ego_ci_table(rows), improvement_table(rows)
-    atomic_write_bytes(out / "ego_ci.csv", to_csv(cis))
-    atomic_write_bytes(out / "improvement.csv", to_csv(poi))
-    figures: list[str] = []
+    stats = uncertainty_report(ego_rows, t62, out, plots=plots, n_boot=n_boot, n_boot_poi=n_boot_poi)
+    figures: list[str] = list(stats.figures)
     video_files: list[str] = []
     if plots:
         figures += [str(p.name) for p in plot_setting_bars(t61, out)]
@@ -68,17 +71,13 @@ def write_report(
     md = [
         "# Evaluation report\n",
         f"Store `{Path(store_path).resolve()}`: {len(rows)} scored episodes of {n_runs} egos "
-        f"(pipelines: {', '.join(ordered_pipelines({r['pipeline'] for r in rows}))}).\n",
+        f"(pipelines: {', '.join(ordered_pipelines({r['pipeline'] for r in ego_rows}))}).\n",
+        stats.first_page,
         "## Egos per training pipeline (thesis Table 6.1)\n",
         "Rates in %: median over seeds, [25th-75th percentile]; each seed's rate is over the setting's "
         "scenarios. Generator settings: the last of K perturbation passes against the same ego.\n",
         ego_markdown(t61),
-        "## Uncertainty\n",
-        "Success rate in %: mean over seeds [95 % bootstrap interval; seeds and scenarios resampled].\n",
-        ci_markdown(cis) if cis else "(none)\n",
-        "Probability that a pipeline's ego beats the reference's (success rate per seed, pairs of seeds, averaged "
-        "over the settings both were evaluated on; 95 % stratified bootstrap interval; 0.5 = no difference).\n",
-        improvement_markdown(poi) if poi else "(no pipeline with a reference)\n",
+        *stats.sections,
         "## Generators (thesis Table 6.2)\n",
         "Ego success / crash averaged over egos; realism = Wasserstein distances of the pooled adversary yaw rate, "
         "acceleration and out-of-road rate to the logged adversaries (lower = more realistic); collision speed "
@@ -95,7 +94,8 @@ def write_report(
         md += [f"- [{v}]({v})" for v in video_files]
         md.append("")
     atomic_write_bytes(out / "report.md", "\n".join(md).encode())
-    return {"table_6_1": t61, "table_6_2": t62, "ego_ci": cis, "improvement": poi, "figures": figures,
+    return {"table_6_1": t61, "table_6_2": t62, "ego_ci": stats.ego_ci, "improvement": stats.improvement,
+            "improvement_per_setting": stats.improvement_per_setting, "paired": stats.paired, "figures": figures,
             "videos": video_files, "episodes": len(rows)}
 
 

@@ -1,69 +1,143 @@
-"""Uncertainty statistics of the report: probability of improvement by hand, bootstrap intervals that contain the
-point estimate and shrink with more data, references from the registry, and the tables from store-like rows."""
+"""Uncertainty statistics of the report (rliable): the score matrices, mean and IQM intervals over seeds and
+scenarios, the probability of improvement against a count by hand, algorithm groups kept apart, the per-scenario
+paired view and the first page written from the numbers."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from seal.experiments.report.compare import ordered_pipelines
+from seal.experiments.report.first_page import first_page_markdown, setting_verdicts
+from seal.experiments.report.groups import algo_of, base_pipeline, comparable, label_by_algo
+from seal.experiments.report.paired import paired_counts, scenario_rates
 from seal.experiments.report.stats import (
-    average_poi,
-    bootstrap_mean_ci,
     ego_ci_table,
+    improvement_markdown,
     improvement_table,
-    probability_of_improvement,
-    references,
+    mean_iqm_intervals,
+    poi_interval,
+    score_matrices,
 )
 
 
-def test_probability_of_improvement_counts_pairs_and_half_ties() -> None:
-    assert probability_of_improvement(np.array([0.5, 0.7]), np.array([0.6])) == pytest.approx(0.5)
-    # pairs: (0.6>0.4) 1, (0.6=0.6) 0.5, (0.8>0.4) 1, (0.8>0.6) 1 -> 3.5 / 4
-    assert probability_of_improvement(np.array([0.6, 0.8]), np.array([0.4, 0.6])) == pytest.approx(0.875)
-    point, lo, hi = average_poi([np.array([0.9, 0.8])], [np.array([0.1, 0.2])], n_boot=200)
-    assert point == 1.0 and lo == 1.0 and hi == 1.0
-    point, lo, hi = average_poi([np.array([0.6, 0.8]), np.array([0.1])], [np.array([0.4, 0.6]), np.array([0.3])],
-                                n_boot=500)
-    assert point == pytest.approx((0.875 + 0.0) / 2) and lo <= point <= hi
-
-
-def test_bootstrap_interval_contains_the_mean_and_shrinks_with_more_episodes() -> None:
-    rng = np.random.default_rng(0)
-    small = [rng.random(10) < 0.6 for _ in range(3)]
-    big = [rng.random(400) < 0.6 for _ in range(3)]
-    for runs in (small, big):
-        mean, lo, hi = bootstrap_mean_ci([r.astype(float) for r in runs], n_boot=500)
-        assert lo <= mean <= hi
-    width_small = np.subtract(*bootstrap_mean_ci([r.astype(float) for r in small], n_boot=500)[2:0:-1])
-    width_big = np.subtract(*bootstrap_mean_ci([r.astype(float) for r in big], n_boot=500)[2:0:-1])
-    assert width_big < width_small
-    assert np.isnan(bootstrap_mean_ci([])[0])
-
-
-def test_references_come_from_the_registry() -> None:
-    assert references("cat-rcg") == ["cat", "noadv"]
-    assert references("seal-rcg") == ["seal", "noadv"]
-    assert references("cat") == ["noadv"] and references("noadv") == []
-
-
-def _rows(pipeline: str, run_rates: list[float], setting: str = "normal", n: int = 10) -> list[dict]:
+def _rows(pipeline: str, run_rates: list[float], setting: str = "normal", n: int = 10, run_prefix: str = ""
+          ) -> list[dict]:
+    """Seed k succeeds on the first round(rate * n) scenarios s0.. and crashes on the others."""
     rows = []
     for k, rate in enumerate(run_rates):
         wins = round(rate * n)
-        rows += [{"pipeline": pipeline, "setting": setting, "run": f"{pipeline}-s{k}", "success": i < wins,
-                  "crash": i >= wins, "out_of_road": False} for i in range(n)]
+        rows += [{"pipeline": pipeline, "setting": setting, "run": f"{run_prefix}{pipeline}-s{k}",
+                  "scenario_id": f"s{i:03d}", "success": i < wins, "crash": i >= wins, "out_of_road": False}
+                 for i in range(n)]
     return rows
 
 
-def test_tables_from_rows() -> None:
+def test_score_matrix_keeps_the_scenarios_every_seed_played() -> None:
+    rows = _rows("cat", [0.2, 0.4])
+    rows = [r for r in rows if not (r["run"] == "cat-s1" and r["scenario_id"] == "s009")]
+    m = score_matrices(rows)[("cat", "normal")]
+    assert m.values.shape == (9, 2, 3) and m.runs == ("cat-s0", "cat-s1")
+    assert m.rates().tolist() == pytest.approx([2 / 9, 4 / 9])
+
+
+def test_mean_and_iqm_intervals_contain_the_estimates_and_shrink_with_more_scenarios() -> None:
+    rng = np.random.default_rng(0)
+    widths = []
+    for n in (20, 400):
+        rows = [{"pipeline": "cat", "setting": "normal", "run": f"s{k}", "scenario_id": str(i),
+                 "success": bool(rng.random() < 0.6), "crash": False, "out_of_road": False}
+                for k in range(4) for i in range(n)]
+        est = mean_iqm_intervals(score_matrices(rows)[("cat", "normal")], n_boot=400)["success"]
+        assert est["mean_low"] <= est["mean"] <= est["mean_high"]
+        assert est["iqm_low"] <= est["iqm"] <= est["iqm_high"]
+        widths.append(est["mean_high"] - est["mean_low"])
+    assert widths[1] < widths[0] / 2
+
+
+def test_iqm_is_over_the_seeds_rates_and_ignores_an_outlying_seed() -> None:
+    rows = _rows("cat", [0.0, 0.5, 0.6, 1.0], n=10)
+    cis = {(r["setting"], r["metric"]): r for r in ego_ci_table(rows, n_boot=200)}
+    assert cis[("normal", "success")]["mean"] == pytest.approx(0.525)
+    assert cis[("normal", "success")]["iqm"] == pytest.approx(0.55)  # mean of the middle two seeds
+    assert cis[("normal", "success")]["seeds"] == 4 and cis[("normal", "success")]["scenarios"] == 10
+    again = {(r["setting"], r["metric"]): r for r in ego_ci_table(rows, n_boot=200)}
+    assert again == cis  # seeded: the same intervals each time
+
+
+def test_probability_of_improvement_counts_pairs_and_half_ties() -> None:
+    # pairs: (0.6>0.4) 1, (0.6=0.6) 0.5, (0.8>0.4) 1, (0.8>0.6) 1 -> 3.5 / 4
+    p, lo, hi = poi_interval([np.array([0.6, 0.8])], [np.array([0.4, 0.6])], n_boot=200)
+    assert p == pytest.approx(0.875) and lo <= p <= hi
+    p, lo, hi = poi_interval([np.array([0.9, 0.8])], [np.array([0.1, 0.2])], n_boot=200)
+    assert (p, lo, hi) == (1.0, 1.0, 1.0)
+    p, _, _ = poi_interval([np.array([0.6, 0.8]), np.array([0.1, 0.1])], [np.array([0.4, 0.6]), np.array([0.3, 0.3])],
+                           n_boot=100)
+    assert p == pytest.approx((0.875 + 0.0) / 2)
+
+
+def test_improvement_table_covers_every_pair_both_ways() -> None:
     rows = _rows("cat", [0.2, 0.4]) + _rows("cat-rcg", [0.5, 0.7]) + _rows("noadv", [0.3, 0.3])
     rows += _rows("cat", [0.1, 0.1], setting="hard") + _rows("cat-rcg", [0.1, 0.3], setting="hard")
-    cis = {(r["pipeline"], r["setting"], r["metric"]): r for r in ego_ci_table(rows, n_boot=300)}
-    assert cis[("cat-rcg", "normal", "success")]["mean"] == pytest.approx(0.6)
-    assert cis[("cat", "hard", "crash")]["mean"] == pytest.approx(0.9)
-    poi = {(r["pipeline"], r["reference"]): r for r in improvement_table(rows, n_boot=300)}
-    # normal: all four pairs better -> 1; hard: (0.1 = 0.1) 0.5, (0.1 = 0.1) 0.5, (0.3 > 0.1) 1, 1 -> 0.75
+    rows += _rows("replay", [0.9], setting="normal")  # a built-in ego: in the tables, in no comparison
+    poi = {(r["pipeline"], r["reference"]): r for r in improvement_table(rows, n_boot=200)}
+    # normal: all four pairs better -> 1; hard: (0.1 = 0.1) 0.5 twice, (0.3 > 0.1) 1 twice -> 0.75
     assert poi[("cat-rcg", "cat")]["p_improvement"] == pytest.approx((1.0 + 0.75) / 2)
-    assert poi[("cat-rcg", "cat")]["settings"] == 2
-    assert poi[("cat-rcg", "noadv")]["settings"] == 1 and poi[("cat-rcg", "noadv")]["p_improvement"] == 1.0
+    assert poi[("cat", "cat-rcg")]["p_improvement"] == pytest.approx(1 - (1.0 + 0.75) / 2)
+    assert poi[("cat", "cat-rcg")]["ci_low"] == pytest.approx(1 - poi[("cat-rcg", "cat")]["ci_high"])
+    assert poi[("cat-rcg", "cat")]["settings"] == 2 and poi[("cat-rcg", "noadv")]["settings"] == 1
     assert poi[("cat", "noadv")]["p_improvement"] == pytest.approx(0.5)  # 0.2 < 0.3 < 0.4
+    assert not any("replay" in key for key in poi) and len(poi) == 6
+    per_setting = {(r["pipeline"], r["reference"], r["setting"]): r
+                   for r in improvement_table(rows, n_boot=200, per_setting=True)}
+    assert per_setting[("cat-rcg", "cat", "hard")]["p_improvement"] == pytest.approx(0.75)
+    md = improvement_markdown(list(poi.values()))
+    assert "| cat-rcg | 1.00 [1.00-1.00] | 0.88 [" in md and md.index("| noadv |") < md.index("| cat-rcg |")
+
+
+def test_algorithms_are_labelled_apart_and_compared_only_within() -> None:
+    rows = _rows("cat", [0.2, 0.4], run_prefix="a/") + _rows("cat", [0.8, 0.9], run_prefix="b/")
+    rows += _rows("noadv", [0.1, 0.2], run_prefix="a/") + _rows("replay", [0.5])
+    runs = [{"run": f"a/{p}-s{k}", "pipeline": p, "config": '{"algo": "reskill"}'} for p in ("cat", "noadv")
+            for k in range(2)] + [{"run": f"b/cat-s{k}", "pipeline": "cat", "config": {"algo": "td3"}}
+                                  for k in range(2)] + [{"run": "replay", "pipeline": "replay", "config": "{}"}]
+    labelled = label_by_algo(rows, runs)
+    names = ordered_pipelines({r["pipeline"] for r in labelled})
+    assert names == ["replay", "noadv (reskill)", "cat (reskill)", "cat (td3)"]
+    assert algo_of("cat (td3)") == "td3" and base_pipeline("cat-rcg (td3)") == "cat-rcg"
+    assert comparable("cat (reskill)", "noadv (reskill)") and not comparable("cat (reskill)", "cat (td3)")
+    pairs = {(r["pipeline"], r["reference"]) for r in improvement_table(labelled, n_boot=50)}
+    assert pairs == {("cat (reskill)", "noadv (reskill)"), ("noadv (reskill)", "cat (reskill)")}
+    one_algo = [r for r in runs if r["run"].startswith("a/")]
+    assert {r["pipeline"] for r in label_by_algo(rows, one_algo)} == {"cat", "noadv", "replay"}
+
+
+def test_paired_view_counts_what_one_solves_and_the_other_does_not() -> None:
+    # cat solves s0-s5 in both seeds; noadv solves s0-s2 in both seeds and s3 in one seed only (not a majority).
+    rows = _rows("cat", [0.6, 0.6]) + _rows("noadv", [0.4, 0.3])
+    counts = {(r["pipeline"], r["reference"]): r for r in paired_counts(rows)}
+    c = counts[("cat", "noadv")]
+    assert (c["both"], c["only_pipeline"], c["only_reference"], c["neither"], c["scenarios"]) == (3, 3, 0, 4, 10)
+    assert counts[("noadv", "cat")]["only_reference"] == 3
+    shares = {(r["pipeline"], r["scenario_id"]): r["success_share"] for r in scenario_rates(rows)}
+    assert shares[("noadv", "s003")] == 0.5 and shares[("cat", "s005")] == 1.0
+
+
+def test_first_page_names_the_leader_from_the_numbers() -> None:
+    rows = _rows("cat", [0.9, 0.95, 0.85, 0.9], n=40) + _rows("noadv", [0.4, 0.5, 0.45, 0.5], n=40)
+    rows += _rows("cat", [0.5, 0.4, 0.45, 0.5], setting="hard", n=40)
+    rows += _rows("noadv", [0.45, 0.5, 0.4, 0.55], setting="hard", n=40)
+    cis = ego_ci_table(rows, n_boot=300)
+    poi, per_setting = improvement_table(rows, n_boot=300), improvement_table(rows, n_boot=300, per_setting=True)
+    verdicts = {v["setting"]: v for v in setting_verdicts(cis, per_setting)}
+    assert verdicts["normal"]["best"]["pipeline"] == "cat" and verdicts["normal"]["ahead"]
+    assert verdicts["normal"]["margin"] == pytest.approx(0.9 - 0.4625)
+    assert not verdicts["hard"]["ahead"]  # 47.5 vs 47.5 %: no clear winner
+    t62 = [{"setting": "normal", "realism": 0.0, "collision_speed_mps": 1.0},
+           {"setting": "cat", "realism": 0.3, "collision_speed_mps": 4.0},
+           {"setting": "seal", "realism": 0.2, "collision_speed_mps": 5.0}]
+    md = first_page_markdown(cis, poi, per_setting, t62)
+    assert "| normal | cat | 90.0 % [" in md and "cat ahead" in md and "no clear winner" in md
+    assert "most realistic generator (lowest mean WD to the logged adversaries): **seal** 0.2" in md
+    assert "lowest collision speed: **cat** 4 m/s" in md
+    assert "of 4 pipeline x setting cells are within +/-5 points" in md

@@ -1,0 +1,76 @@
+"""The statistics part of the report folder: the interval and improvement tables (`seal.experiments.report.stats`),
+the per-scenario paired view (`seal.experiments.report.paired`), the interval figures
+(`seal.experiments.report.ci_plots`) and the first page (`seal.experiments.report.first_page`), written as CSV /
+PNG files and returned as Markdown sections for ``report.md``."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from seal.core.atomic import atomic_write_bytes
+from seal.experiments.report.ci_plots import plot_success_intervals
+from seal.experiments.report.compare import to_csv
+from seal.experiments.report.first_page import first_page_markdown
+from seal.experiments.report.paired import paired_counts, paired_markdown, scenario_rates
+from seal.experiments.report.stats import (
+    N_BOOT,
+    N_BOOT_POI,
+    ci_markdown,
+    ego_ci_table,
+    improvement_markdown,
+    improvement_table,
+)
+
+FILES = ("ego_ci.csv", "improvement.csv", "improvement_per_setting.csv", "paired.csv", "per_scenario.csv")
+
+
+@dataclass
+class Uncertainty:
+    """What `uncertainty_report` computed and wrote."""
+
+    ego_ci: list[dict[str, Any]]
+    improvement: list[dict[str, Any]]
+    improvement_per_setting: list[dict[str, Any]]
+    paired: list[dict[str, Any]]
+    first_page: str
+    sections: list[str]
+    figures: list[str] = field(default_factory=list)
+
+
+def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapping[str, Any]], out: Path,
+                       plots: bool = True, n_boot: int = N_BOOT, n_boot_poi: int = N_BOOT_POI, seed: int = 0
+                       ) -> Uncertainty:
+    """Write `FILES` (and with ``plots`` the interval figures) into ``out`` from the episode rows (pipelines
+    already labelled by algorithm, `seal.experiments.report.groups.label_by_algo`) and Table 6.2 rows."""
+    cis = ego_ci_table(ego_rows, n_boot, seed)
+    poi = improvement_table(ego_rows, n_boot_poi, seed)
+    poi_setting = improvement_table(ego_rows, n_boot_poi, seed, per_setting=True)
+    paired = paired_counts(ego_rows)
+    for name, table in zip(FILES, (cis, poi, poi_setting, paired, scenario_rates(ego_rows)), strict=True):
+        atomic_write_bytes(out / name, to_csv(table))
+    figures = []
+    if plots:
+        figures = [p.name for s in ("mean", "iqm") if (p := plot_success_intervals(cis, out, s)) is not None]
+    sections = [
+        "## Uncertainty (rliable)\n",
+        "Success rate in %: mean over seeds and scenarios [95 % stratified-bootstrap interval; seeds and, within "
+        "each, scenarios resampled].\n",
+        ci_markdown(cis) if cis else "(none)\n",
+        "Success rate in %: IQM (interquartile mean) of the seeds' rates [95 % interval, same bootstrap].\n",
+        ci_markdown(cis, statistic="iqm") if cis else "(none)\n",
+        "Crash rate in %: mean [95 % interval].\n",
+        ci_markdown(cis, metric="crash") if cis else "(none)\n",
+        "Probability that the row's egos beat the column's in success rate (per-seed rates, averaged over the "
+        "settings both were evaluated on; 95 % stratified-bootstrap interval; 0.5 = no difference). Per setting: "
+        "`improvement_per_setting.csv`.\n",
+        improvement_markdown(poi) if poi else "(fewer than two comparable pipelines)\n",
+        "## Per scenario: what one pipeline solves and another does not\n",
+        "A pipeline solves a scenario when its egos succeed on it in more than half of the seeds. Every "
+        "scenario's success share per pipeline: `per_scenario.csv`; all counts: `paired.csv`.\n",
+        paired_markdown(paired) if paired else "(fewer than two comparable pipelines)\n",
+    ]
+    return Uncertainty(cis, poi, poi_setting, paired, first_page_markdown(cis, poi, poi_setting, t62), sections,
+                       figures)
