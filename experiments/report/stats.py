@@ -29,7 +29,7 @@ labelled apart by `seal.experiments.report.groups` before they get here and are 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
@@ -161,13 +161,16 @@ def _common_seed_count(matrices: Mapping[tuple[str, str], ScoreMatrix], pipeline
 
 
 def improvement_table(rows: Sequence[Mapping[str, Any]], n_boot: int = N_BOOT_POI, seed: int = 0,
-                      per_setting: bool = False) -> list[dict[str, Any]]:
+                      per_setting: bool = False, only: Collection[tuple[str, str, str]] | None = None
+                      ) -> list[dict[str, Any]]:
     """Probability that ``pipeline``'s ego beats ``reference``'s in success rate, for every ordered pair of trained
     pipelines of the same algorithm: ``p_improvement`` with ``ci_low`` / ``ci_high``, averaged over the ``settings``
     (count) both were evaluated on with the same seed count (``per_setting``: one row per pair and setting, with
-    ``setting``), and the seeds on each side. Pairs evaluated on no common setting are left out."""
+    ``setting``; ``only``: just these ``(pipeline, reference, setting label)`` triples, either order), and the
+    seeds on each side. Pairs evaluated on no common setting are left out."""
     matrices = score_matrices(rows)
     pipelines = [p for p in ordered_pipelines(p for p, _ in matrices) if is_trained(p)]
+    wanted = None if only is None else {(a, b, s) for x, y, s in only for a, b in ((x, y), (y, x))}
     table = []
     for i, a in enumerate(pipelines):
         for b in pipelines[i + 1:]:
@@ -175,7 +178,8 @@ def improvement_table(rows: Sequence[Mapping[str, Any]], n_boot: int = N_BOOT_PO
                 continue
             common = [s for s in ordered_settings(s for p, s in matrices if p == a) if (b, s) in matrices
                       and matrices[(a, s)].scenario_ids and matrices[(b, s)].scenario_ids]
-            groups = [[s] for s in common] if per_setting else [common]
+            groups = ([[s] for s in common if wanted is None or (a, b, setting_label(s)) in wanted]
+                      if per_setting else [common])
             for settings in groups:
                 if not settings or not (_common_seed_count(matrices, a, settings)
                                         and _common_seed_count(matrices, b, settings)):

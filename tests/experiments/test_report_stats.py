@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from seal.experiments.report.compare import ordered_pipelines
-from seal.experiments.report.first_page import first_page_markdown, setting_verdicts
+from seal.experiments.report.first_page import first_page_markdown, leader_pairs, setting_verdicts
 from seal.experiments.report.groups import algo_of, base_pipeline, comparable, label_by_algo
 from seal.experiments.report.paired import paired_counts, scenario_rates
 from seal.experiments.report.stats import (
@@ -127,17 +127,25 @@ def test_first_page_names_the_leader_from_the_numbers() -> None:
     rows = _rows("cat", [0.9, 0.95, 0.85, 0.9], n=40) + _rows("noadv", [0.4, 0.5, 0.45, 0.5], n=40)
     rows += _rows("cat", [0.5, 0.4, 0.45, 0.5], setting="hard", n=40)
     rows += _rows("noadv", [0.45, 0.5, 0.4, 0.55], setting="hard", n=40)
+    # Every seed of seal beats every seed of noadv, by 10 points on 10 scenarios: P = 1, but within the noise.
+    rows += _rows("seal", [0.6, 0.6, 0.7, 0.6], setting="seal") + _rows("noadv", [0.5, 0.5, 0.5, 0.4], setting="seal")
     cis = ego_ci_table(rows, n_boot=300)
-    poi, per_setting = improvement_table(rows, n_boot=300), improvement_table(rows, n_boot=300, per_setting=True)
+    pairs = leader_pairs(cis)
+    assert sorted(pairs) == [("cat", "noadv", "normal"), ("noadv", "cat", "hard"), ("seal", "noadv", "seal")]
+    poi, per_setting = improvement_table(rows, n_boot=300), improvement_table(rows, n_boot=300, per_setting=True,
+                                                                              only=pairs)
+    assert {r["setting"] for r in per_setting} == {"normal", "hard", "seal"} and len(per_setting) == 6
     verdicts = {v["setting"]: v for v in setting_verdicts(cis, per_setting)}
     assert verdicts["normal"]["best"]["pipeline"] == "cat" and verdicts["normal"]["ahead"]
     assert verdicts["normal"]["margin"] == pytest.approx(0.9 - 0.4625)
-    assert not verdicts["hard"]["ahead"]  # 47.5 vs 47.5 %: no clear winner
+    assert not verdicts["hard"]["ahead"]  # noadv 47.5 vs cat 46.3 %: no clear winner
+    assert verdicts["seal"]["seeds_agree"] and not verdicts["seal"]["apart"] and not verdicts["seal"]["ahead"]
     t62 = [{"setting": "normal", "realism": 0.0, "collision_speed_mps": 1.0},
            {"setting": "cat", "realism": 0.3, "collision_speed_mps": 4.0},
            {"setting": "seal", "realism": 0.2, "collision_speed_mps": 5.0}]
     md = first_page_markdown(cis, poi, per_setting, t62)
-    assert "| normal | cat | 90.0 % [" in md and "cat ahead" in md and "no clear winner" in md
+    assert "| normal | cat | 90.0 % [" in md and "| cat ahead |" in md and "| no clear winner |" in md
+    assert "seal ahead on the seeds, but the success intervals overlap: not sure" in md
     assert "most realistic generator (lowest mean WD to the logged adversaries): **seal** 0.2" in md
     assert "lowest collision speed: **cat** 4 m/s" in md
-    assert "of 4 pipeline x setting cells are within +/-5 points" in md
+    assert "of 6 pipeline x setting cells are within +/-5 points" in md
