@@ -3,13 +3,31 @@
 from __future__ import annotations
 
 import argparse
+import math
+from typing import Any
 
-from seal.cli.args import CliError
+from seal.cli.args import CliError, positive_int
 from seal.cli.tree import CommandTree
+
+# The defaults of seal.experiments.report.stats.N_BOOT / N_BOOT_POI, repeated so `seal compare --help` stays fast
+# (the report modules import rliable); tests/cli checks they agree.
+N_BOOT_DEFAULT = 2000
+N_BOOT_POI_DEFAULT = 1000
 
 
 def _names(text: str | None) -> list[str] | None:
     return [t.strip() for t in text.split(",") if t.strip()] if text else None
+
+
+def _finite(value: Any) -> Any:
+    """``value`` with NaN / infinite floats as None (strict JSON)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
@@ -28,7 +46,13 @@ def cmd_compare(args: argparse.Namespace) -> int:
     result = write_report(
         args.store, args.out, pipelines=_names(args.pipeline), settings=_names(args.setting),
         plots=not args.no_plots, videos=args.videos, video_format=args.video_format, progress=not args.no_progress,
+        n_boot=args.reps, n_boot_poi=args.poi_reps,
     )
+    if args.json:
+        import json
+
+        print(json.dumps(_finite(result), indent=2, default=str))
+        return 0
     print(ego_markdown(result["table_6_1"]))
     if result["table_6_2"]:
         print(generator_markdown(result["table_6_2"]))
@@ -43,7 +67,12 @@ def register(tree: CommandTree) -> None:
         "compare",
         help="report from a results store: Table 6.1 / 6.2 as Markdown + CSV, plots, videos",
         description="Read the evaluation episodes of a results store (seal eval runs / seal run) and write into "
-        "--out: report.md; table_6_1.csv (per pipeline x setting: median, q25, q75, IQR over seeds of success / "
+        "--out: report.md (first page: which pipeline wins where, by how much, how sure); ego_ci.csv (per "
+        "pipeline x setting, rliable: mean and IQM of the seeds' rates with 95 % stratified-bootstrap intervals "
+        "over seeds and scenarios); improvement.csv (probability of improvement of every pipeline over every "
+        "other, with its interval); paired.csv / per_scenario.csv (which scenarios one pipeline solves and "
+        "another does not); ci_success_mean.png / ci_success_iqm.png; table_6_1.csv (per pipeline x setting: "
+        "median, q25, q75, IQR over seeds of success / "
         "crash / out-of-road rates); table_6_2.csv (per generator: ego success averaged over egos, realism "
         "Wasserstein distances, collision speed, head-on rates, generation time); rates_per_run.csv; "
         "bars_<metric>.png (median with IQR per setting); training_curves.png (from each run's progress.csv); "
@@ -56,5 +85,11 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--no-plots", action="store_true", help="tables only")
     p.add_argument("--videos", type=int, default=0, help="videos per generator setting (default 0; re-simulates)")
     p.add_argument("--video-format", choices=("mp4", "gif"), default="mp4", help="video format (default mp4)")
+    p.add_argument("--reps", type=positive_int("--reps"), default=N_BOOT_DEFAULT,
+                   help=f"bootstrap resamples of the success / crash intervals (default {N_BOOT_DEFAULT})")
+    p.add_argument("--poi-reps", type=positive_int("--poi-reps"), default=N_BOOT_POI_DEFAULT,
+                   help=f"bootstrap resamples of the probabilities of improvement (default {N_BOOT_POI_DEFAULT}; "
+                   "~1 ms each per pipeline pair and setting)")
+    p.add_argument("--json", action="store_true", help="print the tables as JSON instead of Markdown")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_compare)

@@ -149,3 +149,36 @@ def test_first_page_names_the_leader_from_the_numbers() -> None:
     assert "most realistic generator (lowest mean WD to the logged adversaries): **seal** 0.2" in md
     assert "lowest collision speed: **cat** 4 m/s" in md
     assert "of 6 pipeline x setting cells are within +/-5 points" in md
+
+
+def test_report_folder_has_the_statistics_first_page_and_json(tmp_path, capsys) -> None:
+    import json
+
+    from results_builders import episode
+
+    from seal.cli import main
+    from seal.cli.compare import N_BOOT_DEFAULT, N_BOOT_POI_DEFAULT
+    from seal.experiments.evaluation.results_store import ResultsStore
+    from seal.experiments.report.stats import N_BOOT, N_BOOT_POI
+
+    assert (N_BOOT_DEFAULT, N_BOOT_POI_DEFAULT) == (N_BOOT, N_BOOT_POI)
+    rows = [episode(run=f"/runs/{p}-s{k}", pipeline=p, seed=k, setting=s, scenario_id=f"s{i}",
+                    outcome="success" if i < wins + k else "crash")
+            for p, wins in (("noadv", 2), ("cat", 6)) for k in range(3) for s in ("normal", "hard") for i in range(8)]
+    store_path = tmp_path / "r.sqlite"
+    with ResultsStore(store_path) as store:
+        store.upsert_episodes(rows)
+    out = tmp_path / "rep"
+    assert main(["compare", "--store", str(store_path), "--out", str(out), "--reps", "200", "--poi-reps", "100",
+                 "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert {p.name for p in out.iterdir()} >= {"ego_ci.csv", "improvement.csv", "improvement_per_setting.csv",
+                                               "paired.csv", "per_scenario.csv", "ci_success_mean.png",
+                                               "ci_success_iqm.png"}
+    cell = next(r for r in result["ego_ci"] if (r["pipeline"], r["setting"], r["metric"]) == ("cat", "hard", "success"))
+    assert cell["mean"] == pytest.approx((6 + 7 + 8) / 24) and cell["seeds"] == 3 and cell["scenarios"] == 8
+    poi = next(r for r in result["improvement"] if r["pipeline"] == "cat")
+    assert poi["p_improvement"] == 1.0 and poi["settings"] == 2
+    md = (out / "report.md").read_text()
+    assert md.index("## Summary: who wins where") < md.index("(thesis Table 6.1)")
+    assert "| normal | cat | 87.5 % [" in md and "| noadv | 87.5 % [" not in md
