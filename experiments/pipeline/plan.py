@@ -14,8 +14,16 @@ from pathlib import Path
 from typing import Any
 
 from seal.adversaries.base import NO_ADVERSARY, available_generators
-from seal.experiments.pipeline.references import fits_needed, generators_in_use, substitute
+from seal.experiments.pipeline.references import (
+    fits_needed,
+    generators_in_use,
+    planned_runs,
+    substitute,
+    with_algo,
+    with_models,
+)
 from seal.experiments.pipeline.tasks import FIT_DEFAULTS, OPTIONS
+from seal.experiments.training.config import ALGOS
 
 RUN_EVAL_KEYS = ("settings", "replay_ego")
 """Keys of a preset's ``eval`` section besides `seal.experiments.evaluation.evaluate.EvalRunsConfig`'s."""
@@ -36,12 +44,12 @@ def check_plan(
     generators = {name: substitute(dict((config.get("generators") or {}).get(name) or {}), models)
                   for name in generators_in_use(config)}
     _check_eval(config.get("eval") or {}, dataset)
-    for pipeline in config["pipelines"]:
-        for seed in config["seeds"]:
-            try:
-                train_config_fn(config, config_path, pipeline, seed, dataset, generators)
-            except (ValueError, TypeError) as exc:
-                raise ValueError(f"train ({pipeline}, seed {seed}): {exc}") from None
+    resolved = with_models(config, models)
+    for pipeline, seed, algo in planned_runs(config).values():
+        try:
+            train_config_fn(with_algo(resolved, algo), config_path, pipeline, seed, dataset, generators)
+        except (ValueError, TypeError) as exc:
+            raise ValueError(f"train ({pipeline}, seed {seed}{f', algo {algo}' if algo else ''}): {exc}") from None
     _check_types("report", config.get("report") or {}, REPORT_KEYS)
     _check_types("backend", config.get("backend") or {}, BACKEND_KEYS)
     backend = (config.get("backend") or {}).get("name", "local")
@@ -115,6 +123,9 @@ def _check_pipelines(config: Mapping[str, Any]) -> None:
     for seed in config["seeds"]:
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
             raise ValueError(f"seeds: every seed must be a non-negative integer, got {seed!r}")
+    algos = config.get("algos") or []
+    if not isinstance(algos, list) or len(set(map(str, algos))) != len(algos) or any(a not in ALGOS for a in algos):
+        raise ValueError(f"algos: expected a list of distinct ego algorithms out of {', '.join(ALGOS)}, got {algos!r}")
     for name in config.get("generators") or {}:
         if name not in available_generators():
             raise ValueError(f"generators: unknown generator {name!r}; known: {', '.join(available_generators())}")

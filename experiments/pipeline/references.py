@@ -70,11 +70,12 @@ def _refs(value: Any) -> list[str]:
 
 
 def fits_needed(config: Mapping[str, Any]) -> list[str]:
-    """Models referenced (``"${fit.NAME}"``) by the kwargs of the generators in use, plus the models those fits'
-    options reference in turn (e.g. ``objective: {prior: "${fit.prior}"}``); ordered so that every model comes
-    after the ones its fit uses."""
+    """Models referenced (``"${fit.NAME}"``) by the kwargs of the generators in use and by the train section,
+    plus the models those fits' options reference in turn (e.g. ``objective: {prior: "${fit.prior}"}``); ordered
+    so that every model comes after the ones its fit uses."""
     gens, fit = config.get("generators") or {}, config.get("fit") or {}
     wanted = [r for name in generators_in_use(config) for r in _refs(gens.get(name) or {})]
+    wanted += _refs(config.get("train") or {})  # e.g. the ReSkill ego's hyperparams.reskill.skills
     order: list[str] = []
 
     def visit(name: str, chain: tuple[str, ...]) -> None:
@@ -102,3 +103,26 @@ def substitute(value: Any, models: Mapping[str, str]) -> Any:
         return [substitute(v, models) for v in value]
     m = REF.match(value) if isinstance(value, str) else None
     return models[m.group(1)] + m.group(2) if m else value
+
+
+def planned_runs(config: Mapping[str, Any]) -> dict[str, tuple[str, int, str | None]]:
+    """The training runs of a plan: run folder name -> ``(pipeline, seed, algo)``. Without ``algos`` one run per
+    pipeline x seed, ``<pipeline>-s<seed>``, with the train section's algorithm (``algo`` None); with ``algos`` one
+    per pipeline x algorithm x seed, ``<pipeline>-<algo>-s<seed>``."""
+    algos = config.get("algos") or [None]
+    return {(f"{p}-{a}-s{seed}" if a else f"{p}-s{seed}"): (p, int(seed), a)
+            for p in config["pipelines"] for a in algos for seed in config["seeds"]}
+
+
+def with_algo(config: Mapping[str, Any], algo: str | None) -> dict[str, Any]:
+    """``config`` with ``train.algo`` set to ``algo`` (unchanged for None): the config one run of a multi-algorithm
+    plan is built from."""
+    if algo is None:
+        return dict(config)
+    return {**config, "train": {**dict(config.get("train") or {}), "algo": algo}}
+
+
+def with_models(config: Mapping[str, Any], models: Mapping[str, str]) -> dict[str, Any]:
+    """``config`` with the ``"${fit.NAME}"`` references of its train section replaced by the fitted models' paths
+    (``train: {hyperparams: {reskill: {skills: "${fit.skills}"}}}``: the ReSkill ego's skills)."""
+    return {**config, "train": substitute(dict(config.get("train") or {}), models)}

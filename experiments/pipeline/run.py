@@ -7,6 +7,7 @@ Read top to bottom, the steps are:
 2. fit      the prior / goose / skills / objective (as ``seal fit NAME``) into OUT/models, only the models that the
             generators in use reference (``"${fit.NAME}"`` in ``generators``), or the file given as ``fit.NAME.path``
 3. train    one job per pipeline x seed (`seal.experiments.training.train.train_run`) into OUT/runs/<pipeline>-s<seed>
+            (x algorithm with ``algos``: OUT/runs/<pipeline>-<algo>-s<seed>)
 4. eval     one job per trained ego, plus the Replay ego (`seal.experiments.evaluation.evaluate.evaluate_job`) into
             OUT/results.sqlite
 5. report   `seal.experiments.report.write.write_report` into OUT/report
@@ -24,12 +25,17 @@ The preset's sections (all but ``train`` belong to this module; ``train`` is pas
 * ``data``: ``path`` (an existing scored, split dataset) or ``generate`` / ``score`` / ``split`` options
   (the command's options without dashes, e.g. ``split: {n_train: 80}`` = ``--n-train 80``;
   `seal.experiments.pipeline.tasks`).
-* ``fit``: per model (``prior``, ``goose``, ``skills``, ``objective``) either ``{path: FILE}`` or command
-  options (``{preset: quick, max_minutes: 1}``; ``"${fit.prior}"`` in them = another fitted model, fitted first).
+* ``fit``: per model (``prior``, ``goose``, ``skills``, ``objective``, ``behavior``, ``probes``) either
+  ``{path: FILE}`` or command options (``{preset: quick, max_minutes: 1}``; ``"${fit.prior}"`` in them = another
+  fitted model, fitted first).
 * ``generators``: generator name -> constructor kwargs for training and evaluation; a value ``"${fit.prior}"``
   becomes the fitted model's path.
+* ``train``: `seal.experiments.training.config.EgoTrainConfig` keys; ``"${fit.NAME}"`` in it = a fitted model
+  (``hyperparams: {reskill: {skills: "${fit.skills}"}}`` for the ReSkill ego).
 * ``pipelines``: training pipelines (``noadv`` = no adversary; ``goose``, ``cat``, ``seal``, ... = that
-  generator; or a name of ``variants``); ``seeds``: list of seeds.
+  generator; or a name of ``variants``); ``seeds``: list of seeds; ``algos`` (optional): ego algorithms to train
+  each pipeline x seed with (``[reskill, td3]``: the main and a secondary row of the report, which labels and
+  compares them apart, `seal.experiments.report.groups`).
 * ``variants``: pipeline name -> ``{generator: NAME, kwargs: {...}, train: {...}}``: a training pipeline that uses
   generator NAME with its ``generators`` kwargs updated by ``kwargs``, and the ``train`` section updated by
   ``train`` (nested keys, e.g. ``{curriculum: {warmup: 0.0}}``): the training-pipeline ablations of thesis
@@ -64,8 +70,11 @@ from seal.experiments.pipeline.references import (
     fits_needed,
     generator_of,
     generators_in_use,
+    planned_runs,
     substitute,
     variant_of,
+    with_algo,
+    with_models,
 )
 from seal.experiments.pipeline.tasks import run_task
 
@@ -98,13 +107,16 @@ class RunPreset:
     """`seal.experiments.training.config.EgoTrainConfig` keys."""
     variants: dict[str, Any] = field(default_factory=dict)
     """Pipeline name -> ``{generator, kwargs, train}``: a variant of a generator's training pipeline."""
+    algos: list[str] = field(default_factory=list)
+    """Ego algorithms (``train.algo`` values) each pipeline x seed is trained with, run folders
+    ``<pipeline>-<algo>-s<seed>``; empty: the train section's ``algo`` only, run folders ``<pipeline>-s<seed>``."""
     preset: str = ""
     """The preset's name (default: the file name)."""
 
 
 SECTIONS = tuple(f.name for f in fields(RunPreset))
 FIT_OUTPUTS = {"prior": "prior.pt", "goose": "goose.zip", "skills": "skills", "objective": "objective",
-               "behavior": "behavior"}
+               "behavior": "behavior", "probes": "probes"}
 """Model name -> file or folder written under OUT/models by the fit of that model."""
 
 # ---------------------------------------------------------------------------------------------- config
@@ -122,6 +134,8 @@ def load_run_config(path: str | Path, sets: Sequence[str] = ()) -> dict[str, Any
     for key in ("pipelines", "seeds"):
         if not isinstance(config.get(key), list) or not config[key]:
             raise ValueError(f"{path}: '{key}' must be a non-empty list")
+    if not isinstance(config.get("algos") or [], list):
+        raise ValueError(f"{path}: 'algos' must be a list of ego algorithms, got {config['algos']!r}")
     for key in ("data", "fit", "generators", "eval", "report", "backend", "train"):
         if config.get(key) is not None and not isinstance(config[key], dict):
             raise ValueError(f"{path}: '{key}' must be a mapping of options, got {config[key]!r}")
@@ -239,6 +253,21 @@ class _Run:
             raise RuntimeError(f"step {job['name']} failed: {result.error}")
 
 
+def check_run(config_path: str | Path, out: str | Path, sets: Sequence[str] = (),
+              train_config_fn: Callable[..., dict[str, Any]] = train_config) -> dict[str, Any]:
+    """``seal run --check``: load ``config_path`` and check its whole plan (`check_plan`) without writing anything;
+    returns what it would run: the training runs, the models to fit and the evaluation settings."""
+    from seal.experiments.evaluation.evaluate import DEFAULTS
+
+    config_path, out = Path(config_path).resolve(), Path(out).resolve()
+    config = load_run_config(config_path, sets)
+    check_plan(config, config_path, out, train_config_fn, FIT_OUTPUTS)
+    ev = config.get("eval") or {}
+    return {"preset": config["preset"], "out": str(out), "runs": list(planned_runs(config)),
+            "fits": fits_needed(config), "generators": generators_in_use(config),
+            "eval_settings": list(ev.get("settings") or ["normal", "hard"]), "eval_k": ev.get("k", DEFAULTS["k"])}
+
+
 def run_pipeline(
     config_path: str | Path, out: str | Path, backend: Backend | None = None, workers: int | None = None,
     task_fn: Callable[[Job], Any] = run_task, train_fn: Callable[[Job], Any] = train_job,
@@ -268,6 +297,7 @@ def run_pipeline(
     started = time.perf_counter()
     dataset, data_params = _data_steps(run)
     models = _fit_steps(run, dataset, data_params)
+    run.config = with_models(config, models)  # the train section's "${fit.NAME}" (the ReSkill ego's skills)
     generators = {name: substitute(dict((config.get("generators") or {}).get(name) or {}), models)
                   for name in generators_in_use(config)}
     n_jobs, trained = _train_step(run, dataset, generators)
@@ -324,13 +354,12 @@ def _train_step(run: _Run, dataset: str, generators: Mapping[str, Any]) -> tuple
     """3. train one ego per pipeline x seed (finished run folders skipped); returns the number of train jobs and
     this preset's finished run folders."""
     jobs = []
-    runs = {run.out / "runs" / f"{p}-s{seed}": (p, int(seed))
-            for p in run.config["pipelines"] for seed in run.config["seeds"]}
-    for run_dir, (pipeline, seed) in runs.items():
+    runs = {run.out / "runs" / name: spec for name, spec in planned_runs(run.config).items()}
+    for run_dir, (pipeline, seed, algo) in runs.items():
         if (run_dir / "done.json").is_file():
             logger.info(f"[seal run] train {run_dir.name}: done, skipped")
             continue
-        cfg = run.train_config_fn(run.config, run.config_path, pipeline, seed, dataset, generators)
+        cfg = run.train_config_fn(with_algo(run.config, algo), run.config_path, pipeline, seed, dataset, generators)
         jobs.append({"name": run_dir.name, "config": cfg, "out": str(run_dir)})
     # Trainers may run several env processes each: backend.train_workers caps concurrent local train jobs.
     train_workers = (run.config.get("backend") or {}).get("train_workers")

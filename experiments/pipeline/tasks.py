@@ -1,6 +1,7 @@
 """The data and model-fit steps of ``seal run`` as Python calls: one picklable job function, `run_task`, that a
 backend runs in a worker process (`seal.experiments.backends`), with the same defaults as the matching ``seal``
-commands (``seal data generate | score | split``, ``seal fit prior | goose | skills | objective | behavior``).
+commands (``seal data generate | score | split``, ``seal fit prior | goose | skills | objective | behavior |
+probes``).
 
 A job is a dict: ``task`` (``generate``, ``score``, ``split``, ``fit``), ``dataset`` (the dataset folder),
 ``model`` and ``out`` (fits: which model and the file or folder to write) and ``options`` (the preset's options of
@@ -37,6 +38,7 @@ OPTIONS: dict[str, tuple[str, ...]] = {
                   "limit", "skills", "behavior", "egos", "no_progress"),
     "behavior": ("preset", "config", "split", "limit", "eval_split", "eval_limit", "max_samples", "crash_datasets",
                  "seed", "threads", "no_progress"),
+    "probes": ("prior", "config", "split", "limit", "max_targets", "seed", "no_progress"),
 }
 """Known options per task / fitted model (the options of the matching ``seal`` command)."""
 
@@ -196,7 +198,28 @@ def fit_behavior(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
     return fit_behavior(dataset, out, config, progress=not o.get("no_progress", False))
 
 
+def fit_probes(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
+    """``seal fit probes PRIOR DATASET --out OUT``: the steering folder of the ``steered`` generator (``prior``:
+    the prior file, e.g. ``"${fit.prior}"``)."""
+    from seal.core.config import load_config
+    from seal.core.dataset import load_split
+    from seal.experiments.steering.fit import ProbeFitConfig, fit_probes
+    from seal.models.prior.prior import TrajectoryPrior
+
+    if not o.get("prior"):
+        raise ValueError("fit probes: option 'prior' is required (the prior file, e.g. \"${fit.prior}\")")
+    cfg = load_config(ProbeFitConfig, file=o.get("config"),
+                      values={k: o.get(k) for k in ("split", "limit", "max_targets", "seed")})
+    _torch_threads(1)  # as `seal fit probes`: batch inference of a small transformer is fastest on one thread
+    prior = TrajectoryPrior.load(str(o["prior"]))
+    scenarios = load_split(dataset, cfg.split, cfg.limit)
+    info = {"prior": str(Path(str(o["prior"])).resolve()), "dataset": str(Path(dataset).resolve()),
+            "split": cfg.split, "scenarios": len(scenarios)}
+    report = fit_probes(prior, scenarios, out, cfg, info=info, progress=not o.get("no_progress", False))
+    return {"best_site": report.get("best_site"), "vectors": len(report.get("vectors") or [])}
+
+
 FITS: dict[str, Callable[[str, str, dict[str, Any]], Any]] = {
     "prior": fit_prior, "goose": fit_goose, "skills": fit_skills, "objective": fit_objective,
-    "behavior": fit_behavior,
+    "behavior": fit_behavior, "probes": fit_probes,
 }

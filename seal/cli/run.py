@@ -19,6 +19,18 @@ def cmd_run(args: argparse.Namespace) -> int:
         config = load_run_config(args.config, args.set)
     except (OSError, ValueError) as exc:
         raise CliError(str(exc)) from None
+    out = args.out or str(Path("runs") / Path(args.config).stem)
+    if args.check:
+        from seal.experiments.pipeline.run import check_run
+
+        try:
+            plan = check_run(args.config, out, args.set)
+        except (OSError, ValueError) as exc:
+            raise CliError(f"{args.config}: {exc}") from None
+        print(json.dumps(plan, indent=2) if args.json else
+              f"{args.config}: plan ok: {len(plan['runs'])} training runs, fits {', '.join(plan['fits']) or 'none'}, "
+              f"evaluation on {', '.join(plan['eval_settings'])} (K = {plan['eval_k']})")
+        return 0
     bcfg = config.get("backend") or {}
     name = args.backend or bcfg.get("name", "local")
     workers = args.workers if args.workers is not None else bcfg.get("workers")
@@ -26,7 +38,6 @@ def cmd_run(args: argparse.Namespace) -> int:
         backend = make_backend(name, workers, address=args.address or bcfg.get("address"))
     except RuntimeError as exc:
         raise CliError(str(exc)) from None
-    out = args.out or str(Path("runs") / Path(args.config).stem)
     try:
         summary = run_pipeline(args.config, out, backend=backend, progress=not args.no_progress, sets=args.set)
     except RuntimeError as exc:
@@ -56,5 +67,9 @@ def register(tree: CommandTree) -> None:
                    help="local worker processes (default: the preset's backend.workers, else the CPU count)")
     p.add_argument("--address", default=None, help="Ray cluster address (default RAY_ADDRESS, else auto)")
     add_set_option(p, "eval.limit=5 or seeds=[0]")
+    p.add_argument("--check", action="store_true",
+                   help="check the whole plan (every step's options, names, paths) and print what it would run; "
+                   "writes nothing")
+    p.add_argument("--json", action="store_true", help="with --check: print the plan as JSON")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_run)
