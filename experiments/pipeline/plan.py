@@ -27,7 +27,7 @@ from seal.experiments.training.config import ALGOS
 
 RUN_EVAL_KEYS = ("settings", "replay_ego")
 """Keys of a preset's ``eval`` section besides `seal.experiments.evaluation.evaluate.EvalRunsConfig`'s."""
-REPORT_KEYS = {"plots": bool, "videos": int, "video_format": str}
+REPORT_KEYS = {"plots": bool, "videos": int, "video_format": str, "reps": int, "poi_reps": int}
 BACKEND_KEYS = {"name": str, "workers": int, "address": str, "train_workers": int}
 DATA_TASKS = ("generate", "score", "split")
 

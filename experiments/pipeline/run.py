@@ -42,7 +42,8 @@ The preset's sections (all but ``train`` belong to this module; ``train`` is pas
   Fig. 6.5 (``experiments/configs/quick_ablations.yaml``).
 * ``eval``: ``settings`` (list, as ``seal eval runs --settings``), ``k``, ``limit``, ``seed``, ``prior``,
   ``candidates``, ``env``, ``replay_ego`` (default true).
-* ``report``: ``plots`` (default true), ``videos`` (per generator, default 0), ``video_format``.
+* ``report``: ``plots`` (default true), ``videos`` (per generator, default 0), ``video_format``, ``reps`` /
+  ``poi_reps`` (bootstrap resamples of the intervals / probabilities of improvement, as ``seal compare``).
 * ``backend``: ``name`` (local | ray), ``workers``, ``address`` (Ray), ``train_workers`` (local: concurrent train
   jobs, when each trainer already runs several env processes); the command line overrides name and workers.
 """
@@ -84,8 +85,8 @@ logger = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class RunPreset:
-    """The sections of a ``seal run`` preset (``experiments/configs/quick|standard|paper.yaml``); each step's own
-    config type checks its section when the step runs."""
+    """The sections of a ``seal run`` preset (``experiments/configs/quick|standard|paper|decisive.yaml``); each
+    step's own config type checks its section when the step runs."""
 
     data: dict[str, Any] = field(default_factory=dict)
     """How to build, score and split the pool (options of ``seal data generate / score / split``), or ``path:``."""
@@ -421,5 +422,6 @@ def _report_step(run: _Run, store: str) -> Path:
         run.steps.run("report", [rep, n_episodes], lambda: write_report(
             store, report_dir, plots=rep.get("plots", True), videos=int(rep.get("videos", 0)),
             video_format=rep.get("video_format", "mp4"), progress=run.progress,
+            **{k: int(rep[key]) for k, key in (("n_boot", "reps"), ("n_boot_poi", "poi_reps")) if rep.get(key)},
         ))
     return report_dir

@@ -279,13 +279,13 @@ RESOLVED_ONLY = ("generator", "preset", "hyperparams")
 ADDED_LATER: dict[str, Any] = {"overlap_updates": False}
 """Fields a run folder recorded before they existed may lack, with the value that reproduces those runs."""
 
-PRESETS = ("quick", "standard", "paper")
+PRESETS = ("quick", "standard", "paper", "decisive")
 DEFAULT_PRESET = "standard"
 
 
 def preset_path(name_or_path: str | Path) -> Path:
-    """A preset name (quick | standard | paper) -> ``experiments/configs/<name>.yaml`` of the installed package;
-    anything else is taken as a path."""
+    """A preset name (quick | standard | paper | decisive) -> ``experiments/configs/<name>.yaml`` of the installed
+    package; anything else is taken as a path."""
     from seal.experiments.presets import CONFIG_DIR
 
     text = str(name_or_path)
@@ -297,7 +297,7 @@ def read_train_section(path: str | Path) -> dict[str, Any]:
     path = preset_path(path)
     if not path.is_file():
         raise FileNotFoundError(
-            f"--config {path}: no such file (presets: experiments/configs/quick|standard|paper.yaml)"
+            f"--config {path}: no such file (presets: experiments/configs/quick|standard|paper|decisive.yaml)"
         )
     loaded = read_yaml(path)
     if not isinstance(loaded.get("train"), dict):

@@ -51,7 +51,7 @@ def register(tree: CommandTree) -> None:
     p = tree.top.add_parser(
         "run",
         help="the whole experiment of a preset: data, scores, splits, fits, training x seeds, eval, report",
-        description="Run every step of an experiment preset (experiments/configs/quick|standard|paper.yaml): "
+        description="Run every step of an experiment preset (experiments/configs/quick|standard|paper|decisive.yaml): "
         "generate, score and split the data; fit the models the generators need (prior, GOOSE, skills, "
         "objective); train one ego per pipeline x seed; evaluate every ego plus the Replay ego into "
         "OUT/results.sqlite; write OUT/report. Finished steps are skipped on re-run (markers in OUT/steps, run "

@@ -10,6 +10,7 @@ import pytest
 import scenario_factory as sf
 import yaml
 from results_builders import episode
+from run_builders import FakeTasks
 
 from seal.core.dataset import Dataset, write_dataset
 from seal.experiments.backends import InlineBackend
@@ -19,26 +20,6 @@ from seal.experiments.pipeline.run import load_run_config, run_pipeline
 from seal.experiments.pipeline.tasks import run_task
 
 CONFIGS = Path(__file__).resolve().parents[2] / "experiments" / "configs"
-
-
-class FakeTasks:
-    """Records the data / fit step jobs as (task or fit model, dataset, out, options); `generate` / `split` and the
-    fits write small real outputs."""
-
-    def __init__(self) -> None:
-        self.calls: list[tuple] = []
-
-    def __call__(self, job) -> None:
-        kind = job["model"] if job["task"] == "fit" else job["task"]
-        self.calls.append((kind, job["dataset"], job.get("out"), job["options"]))
-        if job["task"] == "generate":
-            write_dataset(job["dataset"], [sf.highway_scenario(i) for i in range(3)])
-        elif job["task"] == "split":
-            ds = Dataset.open(job["dataset"])
-            ids = [s.scenario_id for s in ds.load()]
-            ds.update_manifest(splits={"train": ids[:1], "eval": ids[1:], "hard": ids[:1]})
-        elif job["task"] == "fit":
-            Path(job["out"]).write_text("model")
 
 
 def fake_train_config(config, preset_path, pipeline, seed, dataset, generators) -> dict:
@@ -81,7 +62,7 @@ def write_preset(tmp_path: Path, seeds=(0, 1), **changes) -> Path:
         "pipelines": ["noadv", "cat"],
         "seeds": list(seeds),
         "eval": {"settings": ["normal", "hard", "cat"], "k": 2, "limit": 2},
-        "report": {"plots": False},
+        "report": {"plots": False, "reps": 50, "poi_reps": 20},  # few resamples: the statistics are not tested here
         "train": {"algo": "td3", "total_timesteps": 100},
         **changes,
     }

@@ -1,0 +1,125 @@
+"""The decisive preset (issue 26): its plan passes the check with the real trainer configs (every pipeline of the
+registry x ReSkill and TD3 x 4 seeds, the split sizes, every generator setting with K = 5, a real-data setting),
+and a toy variant of it runs end to end through `seal run` (injected step / job functions, the real report): run
+folders per algorithm, ReSkill runs on the fitted skills, and a report that keeps the algorithms apart."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+import scenario_factory as sf
+import yaml
+from results_builders import episode
+from run_builders import FakeTasks
+
+from seal.adversaries.base import pipeline_names
+from seal.cli import main
+from seal.core.dataset import write_dataset
+from seal.experiments.backends import InlineBackend
+from seal.experiments.evaluation.results_store import ResultsStore
+from seal.experiments.pipeline.references import fits_needed, planned_runs
+from seal.experiments.pipeline.run import check_run, load_run_config, run_pipeline, train_config
+
+PRESET = Path(__file__).resolve().parents[2] / "experiments" / "configs" / "decisive.yaml"
+
+
+@pytest.fixture()
+def real_dataset(tmp_path: Path) -> str:
+    """An imported-recordings stand-in: the preset's ``real:`` setting pointed at it."""
+    root = tmp_path / "ngsim"
+    write_dataset(root, [sf.highway_scenario(i) for i in range(2)])
+    return str(root)
+
+
+def _settings_with(real: str, settings: list[str]) -> str:
+    return "eval.settings=" + json.dumps([*settings, f"real:{real}"])
+
+
+def test_decisive_plan_is_every_pipeline_times_two_algorithms_times_four_seeds(tmp_path: Path, real_dataset: str
+                                                                               ) -> None:
+    config = load_run_config(PRESET)
+    assert config["pipelines"] == list(pipeline_names()) and config["algos"] == ["reskill", "td3"]
+    assert config["seeds"] == [0, 1, 2, 3]
+    split = config["data"]["split"]
+    assert (split["n_train"], split["n_eval"], split["n_hard"], split["hard_by"]) == (1000, 300, 300, "pair")
+    ev = config["eval"]
+    assert ev["k"] == 5 and ev["limit"] is None
+    assert set(pipeline_names()) - {"noadv"} <= set(ev["settings"]) and {"normal", "hard"} <= set(ev["settings"])
+    assert any(s.startswith("real:") for s in ev["settings"])
+    assert set(fits_needed(config)) == {"prior", "goose", "skills", "objective", "behavior", "probes"}
+    assert "skills" in fits_needed({**config, "pipelines": ["noadv"], "eval": {}})  # the ReSkill ego needs them
+    settings = [s for s in ev["settings"] if not s.startswith("real:")]
+    plan = check_run(PRESET, tmp_path / "out", [_settings_with(real_dataset, settings)])
+    assert len(plan["runs"]) == 56 and "seal-rcg-reskill-s3" in plan["runs"] and "noadv-td3-s0" in plan["runs"]
+    assert not (tmp_path / "out").exists()
+    # The shipped file with its own real: path, where that dataset exists (this machine), through the CLI.
+    if Path(ev["settings"][-1][len("real:"):]).expanduser().is_dir():
+        assert main(["run", str(PRESET), "--out", str(tmp_path / "o2"), "--check"]) == 0
+
+
+def test_each_run_gets_its_algorithm_and_the_reskill_runs_the_fitted_skills(real_dataset: str) -> None:
+    config = load_run_config(PRESET, [_settings_with(real_dataset, ["normal"])])
+    runs = planned_runs(config)
+    assert runs["cat-td3-s2"] == ("cat", 2, "td3") and runs["seal-reskill-s0"] == ("seal", 0, "reskill")
+    from seal.experiments.pipeline.references import with_algo, with_models
+
+    resolved = with_models(config, {"skills": "/m/skills"})
+    gens = {"seal": {"prior": "/m/prior.pt", "objective": "/m/objective/objective.pt", "skills": "/m/skills"}}
+    reskill = train_config(with_algo(resolved, "reskill"), PRESET, "seal", 0, "/d", gens)
+    td3 = train_config(with_algo(resolved, "td3"), PRESET, "seal", 0, "/d", gens)
+    assert reskill["algo"] == "reskill" and reskill["hyperparams"]["skills"] == "/m/skills"
+    assert td3["algo"] == "td3" and td3["hyperparams"]["train_freq"] == 2
+    assert reskill["generator"] == td3["generator"] == {"name": "seal", "kwargs": gens["seal"]}
+
+
+def _train(job) -> dict:
+    """A finished run folder (config.yaml, done.json) of the job's resolved config."""
+    out = Path(job["out"])
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "config.yaml").write_text(yaml.safe_dump(job["config"]))
+    (out / "done.json").write_text("{}")
+    return {"run": str(out)}
+
+
+def _eval(job) -> dict:
+    """Four scenarios per setting: SEAL's ReSkill egos solve all four, every other ego the first two."""
+    cfg = yaml.safe_load((Path(job["run"]) / "config.yaml").read_text()) if job["run"] != "replay" else {}
+    pipeline, seed = cfg.get("pipeline", "replay"), cfg.get("seed", 0)
+    wins = 4 if (pipeline, cfg.get("algo")) == ("seal", "reskill") else 2
+    with ResultsStore(job["store"]) as store:
+        store.upsert_episodes([episode(run=job["run"], setting=s["name"], pipeline=pipeline, seed=seed,
+                                       scenario_id=f"s{i}", outcome="success" if i < wins else "crash")
+                               for s in job["settings"] for i in range(4)])
+        store.upsert_run(job["run"], pipeline, seed, job["run"], None if job["run"] == "replay" else job["run"], cfg)
+    return {"run": job["run"]}
+
+
+def test_toy_decisive_runs_end_to_end_and_reports_the_algorithms_apart(tmp_path: Path, real_dataset: str) -> None:
+    sets = ["seeds=[0,1]", _settings_with(real_dataset, ["normal", "cat"]), "report.plots=false",
+            "report.videos=0", "report.reps=100", "report.poi_reps=50"]
+    out = tmp_path / "toy"
+    tasks = FakeTasks()
+    summary = run_pipeline(PRESET, out, backend=InlineBackend(), task_fn=tasks, train_fn=_train, eval_fn=_eval,
+                           progress=False, sets=sets)
+    fitted = [c[0] for c in tasks.calls if c[0] not in ("generate", "score", "split")]
+    assert fitted.index("prior") < fitted.index("probes") and set(fitted) == {
+        "prior", "goose", "skills", "objective", "behavior", "probes"}
+    assert len(summary["runs"]) == 7 * 2 * 2 and not summary["errors"]
+    reskill = yaml.safe_load((out / "runs" / "noadv-reskill-s1" / "config.yaml").read_text())
+    assert reskill["algo"] == "reskill" and reskill["hyperparams"]["skills"] == str(out / "models" / "skills")
+    models = out / "models"
+    assert yaml.safe_load((out / "runs" / "steered-td3-s0" / "config.yaml").read_text())["generator"] == {
+        "name": "steered", "kwargs": {"prior": str(models / "prior.pt"), "steer": str(models / "probes")}}
+    report = out / "report"
+    md = (report / "report.md").read_text()
+    assert "### Ego algorithm: reskill" in md and "### Ego algorithm: td3" in md
+    assert "| normal | seal (reskill) | 100.0 % [" in md and "| cat | seal (reskill) |" in md
+    with open(report / "improvement.csv") as f:
+        poi = list(csv.DictReader(f))
+    assert all(r["pipeline"][r["pipeline"].index("("):] == r["reference"][r["reference"].index("("):] for r in poi)
+    assert len(poi) == 2 * 7 * 6  # every ordered pair within each algorithm
+    best = next(r for r in poi if (r["pipeline"], r["reference"]) == ("seal (reskill)", "cat (reskill)"))
+    assert float(best["p_improvement"]) == 1.0 and int(best["settings"]) == 3
