@@ -412,6 +412,7 @@ def _report_step(run: _Run, store: str) -> Path:
     if not Path(store).is_file():
         return report_dir
     from seal.experiments.evaluation.results_store import ResultsStore
+    from seal.experiments.report.stats import N_BOOT, N_BOOT_POI
     from seal.experiments.report.write import write_report
 
     with ResultsStore(store) as s:
@@ -422,6 +423,6 @@ def _report_step(run: _Run, store: str) -> Path:
         run.steps.run("report", [rep, n_episodes], lambda: write_report(
             store, report_dir, plots=rep.get("plots", True), videos=int(rep.get("videos", 0)),
             video_format=rep.get("video_format", "mp4"), progress=run.progress,
-            **{k: int(rep[key]) for k, key in (("n_boot", "reps"), ("n_boot_poi", "poi_reps")) if rep.get(key)},
+            n_boot=int(rep.get("reps") or N_BOOT), n_boot_poi=int(rep.get("poi_reps") or N_BOOT_POI),
         ))
     return report_dir

@@ -7,10 +7,10 @@ a training pipeline) on one scenario of a setting. Per (pipeline, setting) the s
 
 * **mean**: the rate over all its episodes, which is the mean of the seeds' rates (every seed plays the same
   scenarios).
-* **IQM**: rliable's interquartile mean (`rliable.metrics.aggregate_iqm`, a 25 % trimmed mean) of the *seeds'
-  rates*, so one outlying seed does not move it (with 4 seeds: the mean of the middle two). The IQM of the 0/1
-  episodes themselves would be ``clip((p - 0.25) / 0.5, 0, 1)`` of the mean ``p``: a clipped rescaling that carries
-  nothing the mean does not.
+* **IQM**: rliable's interquartile mean (`rliable.metrics.aggregate_iqm`, a 25 % trimmed mean; `iqm_columns`
+  computes the same numbers faster) of the *seeds' rates*, so one outlying seed does not move it (with 4 seeds:
+  the mean of the middle two). The IQM of the 0/1 episodes themselves would be ``clip((p - 0.25) / 0.5, 0, 1)`` of
+  the mean ``p``: a clipped rescaling that carries nothing the mean does not.
 * **95 % intervals**: rliable's stratified bootstrap (`rliable.library.get_interval_estimates`, percentile method)
   with ``task_bootstrap`` on the ``scenarios x seeds`` matrix: rliable's "tasks" are the seeds (drawn with
   replacement) and its "runs" the scenarios, resampled within each drawn seed, so both the seed-to-seed and the
@@ -21,7 +21,7 @@ a training pipeline) on one scenario of a setting. Per (pipeline, setting) the s
   (each pipeline's seeds resampled per setting). ``P(Y > X) = 1 - P(X > Y)`` exactly, resamples included, so each
   unordered pair is bootstrapped once.
 
-rliable draws from NumPy's global generator; `_seeded` seeds it for each estimate and restores it afterwards, so
+rliable draws from NumPy's global generator; `seeded` seeds it for each estimate and restores it afterwards, so
 the intervals are reproducible and the caller's random stream is untouched. Egos with another algorithm are
 labelled apart by `seal.experiments.report.groups` before they get here and are only compared within their algorithm.
 """
@@ -48,7 +48,7 @@ CONFIDENCE = 0.95
 
 
 @contextmanager
-def _seeded(seed: int) -> Iterator[None]:
+def seeded(seed: int) -> Iterator[None]:
     """rliable samples from ``np.random``'s global state: seed it for one estimate, then put it back."""
     state = np.random.get_state()
     np.random.seed(seed)
@@ -88,14 +88,20 @@ def score_matrices(rows: Sequence[Mapping[str, Any]]) -> dict[tuple[str, str], S
     return out
 
 
+def iqm_columns(scores: np.ndarray) -> np.ndarray:
+    """rliable's IQM (`rliable.metrics.aggregate_iqm`: scipy's ``trim_mean(proportiontocut=0.25)``) of each column
+    of ``scores [runs, columns]``: sort, drop ``int(0.25 runs)`` from each end, average. Written out because the
+    bootstrap calls it thousands of times and scipy's call costs ~1.2 ms against ~0.02 ms here; the tests check it
+    equals rliable's."""
+    cut = int(0.25 * scores.shape[0])
+    return np.sort(scores, axis=0)[cut:scores.shape[0] - cut].mean(axis=0)
+
+
 def _mean_and_iqm(values: np.ndarray) -> np.ndarray:
     """``[mean of metric 0, IQM over seeds of metric 0, mean of metric 1, ...]`` of ``values [scenarios, seeds,
     metrics]`` (the aggregate function handed to rliable)."""
-    from rliable import metrics
-
     rates = values.mean(axis=0)  # [seeds, metrics]
-    return np.array([v for m in range(values.shape[2])
-                     for v in (float(rates[:, m].mean()), float(metrics.aggregate_iqm(rates[:, m])))])
+    return np.stack([rates.mean(axis=0), iqm_columns(rates)], axis=1).ravel()
 
 
 def mean_iqm_intervals(matrix: ScoreMatrix, n_boot: int = N_BOOT, seed: int = 0) -> dict[str, dict[str, float]]:
@@ -107,7 +113,7 @@ def mean_iqm_intervals(matrix: ScoreMatrix, n_boot: int = N_BOOT, seed: int = 0)
     if matrix.values.shape[0] == 0:
         return {m: {k: math.nan for k in ("mean", "mean_low", "mean_high", "iqm", "iqm_low", "iqm_high")}
                 for m in EGO_METRICS}
-    with _seeded(seed):
+    with seeded(seed):
         points, intervals = rly.get_interval_estimates(
             {"x": matrix.values}, _mean_and_iqm, task_bootstrap=True, reps=n_boot,
             confidence_interval_size=CONFIDENCE)
@@ -148,7 +154,7 @@ def poi_interval(x: Sequence[np.ndarray], y: Sequence[np.ndarray], n_boot: int =
     from rliable import metrics
 
     sx, sy = np.stack([np.asarray(v, np.float64) for v in x], 1), np.stack([np.asarray(v, np.float64) for v in y], 1)
-    with _seeded(seed):
+    with seeded(seed):
         points, intervals = rly.get_interval_estimates(
             {"xy": (sx, sy)}, metrics.probability_of_improvement, reps=n_boot, confidence_interval_size=CONFIDENCE)
     ci = np.asarray(intervals["xy"]).ravel()
@@ -195,7 +201,8 @@ def improvement_table(rows: Sequence[Mapping[str, Any]], n_boot: int = N_BOOT_PO
     return table
 
 
-def _ci_cell(point: float, low: float, high: float, scale: float = 100.0, digits: int = 1) -> str:
+def ci_cell(point: float, low: float, high: float, scale: float = 100.0, digits: int = 1) -> str:
+    """``estimate [low-high]`` of ``scale`` times the values, ``-`` for NaN."""
     if not math.isfinite(point):
         return "-"
     return f"{scale * point:.{digits}f} [{scale * low:.{digits}f}-{scale * high:.{digits}f}]"
@@ -211,7 +218,7 @@ def ci_markdown(table: Sequence[Mapping[str, Any]], metric: str = "success", sta
         cells = {r["setting"]: r for r in rows if r["pipeline"] == pipeline}
         seeds = max(r["seeds"] for r in cells.values())
         out.append(f"| {pipeline} | {seeds} | " + " | ".join(
-            _ci_cell(c[statistic], c[low], c[high]) if (c := cells.get(s)) else "-" for s in settings) + " |")
+            ci_cell(c[statistic], c[low], c[high]) if (c := cells.get(s)) else "-" for s in settings) + " |")
     return "\n".join(out) + "\n"
 
 
@@ -223,6 +230,6 @@ def improvement_markdown(table: Sequence[Mapping[str, Any]]) -> str:
     out = ["| P(row > column) | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
     for a in names:
         out.append(f"| {a} | " + " | ".join(
-            _ci_cell(c["p_improvement"], c["ci_low"], c["ci_high"], 1.0, 2) if (c := cells.get((a, b))) else "-"
+            ci_cell(c["p_improvement"], c["ci_low"], c["ci_high"], 1.0, 2) if (c := cells.get((a, b))) else "-"
             for b in names) + " |")
     return "\n".join(out) + "\n"

@@ -1,5 +1,6 @@
-"""The statistics part of the report folder: the interval and improvement tables (`seal.experiments.report.stats`),
-the per-scenario paired view (`seal.experiments.report.paired`), the interval figures
+"""The statistics part of the report folder: the interval and improvement tables
+(`seal.experiments.report.stats`), the generator intervals (`seal.experiments.report.generator_stats`), the
+per-scenario paired view (`seal.experiments.report.paired`), the interval figures
 (`seal.experiments.report.ci_plots`) and the first page (`seal.experiments.report.first_page`), written as CSV /
 PNG files and returned as Markdown sections for ``report.md``."""
 
@@ -14,6 +15,7 @@ from seal.core.atomic import atomic_write_bytes
 from seal.experiments.report.ci_plots import plot_success_intervals
 from seal.experiments.report.compare import to_csv
 from seal.experiments.report.first_page import first_page_markdown, leader_pairs
+from seal.experiments.report.generator_stats import generator_ci_markdown, generator_ci_table
 from seal.experiments.report.paired import paired_counts, paired_markdown, scenario_rates
 from seal.experiments.report.stats import (
     N_BOOT,
@@ -24,7 +26,8 @@ from seal.experiments.report.stats import (
     improvement_table,
 )
 
-FILES = ("ego_ci.csv", "improvement.csv", "improvement_per_setting.csv", "paired.csv", "per_scenario.csv")
+FILES = ("ego_ci.csv", "improvement.csv", "improvement_per_setting.csv", "paired.csv", "per_scenario.csv",
+         "generator_ci.csv")
 
 
 @dataclass
@@ -35,6 +38,7 @@ class Uncertainty:
     improvement: list[dict[str, Any]]
     improvement_per_setting: list[dict[str, Any]]
     paired: list[dict[str, Any]]
+    generator_ci: list[dict[str, Any]]
     first_page: str
     sections: list[str]
     figures: list[str] = field(default_factory=list)
@@ -50,7 +54,8 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
     # Per setting only what the first page reads (leader vs runner-up): each pair costs ~1 s per setting.
     poi_setting = improvement_table(ego_rows, n_boot_poi, seed, per_setting=True, only=leader_pairs(cis))
     paired = paired_counts(ego_rows)
-    for name, table in zip(FILES, (cis, poi, poi_setting, paired, scenario_rates(ego_rows)), strict=True):
+    gen_ci = generator_ci_table(ego_rows, [r["setting"] for r in t62], seed=seed)
+    for name, table in zip(FILES, (cis, poi, poi_setting, paired, scenario_rates(ego_rows), gen_ci), strict=True):
         atomic_write_bytes(out / name, to_csv(table))
     figures = []
     if plots:
@@ -72,6 +77,10 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
         "A pipeline solves a scenario when its egos succeed on it in more than half of the seeds. Every "
         "scenario's success share per pipeline: `per_scenario.csv`; all counts: `paired.csv`.\n",
         paired_markdown(paired) if paired else "(fewer than two comparable pipelines)\n",
+        "## Generators with intervals (Table 6.2)\n",
+        "Realism Wasserstein distances and collision speed as in Table 6.2 [95 % bootstrap interval; the "
+        "setting's scenarios resampled, each with all its episodes].\n",
+        generator_ci_markdown(gen_ci) if gen_ci else "(no generator settings evaluated)\n",
     ]
-    return Uncertainty(cis, poi, poi_setting, paired, first_page_markdown(cis, poi, poi_setting, t62), sections,
-                       figures)
+    return Uncertainty(cis, poi, poi_setting, paired, gen_ci, first_page_markdown(cis, poi, poi_setting, gen_ci),
+                       sections, figures)

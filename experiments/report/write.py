@@ -95,7 +95,8 @@ def write_report(
         md.append("")
     atomic_write_bytes(out / "report.md", "\n".join(md).encode())
     return {"table_6_1": t61, "table_6_2": t62, "ego_ci": stats.ego_ci, "improvement": stats.improvement,
-            "improvement_per_setting": stats.improvement_per_setting, "paired": stats.paired, "figures": figures,
+            "improvement_per_setting": stats.improvement_per_setting, "paired": stats.paired,
+            "generator_ci": stats.generator_ci, "figures": figures,
             "videos": video_files, "episodes": len(rows)}
 
 

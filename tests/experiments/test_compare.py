@@ -132,7 +132,7 @@ def test_report_files_tables_and_plots(tmp_path):
         store.upsert_run("/runs/noadv-s0", "noadv", 0, "x", str(run_dir), {})
         store.upsert_setting("/data", "cat", "generator", "eval", "cat", {}, 5)
     out = tmp_path / "report"
-    result = write_report(store_path, out, progress=False)
+    result = write_report(store_path, out, progress=False, n_boot=200, n_boot_poi=100)
     assert {p.name for p in out.iterdir()} >= {
         "report.md", "table_6_1.csv", "table_6_2.csv", "rates_per_run.csv", "bars_success.png", "bars_crash.png",
         "bars_out_of_road.png", "training_curves.png",
@@ -153,7 +153,8 @@ def test_compare_cli_and_errors(tmp_path, capsys):
     store_path = tmp_path / "r.sqlite"
     with ResultsStore(store_path) as store:
         store.upsert_episodes(fake_rows())
-    assert main(["compare", "--store", str(store_path), "--out", str(tmp_path / "rep"), "--no-plots"]) == 0
+    assert main(["compare", "--store", str(store_path), "--out", str(tmp_path / "rep"), "--no-plots", "--reps", "200",
+                 "--poi-reps", "100"]) == 0
     assert "75.0 [62.5-87.5]" in capsys.readouterr().out
     assert main(["compare", "--store", str(store_path), "--out", str(tmp_path / "x"), "--pipeline", "seal"]) == 2
     assert "no evaluation episodes match" in capsys.readouterr().err

@@ -15,6 +15,7 @@ from seal.experiments.report.stats import (
     ego_ci_table,
     improvement_markdown,
     improvement_table,
+    iqm_columns,
     mean_iqm_intervals,
     poi_interval,
     score_matrices,
@@ -53,6 +54,15 @@ def test_mean_and_iqm_intervals_contain_the_estimates_and_shrink_with_more_scena
         assert est["iqm_low"] <= est["iqm"] <= est["iqm_high"]
         widths.append(est["mean_high"] - est["mean_low"])
     assert widths[1] < widths[0] / 2
+
+
+def test_iqm_columns_equal_rliables_iqm() -> None:
+    from rliable import metrics
+
+    rng = np.random.default_rng(3)
+    for runs in range(1, 9):
+        scores = rng.random((runs, 3)).round(1)  # ties included
+        assert iqm_columns(scores) == pytest.approx([metrics.aggregate_iqm(scores[:, j]) for j in range(3)])
 
 
 def test_iqm_is_over_the_seeds_rates_and_ignores_an_outlying_seed() -> None:
@@ -140,14 +150,17 @@ def test_first_page_names_the_leader_from_the_numbers() -> None:
     assert verdicts["normal"]["margin"] == pytest.approx(0.9 - 0.4625)
     assert not verdicts["hard"]["ahead"]  # noadv 47.5 vs cat 46.3 %: no clear winner
     assert verdicts["seal"]["seeds_agree"] and not verdicts["seal"]["apart"] and not verdicts["seal"]["ahead"]
-    t62 = [{"setting": "normal", "realism": 0.0, "collision_speed_mps": 1.0},
-           {"setting": "cat", "realism": 0.3, "collision_speed_mps": 4.0},
-           {"setting": "seal", "realism": 0.2, "collision_speed_mps": 5.0}]
-    md = first_page_markdown(cis, poi, per_setting, t62)
+    gen_ci = [{"setting": "normal", "realism": 0.0, "collision_speed_mps": 1.0},
+              {"setting": "cat", "realism": 0.3, "realism_low": 0.25, "realism_high": 0.35,
+               "collision_speed_mps": 4.0, "collision_speed_mps_low": 3.0, "collision_speed_mps_high": 5.0},
+              {"setting": "seal", "realism": 0.2, "realism_low": 0.15, "realism_high": 0.24,
+               "collision_speed_mps": 5.0, "collision_speed_mps_low": 4.5, "collision_speed_mps_high": 5.5}]
+    md = first_page_markdown(cis, poi, per_setting, gen_ci)
     assert "| normal | cat | 90.0 % [" in md and "| cat ahead |" in md and "| no clear winner |" in md
     assert "seal ahead on the seeds, but the success intervals overlap: not sure" in md
-    assert "most realistic generator (lowest mean WD to the logged adversaries): **seal** 0.2" in md
-    assert "lowest collision speed: **cat** 4 m/s" in md
+    assert ("most realistic generator (lowest mean WD to the logged adversaries): **seal 0.2 [0.15-0.24]** (then "
+            "cat 0.3 [0.25-0.35]); its interval lies below the next one's.") in md
+    assert "lowest collision speed: **cat 4 m/s [3-5]** (then seal 5 m/s [4.5-5.5]); its interval overlaps" in md
     assert "of 6 pipeline x setting cells are within +/-5 points" in md
 
 
@@ -182,3 +195,30 @@ def test_report_folder_has_the_statistics_first_page_and_json(tmp_path, capsys) 
     md = (out / "report.md").read_text()
     assert md.index("## Summary: who wins where") < md.index("(thesis Table 6.1)")
     assert "| normal | cat | 87.5 % [" in md and "| noadv | 87.5 % [" not in md
+
+
+def test_generator_intervals_resample_scenarios_and_match_table_6_2() -> None:
+    from results_builders import episode, hist
+
+    from seal.experiments.evaluation.metrics import pooled_realism
+    from seal.experiments.report.generator_stats import generator_ci_markdown, generator_ci_table
+    from seal.scoring.realism import YAW_RATE_BINS
+
+    rng = np.random.default_rng(1)
+    rows = []
+    for i in range(12):  # 12 scenarios x 3 egos; the adversary's yaw rates spread more in some scenarios
+        for k in range(3):
+            speed = float(2 + i % 4) if (i + k) % 3 == 0 else None
+            rows.append(episode(run=f"r{k}", setting="cat", scenario_id=f"s{i}", collision_speed_mps=speed,
+                                adv_yaw_hist=hist(rng.normal(0, 0.1 + 0.05 * (i % 3), 40), YAW_RATE_BINS)))
+    rows += [episode(run="r0", setting="hard", scenario_id="h0")]  # not a Table 6.2 row
+    (row,) = generator_ci_table(rows, ["cat"], n_boot=200)
+    expected = pooled_realism([r for r in rows if r["setting"] == "cat"])
+    assert (row["setting"], row["scenarios"], row["episodes"]) == ("cat", 12, 36)
+    assert row["realism"] == pytest.approx(expected["realism"])
+    assert row["realism_yaw_acc"] == pytest.approx((expected["yaw_wd"] + expected["acc_wd"]) / 2)
+    speeds = [r["collision_speed_mps"] for r in rows if r["setting"] == "cat" and r["collision_speed_mps"] is not None]
+    assert row["collision_speed_mps"] == pytest.approx(np.mean(speeds))
+    for name in ("realism", "collision_speed_mps"):
+        assert row[f"{name}_low"] <= row[name] <= row[f"{name}_high"] and row[f"{name}_low"] < row[f"{name}_high"]
+    assert "| cat | 12 | 36 | " in generator_ci_markdown([row])

@@ -1,0 +1,87 @@
+"""Intervals for the generator table (thesis Table 6.2): the realism distance and the collision speed of each
+generator setting with 95 % intervals from rliable's bootstrap.
+
+The resampled unit is the *scenario*: every episode of a setting (one per ego) belongs to a scenario, and the
+episodes of one scenario are alike (same road, same logged adversary), so resampling episodes one by one would
+give intervals that are too narrow. Each resample draws the setting's scenarios with replacement and keeps all
+their episodes; the statistic is then computed as in Table 6.2: the pooled realism Wasserstein distances
+(`seal.experiments.evaluation.metrics.pooled_realism`, mean of yaw, acceleration and out-of-road, and yaw +
+acceleration alone) and the mean collision speed along the contact normal over the episodes with a contact.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from seal.experiments.evaluation.metrics import pooled_realism
+from seal.experiments.report.compare import ordered_settings, setting_label
+from seal.experiments.report.stats import CONFIDENCE, ci_cell, seeded
+
+N_BOOT_GENERATORS = 300
+"""Resamples per generator setting (each recomputes the pooled histograms of all its episodes)."""
+STATISTICS = ("realism", "realism_yaw_acc", "collision_speed_mps")
+
+
+def _statistics(episodes: Sequence[Mapping[str, Any]]) -> np.ndarray:
+    """``[realism, realism_yaw_acc, collision_speed_mps]`` of a set of episode rows (NaN where undefined)."""
+    realism = pooled_realism([dict(e) for e in episodes])
+    speeds = [float(e["collision_speed_mps"]) for e in episodes if e["collision_speed_mps"] is not None
+              and math.isfinite(float(e["collision_speed_mps"]))]
+    return np.array([realism["realism"], float(np.nanmean([realism["yaw_wd"], realism["acc_wd"]])),
+                     float(np.mean(speeds)) if speeds else math.nan])
+
+
+def generator_intervals(episodes: Sequence[Mapping[str, Any]], n_boot: int = N_BOOT_GENERATORS, seed: int = 0
+                        ) -> dict[str, tuple[float, float, float]]:
+    """``{statistic: (estimate, low, high)}`` over ``episodes`` (one setting, histogram columns decoded), the
+    scenarios resampled."""
+    from rliable import library as rly
+
+    by_scenario: dict[str, list[Mapping[str, Any]]] = {}
+    for e in episodes:
+        by_scenario.setdefault(str(e["scenario_id"]), []).append(e)
+    groups = list(by_scenario.values())
+
+    def statistic(index: np.ndarray) -> np.ndarray:
+        return _statistics([e for i in index[:, 0] for e in groups[int(i)]])
+
+    with seeded(seed), np.errstate(all="ignore"):
+        points, intervals = rly.get_interval_estimates(
+            {"x": np.arange(len(groups), dtype=np.float64)[:, None]}, statistic, reps=n_boot,
+            confidence_interval_size=CONFIDENCE)
+    return {name: (float(points["x"][i]), float(intervals["x"][0, i]), float(intervals["x"][1, i]))
+            for i, name in enumerate(STATISTICS)}
+
+
+def generator_ci_table(rows: Sequence[Mapping[str, Any]], generator_settings: Sequence[str],
+                       n_boot: int = N_BOOT_GENERATORS, seed: int = 0) -> list[dict[str, Any]]:
+    """One row per setting whose label is in ``generator_settings`` (Table 6.2's rows, ``normal`` included):
+    ``scenarios``, ``episodes`` and per statistic the estimate with ``<name>_low`` / ``<name>_high``."""
+    by_setting: dict[str, list[Mapping[str, Any]]] = {}
+    for r in rows:
+        if setting_label(r["setting"]) in generator_settings:
+            by_setting.setdefault(r["setting"], []).append(r)
+    table = []
+    for setting in ordered_settings(by_setting):
+        eps = by_setting[setting]
+        est = generator_intervals(eps, n_boot, seed)
+        table.append({"setting": setting_label(setting), "scenarios": len({e["scenario_id"] for e in eps}),
+                      "episodes": len(eps),
+                      **{k: v for name, (p, lo, hi) in est.items()
+                         for k, v in ((name, p), (f"{name}_low", lo), (f"{name}_high", hi))}})
+    return table
+
+
+def generator_ci_markdown(table: Sequence[Mapping[str, Any]]) -> str:
+    """Settings as rows: realism (mean WD), yaw + acceleration WD and collision speed, each ``estimate [low-high]``."""
+    out = ["| generator | scenarios | episodes | realism (mean WD) | yaw+acc WD | coll. speed (m/s) |",
+           "|---|---:|---:|---:|---:|---:|"]
+    for r in table:
+        cells = [ci_cell(r[n], r[f"{n}_low"], r[f"{n}_high"], 1.0, 3 if n != "collision_speed_mps" else 2)
+                 for n in STATISTICS]
+        out.append(f"| {r['setting']} | {r['scenarios']} | {r['episodes']} | " + " | ".join(cells) + " |")
+    return "\n".join(out) + "\n"
