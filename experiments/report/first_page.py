@@ -8,7 +8,8 @@ the two success intervals do not overlap: with few seeds that probability can be
 every runner-up seed) while the margin is within the scenario-to-scenario noise that only the success intervals
 see. Then which pipelines beat which over all settings (the averaged probability of improvement, interval above
 0.5; a seed-level statement), the precision (the largest interval half-width against `TARGET_HALF_WIDTH`)
-and, from Table 6.2's intervals, the most realistic generator and the lowest collision speed.
+and, from Table 6.2's intervals, the most realistic generator and the lowest collision speed; last, the thesis's
+findings checked one by one (`seal.experiments.report.thesis_claims`).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from seal.experiments.report.groups import algo_of, is_trained
+from seal.experiments.report.thesis_claims import claims_markdown
 
 TARGET_HALF_WIDTH = 0.05
 """Success-interval half-width the protocol aims at (5 points, issue 26)."""
@@ -157,4 +159,5 @@ def first_page_markdown(cis: Sequence[Mapping[str, Any]], poi: Sequence[Mapping[
     md.append(precision_line(cis))
     md += generator_lines(gen_ci)
     md.append("")
+    md.append(claims_markdown(poi, gen_ci))
     return "\n".join(md)

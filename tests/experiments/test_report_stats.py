@@ -222,3 +222,29 @@ def test_generator_intervals_resample_scenarios_and_match_table_6_2() -> None:
     for name in ("realism", "collision_speed_mps"):
         assert row[f"{name}_low"] <= row[name] <= row[f"{name}_high"] and row[f"{name}_low"] < row[f"{name}_high"]
     assert "| cat | 12 | 36 | " in generator_ci_markdown([row])
+
+
+def test_thesis_claims_read_the_intervals() -> None:
+    from seal.experiments.report.thesis_claims import claims_markdown, ego_claims, generator_claims
+
+    def p(a: str, b: str, lo: float, hi: float) -> dict:
+        return {"pipeline": a, "reference": b, "p_improvement": (lo + hi) / 2, "ci_low": lo, "ci_high": hi,
+                "settings": 3}
+
+    poi = [p("seal (td3)", "cat (td3)", 0.6, 0.9), p("cat (td3)", "goose (td3)", 0.3, 0.7),
+           p("cat (td3)", "noadv (td3)", 0.1, 0.4)]
+    verdicts = {c["claim"]: c["verdict"] for c in ego_claims(poi)}
+    assert verdicts["seal > cat (success)"] == "holds" and verdicts["cat > goose (success)"] == "not shown"
+    assert verdicts["cat > noadv (success)"] == "reversed" and verdicts["cat-rcg > cat (success)"] == "not tested"
+
+    def g(name: str, lo: float, hi: float) -> dict:
+        return {"setting": name, "realism": (lo + hi) / 2, "realism_low": lo, "realism_high": hi,
+                "collision_speed_mps": 5.0, "collision_speed_mps_low": 4.0 + (name == "seal"),
+                "collision_speed_mps_high": 6.0}
+
+    claims = {c["claim"][:20]: c["verdict"] for c in generator_claims([g("seal", 0.1, 0.2), g("cat", 0.3, 0.4)])}
+    assert claims == {"SEAL is the most rea": "holds", "SEAL's collisions ar": "not shown"}
+    assert generator_claims([g("cat", 0.1, 0.2)])[0]["verdict"] == "not tested"
+    md = claims_markdown(poi, [g("seal", 0.5, 0.6), g("cat", 0.1, 0.2)])
+    assert "| seal > cat (success) | td3 | holds | P = 0.75 [0.60-0.90] over 3 settings |" in md
+    assert "| SEAL is the most realistic generator (lowest mean WD) | all | reversed | seal 0.55 [0.5-0.6]" in md

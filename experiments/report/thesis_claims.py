@@ -1,0 +1,79 @@
+"""The thesis's findings, checked one by one against the report's numbers (issue 26's closing question).
+
+Ego claims (thesis Table 6.1 / 7.2) are read from the averaged probability of improvement over all settings
+(`seal.experiments.report.stats.improvement_table`): a claim "X > Y" *holds* when P(X > Y)'s 95 % interval lies above
+0.5, is *reversed* when it lies below, and is *not shown* otherwise. Generator claims (Table 6.2) are read from
+the generator intervals (`seal.experiments.report.generator_stats`): "SEAL is the most realistic" / "SEAL has the
+lowest collision speed" hold when SEAL's interval lies below every other generator's, are reversed when another
+generator's interval lies below SEAL's, and are not shown otherwise. A claim whose pipelines or generators were
+not evaluated is *not tested*.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from seal.experiments.report.groups import algo_of, base_pipeline
+
+EGO_CLAIMS = (("seal", "cat"), ("cat", "goose"), ("cat", "noadv"), ("seal", "goose"), ("seal", "noadv"),
+              ("cat-rcg", "cat"), ("seal-rcg", "seal"))
+"""``(X, Y)``: the thesis finds X's egos more successful than Y's (6.1: SEAL > CAT > GOOSE / No-Adv; 7.2: the RCG
+variants over their bases)."""
+GENERATOR_CLAIMS = (("realism", "SEAL is the most realistic generator (lowest mean WD)"),
+                    ("collision_speed_mps", "SEAL's collisions are the slowest (lowest collision speed)"))
+
+
+def ego_claims(poi: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """One row per (claim, algorithm): ``claim``, ``algo``, ``verdict`` (holds | reversed | not shown | not
+    tested) and the probability row it rests on (``poi``, None when not tested)."""
+    rows = {(base_pipeline(r["pipeline"]), base_pipeline(r["reference"]), algo_of(r["pipeline"])): r for r in poi}
+    algos = list(dict.fromkeys(algo_of(r["pipeline"]) for r in poi)) or [""]
+    out = []
+    for x, y in EGO_CLAIMS:
+        for algo in algos:
+            r = rows.get((x, y, algo))
+            verdict = ("not tested" if r is None else "holds" if r["ci_low"] > 0.5 else
+                       "reversed" if r["ci_high"] < 0.5 else "not shown")
+            out.append({"claim": f"{x} > {y} (success)", "algo": algo, "verdict": verdict, "poi": r})
+    return out
+
+
+def generator_claims(gen_ci: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """One row per generator claim: ``claim``, ``verdict`` and the ``seal`` / best-other rows it rests on."""
+    gens = {r["setting"]: r for r in gen_ci if r["setting"] != "normal"}
+    out = []
+    for key, claim in GENERATOR_CLAIMS:
+        seal = gens.get("seal")
+        others = [r for s, r in gens.items() if s != "seal" and math.isfinite(r.get(key, math.nan))]
+        if seal is None or not others or not math.isfinite(seal.get(key, math.nan)):
+            out.append({"claim": claim, "verdict": "not tested", "seal": seal, "other": None})
+            continue
+        best = min(others, key=lambda r: r[key])
+        verdict = ("holds" if all(seal[f"{key}_high"] < r[f"{key}_low"] for r in others) else
+                   "reversed" if any(r[f"{key}_high"] < seal[f"{key}_low"] for r in others) else "not shown")
+        out.append({"claim": claim, "verdict": verdict, "seal": seal, "other": best, "key": key})
+    return out
+
+
+def claims_markdown(poi: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[str, Any]]) -> str:
+    """The claims as a Markdown table with the numbers each verdict rests on."""
+    md = ["### The thesis's findings, checked\n",
+          "holds / reversed: the 95 % interval lies on one side (P above or below 0.5; SEAL's interval below or "
+          "above another generator's); not shown: it does not.\n",
+          "| claim | ego | verdict | evidence |", "|---|---|---|---|"]
+    for c in ego_claims(poi):
+        r = c["poi"]
+        evidence = (f"P = {r['p_improvement']:.2f} [{r['ci_low']:.2f}-{r['ci_high']:.2f}] over {r['settings']} "
+                    "settings" if r else "-")
+        md.append(f"| {c['claim']} | {c['algo'] or '-'} | {c['verdict']} | {evidence} |")
+    for c in generator_claims(gen_ci):
+        if c["other"] is None:
+            md.append(f"| {c['claim']} | all | {c['verdict']} | - |")
+            continue
+        key, s, o = c["key"], c["seal"], c["other"]
+        md.append(f"| {c['claim']} | all | {c['verdict']} | seal {s[key]:.3g} [{s[f'{key}_low']:.3g}-"
+                  f"{s[f'{key}_high']:.3g}], best other {o['setting']} {o[key]:.3g} [{o[f'{key}_low']:.3g}-"
+                  f"{o[f'{key}_high']:.3g}] |")
+    return "\n".join(md) + "\n"
