@@ -59,9 +59,12 @@ def generator_claims(gen_ci: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]
 
 def claims_markdown(poi: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[str, Any]]) -> str:
     """The claims as a Markdown table with the numbers each verdict rests on."""
+    seeds = min((min(r["seeds"], r["reference_seeds"]) for r in poi), default=0)
     md = ["### The thesis's findings, checked\n",
           "holds / reversed: the 95 % interval lies on one side (P above or below 0.5; SEAL's interval below or "
-          "above another generator's); not shown: it does not.\n",
+          "above another generator's); not shown: it does not. P compares the pipelines' seeds (each seed's "
+          f"success rate per setting; here as few as {seeds} seeds a pipeline), so it says how consistently one "
+          "training pipeline beats another, not by how much: read it with the success intervals above.\n",
           "| claim | ego | verdict | evidence |", "|---|---|---|---|"]
     for c in ego_claims(poi):
         r = c["poi"]

@@ -229,7 +229,7 @@ def test_thesis_claims_read_the_intervals() -> None:
 
     def p(a: str, b: str, lo: float, hi: float) -> dict:
         return {"pipeline": a, "reference": b, "p_improvement": (lo + hi) / 2, "ci_low": lo, "ci_high": hi,
-                "settings": 3}
+                "settings": 3, "seeds": 4, "reference_seeds": 3}
 
     poi = [p("seal (td3)", "cat (td3)", 0.6, 0.9), p("cat (td3)", "goose (td3)", 0.3, 0.7),
            p("cat (td3)", "noadv (td3)", 0.1, 0.4)]
@@ -247,4 +247,5 @@ def test_thesis_claims_read_the_intervals() -> None:
     assert generator_claims([g("cat", 0.1, 0.2)])[0]["verdict"] == "not tested"
     md = claims_markdown(poi, [g("seal", 0.5, 0.6), g("cat", 0.1, 0.2)])
     assert "| seal > cat (success) | td3 | holds | P = 0.75 [0.60-0.90] over 3 settings |" in md
+    assert "as few as 3 seeds a pipeline" in md
     assert "| SEAL is the most realistic generator (lowest mean WD) | all | reversed | seal 0.55 [0.5-0.6]" in md
