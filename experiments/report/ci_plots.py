@@ -44,10 +44,13 @@ def plot_success_intervals(table: Sequence[Mapping[str, Any]], out: Path, statis
     if len(settings) == 1:
         points = {p: np.append(v, np.nan) for p, v in points.items()}
         intervals = {p: np.hstack([v, [[np.nan], [np.nan]]]) for p, v in intervals.items()}
-    fig, _ = plot_utils.plot_interval_estimates(
+    fig, axes = plot_utils.plot_interval_estimates(
         points, intervals, metric_names=names, algorithms=pipelines, subfigure_width=2.6,
         row_height=0.45, xlabel=f"ego {metric.replace('_', '-')} rate (%), {statistic} with 95 % interval",
-        xlabel_y_coordinate=-0.02 - 0.6 / max(2, len(pipelines)))
+        xlabel_y_coordinate=-0.02 - 0.6 / max(2, len(pipelines)), wspace=0.25)
+    for ax in np.ravel(axes):  # one scale in every panel, so the settings compare at a glance
+        ax.set_xlim(-2, 102)
+        ax.set_xticks([0, 50, 100])
     path = out / f"ci_{metric}_{statistic}.png"
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100, bbox_inches="tight")
