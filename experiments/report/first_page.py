@@ -19,6 +19,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from seal.experiments.report.groups import algo_of, is_trained
+from seal.experiments.report.stats import MIN_SEEDS_FOR_POI, enough_seeds
 from seal.experiments.report.thesis_claims import claims_markdown
 
 TARGET_HALF_WIDTH = 0.05
@@ -55,7 +56,8 @@ def setting_verdicts(cis: Sequence[Mapping[str, Any]], poi_by_setting: Sequence[
     for (algo, setting), ranked in _ranked(cis).items():
         best, second = ranked[0], (ranked[1] if len(ranked) > 1 else None)
         p = poi.get((best["pipeline"], second["pipeline"], setting)) if second else None
-        agree, apart = bool(p and p["ci_low"] > 0.5), bool(second and best["ci_low"] > second["ci_high"])
+        agree = bool(p and enough_seeds(p) and p["ci_low"] > 0.5)
+        apart = bool(second and best["ci_low"] > second["ci_high"])
         out.append({"algo": algo, "setting": setting, "best": best, "runner_up": second,
                     "margin": best["mean"] - second["mean"] if second else math.nan,
                     "poi": p, "seeds_agree": agree, "apart": apart, "ahead": agree and apart})
@@ -69,8 +71,12 @@ def _verdict(v: Mapping[str, Any]) -> str:
         return f"{leader} ahead"
     if v["seeds_agree"]:
         return f"{leader} ahead on the seeds, but the success intervals overlap: not sure"
+    few = bool(v["poi"]) and not enough_seeds(v["poi"])
     if v["apart"]:
-        return f"{leader}'s interval is above, but P's interval reaches 0.5: not sure"
+        return f"{leader}'s interval is above, but " + (
+            f"fewer than {MIN_SEEDS_FOR_POI} seeds: not sure" if few else "P's interval reaches 0.5: not sure")
+    if few:
+        return f"no clear winner (fewer than {MIN_SEEDS_FOR_POI} seeds a side for P)"
     return "no clear winner" if v["poi"] else "not compared (seed counts differ)"
 
 
@@ -87,6 +93,9 @@ def _verdict_row(v: Mapping[str, Any]) -> str:
 def overall_lines(poi: Sequence[Mapping[str, Any]]) -> list[str]:
     """Sentences on which pipeline beats which over all common settings (interval of P above 0.5)."""
     lines = []
+    if poi and not any(enough_seeds(r) for r in poi):
+        return [f"- Fewer than {MIN_SEEDS_FOR_POI} seeds a pipeline: no pipeline is said to beat another."]
+    poi = [r for r in poi if enough_seeds(r)]
     pipelines = list(dict.fromkeys(r["pipeline"] for r in poi))
     for a in pipelines:
         beaten = [r for r in poi if r["pipeline"] == a and r["ci_low"] > 0.5]
@@ -109,9 +118,12 @@ def precision_line(cis: Sequence[Mapping[str, Any]]) -> str:
         return "- No trained pipeline evaluated."
     worst = max(rows, key=lambda r: r["half_width"])
     met = sum(r["half_width"] <= TARGET_HALF_WIDTH for r in rows)
+    flat = sum(r["ci_low"] == r["ci_high"] for r in rows)
     return (f"- Precision: the widest success interval is +/-{100 * worst['half_width']:.1f} points "
             f"({worst['pipeline']}, {worst['setting']}, {worst['seeds']} seeds x {worst['scenarios']} scenarios); "
-            f"{met} of {len(rows)} pipeline x setting cells are within +/-{100 * TARGET_HALF_WIDTH:.0f} points.")
+            f"{met} of {len(rows)} pipeline x setting cells are within +/-{100 * TARGET_HALF_WIDTH:.0f} points"
+            + (f" ({flat} of them at a rate of 0 or 100 %, where the bootstrap interval has zero width)" if flat
+               else "") + ".")
 
 
 GENERATOR_CLAIMS = (("realism", "most realistic generator (lowest mean WD to the logged adversaries)", ""),

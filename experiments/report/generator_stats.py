@@ -26,35 +26,55 @@ N_BOOT_GENERATORS = 300
 STATISTICS = ("realism", "realism_yaw_acc", "collision_speed_mps")
 
 
-def _statistics(episodes: Sequence[Mapping[str, Any]]) -> np.ndarray:
-    """``[realism, realism_yaw_acc, collision_speed_mps]`` of a set of episode rows (NaN where undefined)."""
+def _speed(e: Mapping[str, Any]) -> float | None:
+    """The episode's collision speed along the contact normal (m/s), None without a contact."""
+    v = e["collision_speed_mps"]
+    return float(v) if v is not None and math.isfinite(float(v)) else None
+
+
+def _realism(episodes: Sequence[Mapping[str, Any]]) -> np.ndarray:
+    """``[realism, realism_yaw_acc]`` of a set of episode rows, as Table 6.2 computes them."""
     realism = pooled_realism([dict(e) for e in episodes])
-    speeds = [float(e["collision_speed_mps"]) for e in episodes if e["collision_speed_mps"] is not None
-              and math.isfinite(float(e["collision_speed_mps"]))]
-    return np.array([realism["realism"], float(np.nanmean([realism["yaw_wd"], realism["acc_wd"]])),
-                     float(np.mean(speeds)) if speeds else math.nan])
+    return np.array([realism["realism"], float(np.nanmean([realism["yaw_wd"], realism["acc_wd"]]))])
+
+
+def _mean_speed(episodes: Sequence[Mapping[str, Any]]) -> np.ndarray:
+    speeds = [v for e in episodes if (v := _speed(e)) is not None]
+    return np.array([float(np.mean(speeds)) if speeds else math.nan])
+
+
+def _by_scenario_interval(groups: Sequence[Sequence[Mapping[str, Any]]], statistic: Any, n_boot: int, seed: int
+                          ) -> list[tuple[float, float, float]]:
+    """``(estimate, low, high)`` per output of ``statistic(episodes)``, the ``groups`` (a scenario's episodes)
+    resampled with rliable's bootstrap; NaNs without a group."""
+    from rliable import library as rly
+
+    if not groups:
+        return [(math.nan, math.nan, math.nan)] * len(statistic([]))
+
+    def on_index(index: np.ndarray) -> np.ndarray:
+        return statistic([e for i in index[:, 0] for e in groups[int(i)]])
+
+    with seeded(seed), np.errstate(all="ignore"):
+        points, intervals = rly.get_interval_estimates(
+            {"x": np.arange(len(groups), dtype=np.float64)[:, None]}, on_index, reps=n_boot,
+            confidence_interval_size=CONFIDENCE)
+    return [(float(p), float(intervals["x"][0, i]), float(intervals["x"][1, i])) for i, p in enumerate(points["x"])]
 
 
 def generator_intervals(episodes: Sequence[Mapping[str, Any]], n_boot: int = N_BOOT_GENERATORS, seed: int = 0
                         ) -> dict[str, tuple[float, float, float]]:
     """``{statistic: (estimate, low, high)}`` over ``episodes`` (one setting, histogram columns decoded), the
-    scenarios resampled."""
-    from rliable import library as rly
-
+    scenarios resampled: all of them for the realism distances, those with a contact for the collision speed
+    (so that every resample has one)."""
     by_scenario: dict[str, list[Mapping[str, Any]]] = {}
     for e in episodes:
         by_scenario.setdefault(str(e["scenario_id"]), []).append(e)
     groups = list(by_scenario.values())
-
-    def statistic(index: np.ndarray) -> np.ndarray:
-        return _statistics([e for i in index[:, 0] for e in groups[int(i)]])
-
-    with seeded(seed), np.errstate(all="ignore"):
-        points, intervals = rly.get_interval_estimates(
-            {"x": np.arange(len(groups), dtype=np.float64)[:, None]}, statistic, reps=n_boot,
-            confidence_interval_size=CONFIDENCE)
-    return {name: (float(points["x"][i]), float(intervals["x"][0, i]), float(intervals["x"][1, i]))
-            for i, name in enumerate(STATISTICS)}
+    with_contact = [g for g in groups if any(_speed(e) is not None for e in g)]
+    realism = _by_scenario_interval(groups, _realism, n_boot, seed)
+    speed = _by_scenario_interval(with_contact, _mean_speed, n_boot, seed)
+    return dict(zip(STATISTICS, [*realism, *speed], strict=True))
 
 
 def generator_ci_table(rows: Sequence[Mapping[str, Any]], generator_settings: Sequence[str],

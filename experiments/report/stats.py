@@ -45,6 +45,14 @@ N_BOOT_POI = 1000
 """Bootstrap resamples of the probability of improvement (rliable's estimator calls scipy's Mann-Whitney test once
 per setting and resample, ~1 ms each)."""
 CONFIDENCE = 0.95
+MIN_SEEDS_FOR_POI = 3
+"""Seeds a side below which no verdict rests on a probability of improvement: it compares seeds, and with one seed
+a side its bootstrap interval has zero width whatever the data (the first page and the claims say so instead)."""
+
+
+def enough_seeds(poi_row: Mapping[str, Any]) -> bool:
+    """Whether an `improvement_table` row has `MIN_SEEDS_FOR_POI` seeds on both sides."""
+    return min(int(poi_row["seeds"]), int(poi_row["reference_seeds"])) >= MIN_SEEDS_FOR_POI
 
 
 @contextmanager

@@ -1,12 +1,13 @@
 """The thesis's findings, checked one by one against the report's numbers (issue 26's closing question).
 
 Ego claims (thesis Table 6.1 / 7.2) are read from the averaged probability of improvement over all settings
-(`seal.experiments.report.stats.improvement_table`): a claim "X > Y" *holds* when P(X > Y)'s 95 % interval lies above
-0.5, is *reversed* when it lies below, and is *not shown* otherwise. Generator claims (Table 6.2) are read from
-the generator intervals (`seal.experiments.report.generator_stats`): "SEAL is the most realistic" / "SEAL has the
-lowest collision speed" hold when SEAL's interval lies below every other generator's, are reversed when another
-generator's interval lies below SEAL's, and are not shown otherwise. A claim whose pipelines or generators were
-not evaluated is *not tested*.
+(`seal.experiments.report.stats.improvement_table`): a claim "X > Y" *holds* when P(X > Y)'s 95 % interval lies
+above 0.5, is *reversed* when it lies below, and is *not shown* otherwise (with fewer than
+`seal.experiments.report.stats.MIN_SEEDS_FOR_POI` seeds a side: *too few seeds*). Generator claims (Table 6.2)
+are read from the generator intervals (`seal.experiments.report.generator_stats`): "SEAL is the most realistic" /
+"SEAL has the lowest collision speed" hold when SEAL's interval lies below every other generator's, are reversed
+when another generator's interval lies below SEAL's, and are not shown otherwise. A claim whose pipelines or
+generators were not evaluated is *not tested*.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from seal.experiments.report.groups import algo_of, base_pipeline
+from seal.experiments.report.stats import MIN_SEEDS_FOR_POI, enough_seeds
 
 EGO_CLAIMS = (("seal", "cat"), ("cat", "goose"), ("cat", "noadv"), ("seal", "goose"), ("seal", "noadv"),
               ("cat-rcg", "cat"), ("seal-rcg", "seal"))
@@ -34,8 +36,8 @@ def ego_claims(poi: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     for x, y in EGO_CLAIMS:
         for algo in algos:
             r = rows.get((x, y, algo))
-            verdict = ("not tested" if r is None else "holds" if r["ci_low"] > 0.5 else
-                       "reversed" if r["ci_high"] < 0.5 else "not shown")
+            verdict = ("not tested" if r is None else f"too few seeds (< {MIN_SEEDS_FOR_POI})" if not enough_seeds(r)
+                       else "holds" if r["ci_low"] > 0.5 else "reversed" if r["ci_high"] < 0.5 else "not shown")
             out.append({"claim": f"{x} > {y} (success)", "algo": algo, "verdict": verdict, "poi": r})
     return out
 

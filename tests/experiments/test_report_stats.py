@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from seal.experiments.report.compare import ordered_pipelines
-from seal.experiments.report.first_page import first_page_markdown, leader_pairs, setting_verdicts
+from seal.experiments.report.first_page import first_page_markdown, leader_pairs, overall_lines, setting_verdicts
 from seal.experiments.report.groups import algo_of, base_pipeline, comparable, label_by_algo
 from seal.experiments.report.paired import paired_counts, scenario_rates
 from seal.experiments.report.stats import (
@@ -236,6 +236,10 @@ def test_thesis_claims_read_the_intervals() -> None:
     verdicts = {c["claim"]: c["verdict"] for c in ego_claims(poi)}
     assert verdicts["seal > cat (success)"] == "holds" and verdicts["cat > goose (success)"] == "not shown"
     assert verdicts["cat > noadv (success)"] == "reversed" and verdicts["cat-rcg > cat (success)"] == "not tested"
+    # One seed a side: the bootstrap interval has zero width whatever the data, so no verdict rests on it.
+    lone = [{**p("seal", "cat", 0.61, 0.61), "seeds": 1, "reference_seeds": 1}]
+    assert ego_claims(lone)[0]["verdict"] == "too few seeds (< 3)"
+    assert overall_lines(lone) == ["- Fewer than 3 seeds a pipeline: no pipeline is said to beat another."]
 
     def g(name: str, lo: float, hi: float) -> dict:
         return {"setting": name, "realism": (lo + hi) / 2, "realism_low": lo, "realism_high": hi,
