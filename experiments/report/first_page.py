@@ -140,7 +140,9 @@ def generator_lines(gen_ci: Sequence[Mapping[str, Any]]) -> list[str]:
         ranked = sorted((r for r in gens if math.isfinite(r.get(key, math.nan))), key=lambda r: r[key])
         if not ranked:
             continue
-        cells = [f"{r['setting']} {r[key]:.3g}{unit} [{r[f'{key}_low']:.3g}-{r[f'{key}_high']:.3g}]" for r in ranked]
+        cells = [f"{r['setting']} {r[key]:.3g}{unit} " + (f"[{r[f'{key}_low']:.3g}-{r[f'{key}_high']:.3g}]" if
+                                                          math.isfinite(r[f"{key}_low"]) else "[too few scenarios]")
+                 for r in ranked]
         verdict = ("" if len(ranked) == 1 else "; its interval lies below the next one's"
                    if ranked[0][f"{key}_high"] < ranked[1][f"{key}_low"] else
                    "; its interval overlaps the next one's: not sure")

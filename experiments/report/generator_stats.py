@@ -23,6 +23,9 @@ from seal.experiments.report.stats import CONFIDENCE, ci_cell, seeded
 
 N_BOOT_GENERATORS = 300
 """Resamples per generator setting (each recomputes the pooled histograms of all its episodes)."""
+MIN_SCENARIOS = 5
+"""Scenarios (with a contact, for the collision speed) below which an interval is not given (NaN bounds): from one
+scenario the bootstrap returns a zero-width interval whatever the data."""
 STATISTICS = ("realism", "realism_yaw_acc", "collision_speed_mps")
 
 
@@ -46,11 +49,12 @@ def _mean_speed(episodes: Sequence[Mapping[str, Any]]) -> np.ndarray:
 def _by_scenario_interval(groups: Sequence[Sequence[Mapping[str, Any]]], statistic: Any, n_boot: int, seed: int
                           ) -> list[tuple[float, float, float]]:
     """``(estimate, low, high)`` per output of ``statistic(episodes)``, the ``groups`` (a scenario's episodes)
-    resampled with rliable's bootstrap; NaNs without a group."""
+    resampled with rliable's bootstrap; NaN bounds with fewer than `MIN_SCENARIOS` groups."""
     from rliable import library as rly
 
-    if not groups:
-        return [(math.nan, math.nan, math.nan)] * len(statistic([]))
+    if len(groups) < MIN_SCENARIOS:
+        estimate = statistic([e for g in groups for e in g])
+        return [(float(p), math.nan, math.nan) for p in estimate]
 
     def on_index(index: np.ndarray) -> np.ndarray:
         return statistic([e for i in index[:, 0] for e in groups[int(i)]])

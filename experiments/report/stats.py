@@ -210,9 +210,11 @@ def improvement_table(rows: Sequence[Mapping[str, Any]], n_boot: int = N_BOOT_PO
 
 
 def ci_cell(point: float, low: float, high: float, scale: float = 100.0, digits: int = 1) -> str:
-    """``estimate [low-high]`` of ``scale`` times the values, ``-`` for NaN."""
+    """``estimate [low-high]`` of ``scale`` times the values, ``-`` for NaN, ``[no interval]`` without bounds."""
     if not math.isfinite(point):
         return "-"
+    if not (math.isfinite(low) and math.isfinite(high)):
+        return f"{scale * point:.{digits}f} [no interval]"
     return f"{scale * point:.{digits}f} [{scale * low:.{digits}f}-{scale * high:.{digits}f}]"
 
 

@@ -4,6 +4,8 @@ paired view and the first page written from the numbers."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -222,6 +224,9 @@ def test_generator_intervals_resample_scenarios_and_match_table_6_2() -> None:
     for name in ("realism", "collision_speed_mps"):
         assert row[f"{name}_low"] <= row[name] <= row[f"{name}_high"] and row[f"{name}_low"] < row[f"{name}_high"]
     assert "| cat | 12 | 36 | " in generator_ci_markdown([row])
+    (few,) = generator_ci_table([r for r in rows if r["scenario_id"] in ("s0", "s1")], ["cat"], n_boot=50)
+    assert math.isfinite(few["realism"]) and math.isnan(few["realism_low"]) and math.isnan(few["realism_high"])
+    assert "[no interval]" in generator_ci_markdown([few])
 
 
 def test_thesis_claims_read_the_intervals() -> None:
