@@ -13,7 +13,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from seal.experiments.report.compare import ordered_pipelines, ordered_settings, setting_label
-from seal.experiments.report.groups import comparable
+from seal.experiments.report.groups import algo_of, comparable
 from seal.experiments.report.stats import ScoreMatrix, score_matrices
 
 
@@ -62,15 +62,17 @@ def paired_counts(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
 
 
 def paired_markdown(counts: Sequence[Mapping[str, Any]]) -> str:
-    """Per setting a matrix: cell (row X, column Y) = scenarios X solves and Y does not, of the scenarios both
-    played."""
+    """Per setting (and ego algorithm) a matrix: cell (row X, column Y) = scenarios X solves and Y does not, of
+    the scenarios both played."""
     out = []
-    for setting in dict.fromkeys(r["setting"] for r in counts):
-        rows = [r for r in counts if r["setting"] == setting]
+    groups = dict.fromkeys((r["setting"], algo_of(r["pipeline"])) for r in counts)
+    for setting, algo in groups:  # one matrix per setting and ego algorithm: only those are compared
+        rows = [r for r in counts if r["setting"] == setting and algo_of(r["pipeline"]) == algo]
         names = ordered_pipelines({r["pipeline"] for r in rows})
         cells = {(r["pipeline"], r["reference"]): r for r in rows}
         n = max(r["scenarios"] for r in rows)
-        out.append(f"**{setting}** ({n} scenarios): scenarios the row solves and the column does not\n")
+        out.append(f"**{setting}**{f' ({algo} egos)' if algo else ''} ({n} scenarios): scenarios the row solves "
+                   "and the column does not\n")
         out.append("| solves, other does not | " + " | ".join(names) + " |")
         out.append("|---|" + "---:|" * len(names))
         for a in names:

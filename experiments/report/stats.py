@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from seal.experiments.report.compare import EGO_METRICS, ordered_pipelines, ordered_settings, setting_label
-from seal.experiments.report.groups import comparable, is_trained
+from seal.experiments.report.groups import algo_of, comparable, is_trained
 
 N_BOOT = 2000
 """Bootstrap resamples of the mean / IQM intervals."""
@@ -233,13 +233,17 @@ def ci_markdown(table: Sequence[Mapping[str, Any]], metric: str = "success", sta
 
 
 def improvement_markdown(table: Sequence[Mapping[str, Any]]) -> str:
-    """The averaged probabilities of improvement as a matrix: row X, column Y, cell ``P(X > Y) [low-high]``."""
+    """The averaged probabilities of improvement as a matrix per ego algorithm: row X, column Y, cell
+    ``P(X > Y) [low-high]``."""
     rows = [r for r in table if "setting" not in r]
-    names = ordered_pipelines({r["pipeline"] for r in rows})
     cells = {(r["pipeline"], r["reference"]): r for r in rows}
-    out = ["| P(row > column) | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
-    for a in names:
-        out.append(f"| {a} | " + " | ".join(
-            ci_cell(c["p_improvement"], c["ci_low"], c["ci_high"], 1.0, 2) if (c := cells.get((a, b))) else "-"
-            for b in names) + " |")
-    return "\n".join(out) + "\n"
+    out = []
+    for algo in dict.fromkeys(algo_of(p) for p in ordered_pipelines({r["pipeline"] for r in rows})):
+        names = ordered_pipelines({r["pipeline"] for r in rows if algo_of(r["pipeline"]) == algo})
+        out += ["| P(row > column) | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
+        for a in names:
+            out.append(f"| {a} | " + " | ".join(
+                ci_cell(c["p_improvement"], c["ci_low"], c["ci_high"], 1.0, 2) if (c := cells.get((a, b))) else "-"
+                for b in names) + " |")
+        out.append("")
+    return "\n".join(out)

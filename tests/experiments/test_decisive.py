@@ -117,6 +117,7 @@ def test_toy_decisive_runs_end_to_end_and_reports_the_algorithms_apart(tmp_path:
     md = (report / "report.md").read_text()
     assert "### Ego algorithm: reskill" in md and "### Ego algorithm: td3" in md
     assert "| normal | seal (reskill) | 100.0 % [" in md and "| cat | seal (reskill) |" in md
+    assert md.count("| P(row > column) |") == 2 and "**normal** (td3 egos) (4 scenarios)" in md  # a matrix per algo
     with open(report / "improvement.csv") as f:
         poi = list(csv.DictReader(f))
     assert all(r["pipeline"][r["pipeline"].index("("):] == r["reference"][r["reference"].index("("):] for r in poi)
