@@ -55,9 +55,18 @@ def test_decisive_plan_is_every_pipeline_times_two_algorithms_times_four_seeds(t
     plan = check_run(PRESET, tmp_path / "out", [_settings_with(real_dataset, settings)])
     assert len(plan["runs"]) == 56 and "seal-rcg-reskill-s3" in plan["runs"] and "noadv-td3-s0" in plan["runs"]
     assert not (tmp_path / "out").exists()
-    # The shipped file with its own real: path, where that dataset exists (this machine), through the CLI.
-    if Path(ev["settings"][-1][len("real:"):]).expanduser().is_dir():
-        assert main(["run", str(PRESET), "--out", str(tmp_path / "o2"), "--check"]) == 0
+
+
+
+def test_seal_run_check_prints_the_plan_and_writes_nothing(tmp_path: Path, real_dataset: str, capsys) -> None:
+    out = tmp_path / "o"
+    sets = ["--set", _settings_with(real_dataset, ["normal", "hard", "seal"])]
+    assert main(["run", str(PRESET), "--out", str(out), "--check", "--json", *sets]) == 0
+    plan = json.loads(capsys.readouterr().out)
+    assert len(plan["runs"]) == 56 and plan["eval_k"] == 5 and plan["eval_settings"][:3] == ["normal", "hard", "seal"]
+    assert main(["run", str(PRESET), "--out", str(out), "--check", *sets, "--set", "algos=[reskill, dqn]"]) == 2
+    assert "algos: expected a list of distinct ego algorithms" in capsys.readouterr().err
+    assert not out.exists()
 
 
 def test_each_run_gets_its_algorithm_and_the_reskill_runs_the_fitted_skills(real_dataset: str) -> None:
