@@ -143,9 +143,10 @@ def generator_lines(gen_ci: Sequence[Mapping[str, Any]]) -> list[str]:
         cells = [f"{r['setting']} {r[key]:.3g}{unit} " + (f"[{r[f'{key}_low']:.3g}-{r[f'{key}_high']:.3g}]" if
                                                           math.isfinite(r[f"{key}_low"]) else "[too few scenarios]")
                  for r in ranked]
-        verdict = ("" if len(ranked) == 1 else "; its interval lies below the next one's"
-                   if ranked[0][f"{key}_high"] < ranked[1][f"{key}_low"] else
-                   "; its interval overlaps the next one's: not sure")
+        bounds = [ranked[0][f"{key}_high"], *(r[f"{key}_low"] for r in ranked[1:2])]
+        verdict = ("" if len(ranked) == 1 else "; too few scenarios for intervals: not sure"
+                   if not all(map(math.isfinite, bounds)) else "; its interval lies below the next one's"
+                   if bounds[0] < bounds[1] else "; its interval overlaps the next one's: not sure")
         lines.append(f"- The {what}: **{cells[0]}**" + (f" (then {', '.join(cells[1:])})" if cells[1:] else "")
                      + verdict + ".")
     return lines

@@ -17,7 +17,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from seal.experiments.report.groups import algo_of, base_pipeline
-from seal.experiments.report.stats import MIN_SEEDS_FOR_POI, enough_seeds
+from seal.experiments.report.stats import MIN_SEEDS_FOR_POI, ci_cell, enough_seeds
 
 EGO_CLAIMS = (("seal", "cat"), ("cat", "goose"), ("cat", "noadv"), ("seal", "goose"), ("seal", "noadv"),
               ("cat-rcg", "cat"), ("seal-rcg", "seal"))
@@ -53,7 +53,9 @@ def generator_claims(gen_ci: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]
             out.append({"claim": claim, "verdict": "not tested", "seal": seal, "other": None})
             continue
         best = min(others, key=lambda r: r[key])
-        verdict = ("holds" if all(seal[f"{key}_high"] < r[f"{key}_low"] for r in others) else
+        bounded = all(math.isfinite(r[f"{key}_{b}"]) for r in (seal, *others) for b in ("low", "high"))
+        verdict = ("too few scenarios" if not bounded else
+                   "holds" if all(seal[f"{key}_high"] < r[f"{key}_low"] for r in others) else
                    "reversed" if any(r[f"{key}_high"] < seal[f"{key}_low"] for r in others) else "not shown")
         out.append({"claim": claim, "verdict": verdict, "seal": seal, "other": best, "key": key})
     return out
@@ -78,7 +80,7 @@ def claims_markdown(poi: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[s
             md.append(f"| {c['claim']} | all | {c['verdict']} | - |")
             continue
         key, s, o = c["key"], c["seal"], c["other"]
-        md.append(f"| {c['claim']} | all | {c['verdict']} | seal {s[key]:.3g} [{s[f'{key}_low']:.3g}-"
-                  f"{s[f'{key}_high']:.3g}], best other {o['setting']} {o[key]:.3g} [{o[f'{key}_low']:.3g}-"
-                  f"{o[f'{key}_high']:.3g}] |")
+        seal_cell = ci_cell(s[key], s[f"{key}_low"], s[f"{key}_high"], 1.0, 3)
+        other_cell = ci_cell(o[key], o[f"{key}_low"], o[f"{key}_high"], 1.0, 3)
+        md.append(f"| {c['claim']} | all | {c['verdict']} | seal {seal_cell}, best other {o['setting']} {other_cell} |")
     return "\n".join(md) + "\n"

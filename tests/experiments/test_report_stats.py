@@ -10,7 +10,13 @@ import numpy as np
 import pytest
 
 from seal.experiments.report.compare import ordered_pipelines
-from seal.experiments.report.first_page import first_page_markdown, leader_pairs, overall_lines, setting_verdicts
+from seal.experiments.report.first_page import (
+    first_page_markdown,
+    generator_lines,
+    leader_pairs,
+    overall_lines,
+    setting_verdicts,
+)
 from seal.experiments.report.groups import algo_of, base_pipeline, comparable, label_by_algo
 from seal.experiments.report.paired import paired_counts, scenario_rates
 from seal.experiments.report.stats import (
@@ -164,6 +170,8 @@ def test_first_page_names_the_leader_from_the_numbers() -> None:
             "cat 0.3 [0.25-0.35]); its interval lies below the next one's.") in md
     assert "lowest collision speed: **cat 4 m/s [3-5]** (then seal 5 m/s [4.5-5.5]); its interval overlaps" in md
     assert "of 6 pipeline x setting cells are within +/-5 points" in md
+    no_bounds = [{**r, "realism_low": math.nan} if r["setting"] == "cat" else r for r in gen_ci]
+    assert generator_lines(no_bounds)[0].endswith("; too few scenarios for intervals: not sure.")
 
 
 def test_report_folder_has_the_statistics_first_page_and_json(tmp_path, capsys) -> None:
@@ -257,4 +265,8 @@ def test_thesis_claims_read_the_intervals() -> None:
     md = claims_markdown(poi, [g("seal", 0.5, 0.6), g("cat", 0.1, 0.2)])
     assert "| seal > cat (success) | td3 | holds | P = 0.75 [0.60-0.90] over 3 settings |" in md
     assert "as few as 3 seeds a pipeline" in md
-    assert "| SEAL is the most realistic generator (lowest mean WD) | all | reversed | seal 0.55 [0.5-0.6]" in md
+    assert ("| SEAL is the most realistic generator (lowest mean WD) | all | reversed | seal 0.550 [0.500-0.600], "
+            "best other cat 0.150 [0.100-0.200] |") in md
+    unbounded = [{**g("seal", 0.1, 0.2), "realism_low": math.nan}, g("cat", 0.3, 0.4)]
+    assert generator_claims(unbounded)[0]["verdict"] == "too few scenarios"
+    assert "seal 0.150 [no interval]" in claims_markdown(poi, unbounded)
