@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -248,13 +249,17 @@ class IDMBackground(BackgroundController):
 
 
 def roll_background(scenario: Scenario, controller: BackgroundController, rng: np.random.Generator,
-                    last_step: int = N_STEPS - 1) -> np.ndarray:
+                    last_step: int = N_STEPS - 1, setup: Callable[[BackgroundController], None] | None = None
+                    ) -> np.ndarray:
     """Tracks ``[A, last_step + 1, 8]`` where the background moves by ``controller`` from `CURRENT_STEP` on and
-    the ego and the adversary replay their logs (the open-loop roll-out of `seal eval background`)."""
+    the ego and the adversary replay their logs (the open-loop roll-out of `seal eval background`); ``setup`` is
+    called with the controller after its reset (e.g. to set intents)."""
     log = scenario.tracks.astype(np.float64)
     driven = np.ones(scenario.n_agents, dtype=bool)
     driven[[scenario.ego_index, scenario.adv_index]] = False
     controller.reset(scenario, rng, driven)
+    if setup is not None:
+        setup(controller)
     out = np.zeros((scenario.n_agents, last_step + 1, 8))
     out[:, : CURRENT_STEP + 1] = log[:, : CURRENT_STEP + 1]
     cur = log[:, CURRENT_STEP].copy()

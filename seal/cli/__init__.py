@@ -24,7 +24,7 @@ __all__ = ["COMMAND_MODULES", "CliError", "build_parser", "main"]
 COMMAND_MODULES = (
     "seal.cli.data", "seal.cli.bench", "seal.cli.generators", "seal.cli.importers", "seal.cli.goose", "seal.cli.prior",
     "seal.cli.skills", "seal.cli.evaluate", "seal.cli.compare", "seal.cli.run", "seal.cli.train",
-    "seal.cli.objective", "seal.cli.steering", "seal.cli.behavior",
+    "seal.cli.objective", "seal.cli.steering", "seal.cli.behavior", "seal.cli.background",
 )
 
 
