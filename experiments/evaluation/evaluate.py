@@ -4,6 +4,9 @@ Each ego (a trained run folder, plus the Replay ego by default) is evaluated on 
 
 * ``normal``: the dataset's ``eval`` split (Normal scenarios), logged (replayed) adversary, one episode.
 * ``hard``: the ``hard`` split, replayed adversary.
+* ``normal-reactive``: ``normal`` with reactive background traffic (config ``background``: ``idm``, or ``rapid``
+  with ``background_model``; `ScenarioEnv`'s ``background`` option): compared with ``normal`` it shows how many of
+  an ego's crashes the replayed (non-reacting) background caused.
 * ``<generator>`` (``cat``, ``goose``, ``seal``, ``rule``, ... any registered generator): "X-Gen", the Normal
   eval scenarios perturbed by that generator. Per scenario one normal episode, then K sequential perturbation
   passes against the same ego, each roll-out appended to the scenario's queue; the last pass is scored
@@ -30,7 +33,9 @@ from seal.adversaries.base import K_ROLLOUTS, available_generators
 from seal.core.config import ConfigError, apply_overrides, build, check_keys, defaults_of, safe_load_file
 from seal.experiments.evaluation.results_store import ResultsStore
 
-REPLAY_SETTINGS = ("normal", "hard")
+REPLAY_SETTINGS = ("normal", "hard", "normal-reactive")
+REACTIVE_SETTING = "normal-reactive"
+REACTIVE_BACKGROUNDS = ("idm", "rapid")
 REAL_PREFIX = "real:"
 BUILTIN_EGOS = ("replay", "heuristic")
 
@@ -52,10 +57,18 @@ class EvalRunsConfig:
     """Episode / generator rng seed, the same for every ego."""
     env: dict[str, Any] = field(default_factory=dict)
     """`ScenarioEnv` config overrides."""
+    background: str = "idm"
+    """Background traffic of the ``normal-reactive`` setting: ``idm`` or ``rapid`` (needs ``background_model``)."""
+    background_model: str | None = None
+    """RAPID model file (`seal fit background`) of ``background: rapid``."""
 
     def __post_init__(self) -> None:
         if self.k < 1:
             raise ConfigError(f"k must be >= 1, got {self.k}")
+        if self.background not in REACTIVE_BACKGROUNDS:
+            raise ConfigError(f"background must be one of {list(REACTIVE_BACKGROUNDS)}, got {self.background!r}")
+        if self.background == "rapid" and not self.background_model:
+            raise ConfigError("background: rapid needs background_model (a seal fit background model file)")
 
 
 DEFAULTS: dict[str, Any] = defaults_of(EvalRunsConfig)
@@ -71,12 +84,14 @@ class Setting:
         dataset: absolute dataset directory its scenarios come from.
         split: dataset split, or None for every scenario.
         generator: generator name for X-Gen settings, None for replayed-adversary settings.
+        reactive: the background traffic reacts (``normal-reactive``) instead of replaying its log.
     """
 
     name: str
     dataset: str
     split: str | None
     generator: str | None = None
+    reactive: bool = False
 
     @property
     def kind(self) -> str:
@@ -106,13 +121,14 @@ def parse_settings(spec: str | Sequence[str], dataset: str | Path | None) -> lis
                 f"--settings {name}: needs a dataset (--dataset DIR, or runs whose config.yaml names one)"
             )
         if name in REPLAY_SETTINGS:
-            settings.append(Setting(name, base, "eval" if name == "normal" else "hard"))
+            split = "hard" if name == "hard" else "eval"
+            settings.append(Setting(name, base, split, reactive=name == REACTIVE_SETTING))
         elif name in available_generators():
             settings.append(Setting(name, base, "eval", generator=name))
         else:
             raise ValueError(
-                f"--settings: unknown setting {name!r}; use normal, hard, real:DIR or a generator name "
-                f"({', '.join(available_generators())})"
+                f"--settings: unknown setting {name!r}; use normal, hard, normal-reactive, real:DIR or a generator "
+                f"name ({', '.join(available_generators())})"
             )
     return settings
 
@@ -212,6 +228,8 @@ def plan_ego(store: ResultsStore, ego: EgoSpec, settings: Sequence[Setting], con
     store.upsert_run(ego.run, ego.pipeline, ego.seed, ego.ego, ego.path, ego.config)
     for s in settings:
         kwargs = dict(config["generators"].get(s.generator, {})) if s.generator else {}
+        if s.reactive:
+            kwargs = {"background": config.get("background", "idm"), "background_model": config.get("background_model")}
         store.upsert_setting(s.dataset, s.name, s.kind, s.split, s.generator, {**_shared_for(s, shared), **kwargs},
                              k if s.generator else 0, seed)
     groups: dict[tuple[str, str | None], list[Setting]] = {}
@@ -258,7 +276,11 @@ def play_items(
         for name in missing:
             s = by_name[name]
             row = _base_row(ego, s, scenario.scenario_id, k if s.generator else 0)
-            if s.generator is None:
+            if s.reactive:
+                reactive_env = cached_env(dataset, split, config, reactive=True)
+                rollout = protocol.normal_episode(reactive_env, scenario, i, policy, seed)
+                row.update(episode_metrics(scenario, rollout, (), logged))
+            elif s.generator is None:
                 row.update(episode_metrics(scenario, normal, (), logged))
             else:
                 generator = cached_generator(ego.run, s.generator, config)

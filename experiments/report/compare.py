@@ -3,7 +3,8 @@
 * Table 6.1 (`ego_table`): per training pipeline and setting, the median and interquartile range (25th-75th
   percentile, linear interpolation) over seeds of the ego's success / crash / out-of-road rate; each seed's
   rate is over the scenarios of that setting. The Replay ego appears as pipeline ``replay``.
-* Table 6.2 (`generator_table`): per generator setting (plus ``normal`` as the replayed-log reference), the ego
+* Table 6.2 (`generator_table`): per generator setting (plus ``normal`` as the replayed-log reference and
+  ``normal-reactive``, the same with reacting background traffic, where evaluated), the ego
   success / crash rates averaged over the evaluated egos (each ego's rate over scenarios, then the mean), the
   adversary-collision and close-call rates, the realism Wasserstein distances of the pooled episodes' adversary
   against the logged adversaries (yaw rate, acceleration, out-of-road rate, their mean), the mean collision
@@ -139,7 +140,7 @@ def generator_table(rows: Sequence[Mapping[str, Any]], settings_info: Sequence[M
         is_generator = setting in generators or (
             not settings_info and setting not in REPLAY_SETTINGS and not setting.startswith(REAL_PREFIX)
         )
-        if not (is_generator or setting == "normal"):
+        if not (is_generator or setting in ("normal", "normal-reactive")):
             continue
         eps = by_setting[setting]
         per_run: dict[str, list[Mapping[str, Any]]] = {}

@@ -61,15 +61,17 @@ def register(tree: CommandTree) -> None:
         "unless --no-replay-ego, the Replay ego (logged ego replayed open loop). Settings: normal (eval split, "
         "logged adversary), hard (hard split), a generator name such as cat, goose, seal, rule (the Normal eval "
         "scenarios: one normal episode, then K sequential perturbation passes against the same ego, the last "
-        "scored), real:DIR (an imported dataset, its eval split or every scenario, logged adversary). One row per "
+        "scored), normal-reactive (normal with reacting background traffic: --set background=idm, or "
+        "background=rapid with background_model=FILE), real:DIR (an imported dataset, its eval split or every "
+        "scenario, logged adversary). One row per "
         "(run, dataset, setting, scenario) goes into the SQLite --store; scenarios already there are skipped, so "
         "re-running adds only what is missing.",
     )
     p.add_argument("runs", nargs="*", metavar="RUN",
                    help="run folders (or 'heuristic' for the rule-based driver); none = only the Replay ego")
     p.add_argument("--settings", default="normal,hard",
-                   help="comma-separated: normal, hard, GENERATOR (cat, goose, seal, rule, replay), real:DIR "
-                   "(default normal,hard)")
+                   help="comma-separated: normal, hard, normal-reactive, GENERATOR (cat, goose, seal, rule, replay), "
+                   "real:DIR (default normal,hard)")
     p.add_argument("--store", default="results.sqlite", help="SQLite results store (default results.sqlite)")
     p.add_argument("--dataset", default=None,
                    help="dataset with eval / hard splits (default: the 'dataset' of the first run's config.yaml)")

@@ -67,7 +67,8 @@ class RapidBackground(SimulatedBackground):
                 self._maps.pop(next(iter(self._maps)))
             geo = build_map_geometry(road)
             with torch.inference_mode():
-                z = self.net.map(torch.from_numpy(geo.tokens)[None], torch.from_numpy(anchor_encoding(geo.tokens))[None])
+                tokens = torch.from_numpy(geo.tokens)[None]
+                z = self.net.map(tokens, torch.from_numpy(anchor_encoding(geo.tokens))[None])
             hit = (road, geo, z)
             self._maps[id(road)] = hit
             self.map_builds += 1

@@ -111,7 +111,8 @@ def build_map_geometry(road: RoadDescription) -> MapGeometry:
         frac = (s - cum[k]) / np.maximum(cum[k + 1] - cum[k], 1e-9)
         xy = line[k] + frac[:, None] * seg[k]
         ang = np.arctan2(seg[k, 1], seg[k, 0])
-        rows.append(np.column_stack([fourier(xy - origin), np.cos(ang), np.sin(ang), np.full(len(s), lane.width_m / 4)]))
+        width = np.full(len(s), lane.width_m / 4)
+        rows.append(np.column_stack([fourier(xy - origin), np.cos(ang), np.sin(ang), width]))
     tokens = np.concatenate(rows)[:MAX_TOKENS].astype(np.float32)
     return MapGeometry(origin, centres, edges, tokens)
 
@@ -218,7 +219,8 @@ def agent_inputs(
     dest[~dest_mask] = 0.0
     gap, lead_v = leader_gaps(cur, rows)
     leader_mask = np.isfinite(gap)
-    leader = np.column_stack([np.where(leader_mask, gap, 0.0) / 50.0, np.where(leader_mask, speed - lead_v, 0.0) / 10.0])
+    closing = np.where(leader_mask, speed - lead_v, 0.0)
+    leader = np.column_stack([np.where(leader_mask, gap, 0.0) / 50.0, closing / 10.0])
     neighbors, neighbor_mask = _neighbors(cur, rows, c, s)
     f32 = np.float32
     return AgentInputs(
