@@ -112,3 +112,19 @@ def test_training_reduces_the_loss_and_the_model_file_round_trips(tmp_path: Path
     (tmp_path / "bad.pt").write_bytes(b"not a model")
     with pytest.raises(RapidFileError, match="bad.pt"):
         load_rapid(tmp_path / "bad.pt")
+
+
+def test_closest_points_kernel_matches_the_numpy_projection() -> None:
+    from seal.models.rapid.features import Segments
+
+    rng = np.random.default_rng(4)
+    lines = [np.cumsum(rng.normal(0, 5, (6, 2)), axis=0) for _ in range(4)]
+    seg = Segments.of(lines)
+    pts = rng.uniform(-20, 20, (50, 2))
+    q, direction = seg.nearest(pts)
+    d = pts[:, None, :] - seg.a[None]
+    t = np.clip((d * seg.e[None]).sum(-1) / seg.len2[None], 0.0, 1.0)
+    cand = seg.a[None] + t[..., None] * seg.e[None]
+    k = np.argmin(((pts[:, None, :] - cand) ** 2).sum(-1), axis=1)
+    np.testing.assert_allclose(q, cand[np.arange(50), k], atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(direction, axis=1), 1.0)

@@ -25,6 +25,7 @@ from seal.core.road import RoadDescription
 from seal.core.scenario import DT_S, HEADING, LENGTH, VALID, VX, VY, WIDTH, X, Y
 from seal.envs.background import leader_gaps
 from seal.envs.road_geometry import get_road_geometry
+from seal.models.rapid.kernels import closest_points
 
 N_FREQ = 8
 """Fourier frequencies per axis, linearly spaced from 2 pi / 1 km to 2 pi / 0.5 m (paper 3.2)."""
@@ -49,11 +50,13 @@ def fourier(xy: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Segments:
-    """Polyline segments as arrays: starts ``a [S, 2]``, vectors ``e [S, 2]`` (m), squared lengths ``[S]``."""
+    """Polyline segments as arrays: starts ``a [S, 2]``, vectors ``e [S, 2]`` (m), squared lengths ``[S]`` and
+    the ``[4, S]`` rows (a x, a y, e x, e y) the compiled `closest_points` reads."""
 
     a: np.ndarray
     e: np.ndarray
     len2: np.ndarray
+    cols: np.ndarray
 
     @classmethod
     def of(cls, polylines: list[np.ndarray]) -> Segments:
@@ -63,16 +66,14 @@ class Segments:
         e = (np.concatenate(ends) if ends else np.zeros((0, 2))) - a
         len2 = (e**2).sum(axis=1)
         keep = len2 > 1e-6
-        return cls(a[keep], e[keep], len2[keep])
+        a, e, len2 = a[keep], e[keep], np.ascontiguousarray(len2[keep])
+        return cls(a, e, len2, np.ascontiguousarray(np.vstack([a.T, e.T])))
 
     def nearest(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """For points ``p [n, 2]``: (closest point on any segment ``[n, 2]``, that segment's direction (unit))."""
-        d = p[:, None, :] - self.a[None]
-        t = np.clip((d * self.e[None]).sum(-1) / self.len2[None], 0.0, 1.0)
-        q = self.a[None] + t[..., None] * self.e[None]
-        k = np.argmin(((p[:, None, :] - q) ** 2).sum(-1), axis=1)
-        idx = np.arange(len(p))
-        return q[idx, k], self.e[k] / np.sqrt(self.len2[k])[:, None]
+        """For points ``p [n, 2]``: (closest point on any segment ``[n, 2]``, that segment's direction (unit));
+        one compiled call (`seal.models.rapid.kernels.closest_points`)."""
+        q, ks = closest_points(self.cols, self.len2, np.ascontiguousarray(p, dtype=np.float64))
+        return q, self.e[ks] / np.sqrt(self.len2[ks])[:, None]
 
 
 @dataclass(frozen=True)

@@ -44,7 +44,9 @@ def schedule(n: int = N_DIFFUSION) -> torch.Tensor:
 
 @dataclass(frozen=True)
 class Guidance:
-    """Physics-guidance options of the sampler (eq. 7 weights and the social-force constants).
+    """Physics-guidance options of the sampler (eq. 7 weights and the social-force constants). The defaults of
+    ``w_destination`` / ``tau_s`` were chosen among (0.1, 2 s), (0.2, 1 s), (0.3, 1 s) on 12 validation scenarios
+    (pool2500 train split 300-311, not used for fitting): 8 s ADE, background collisions and speed R^2.
 
     Attributes:
         w_destination, w_social, w_map: weights w_i of eq. 7 (0 = off).
@@ -53,10 +55,10 @@ class Guidance:
         a_map_mps2, b_map_m: strength and range of the repulsion from the road's edges.
     """
 
-    w_destination: float = 0.1
+    w_destination: float = 0.2
     w_social: float = 0.3
     w_map: float = 0.1
-    tau_s: float = 2.0
+    tau_s: float = 1.0
     a_social_mps2: float = 6.0
     b_social_m: float = 2.0
     a_map_mps2: float = 3.0
