@@ -221,7 +221,7 @@ class IDMBackground(BackgroundController):
         alive = self.driven & (self.log[:, t + 1, VALID] > 0.5)
         present = cur[:, VALID] > 0.5
         entering = np.flatnonzero(alive & ~present)
-        for row in entering:
+        for row in entering.tolist():
             out[row] = self.log[row, t + 1]
             route = self._route(row)
             proj = route.project(out[row, X], out[row, Y])
@@ -233,7 +233,7 @@ class IDMBackground(BackgroundController):
         gap, lead_v = leader_gaps(cur, moving)
         desired = np.nan_to_num(self.intent.desired_speed_mps[moving], nan=speed)
         new_speed = np.clip(speed + idm_acceleration(speed, desired, gap, lead_v) * DT_S, 0.0, MAX_SPEED_MPS)
-        for k, row in enumerate(moving):
+        for k, row in enumerate(moving.tolist()):
             route = self._route(row)
             if row not in self._hint:  # present at the first step: start on its route
                 proj = route.project(cur[row, X], cur[row, Y])

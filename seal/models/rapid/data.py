@@ -85,7 +85,11 @@ def build_samples(scenarios: Iterable[Scenario], seed: int, drop_intent: float =
     """`RapidSamples` of ``scenarios`` (every ``stride``-th step)."""
     rng = np.random.default_rng(seed)
     inputs: list[dict[str, np.ndarray]] = []
-    targets, scenes, tokens, pads, anchors = [], [], [], [], []
+    targets: list[np.ndarray] = []
+    scenes: list[np.ndarray] = []
+    tokens: list[np.ndarray] = []
+    pads: list[np.ndarray] = []
+    anchors: list[np.ndarray] = []
     for scenario in scenarios:
         geo = build_map_geometry(scenario.road)
         got = scenario_samples(scenario, geo, rng, drop_intent, stride)

@@ -47,19 +47,21 @@ class RapidTrainConfig:
     seed: int = 0
 
 
-def _batch(samples: RapidSamples, idx: np.ndarray) -> tuple[dict[str, torch.Tensor], torch.Tensor, torch.Tensor]:
+def _batch(samples: RapidSamples, idx: np.ndarray
+           ) -> tuple[dict[str, torch.Tensor], torch.Tensor, np.ndarray, torch.Tensor]:
+    """Inputs, targets, the batch's distinct scenario indices and each sample's position among them."""
     inp = {k: torch.from_numpy(v[idx]) for k, v in samples.inputs.items()}
     scenes, inverse = np.unique(samples.scene[idx], return_inverse=True)
-    return inp, torch.from_numpy(samples.target[idx]), torch.from_numpy(scenes), torch.from_numpy(inverse)  # type: ignore[return-value]
+    return inp, torch.from_numpy(samples.target[idx]), scenes, torch.from_numpy(inverse)
 
 
 def batch_loss(net: RapidNet, samples: RapidSamples, idx: np.ndarray, alpha_bar: torch.Tensor,
                gen: torch.Generator) -> torch.Tensor:
     """Mean squared error of the denoiser's x0 on the samples ``idx`` at random diffusion steps."""
-    inp, target, scenes, inverse = _batch(samples, idx)  # type: ignore[misc]
-    tokens = torch.from_numpy(samples.tokens[scenes.numpy()])
-    pad = torch.from_numpy(samples.token_pad[scenes.numpy()])
-    anchors = torch.from_numpy(samples.anchors[scenes.numpy()])
+    inp, target, scenes, inverse = _batch(samples, idx)
+    tokens = torch.from_numpy(samples.tokens[scenes])
+    pad = torch.from_numpy(samples.token_pad[scenes])
+    anchors = torch.from_numpy(samples.anchors[scenes])
     z = net.map(tokens, anchors, pad)[inverse]
     ctx = net.agent(inp, z)
     k = torch.randint(0, len(alpha_bar), (len(idx),), generator=gen)
