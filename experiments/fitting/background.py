@@ -17,7 +17,7 @@ from typing import Any
 import torch
 
 from seal.core.atomic import atomic_write_json
-from seal.core.config import load_config, to_dict
+from seal.core.config import ConfigError, load_config, to_dict
 from seal.core.dataset import load_split
 from seal.experiments import presets
 from seal.models.rapid.data import build_samples
@@ -58,8 +58,6 @@ class BackgroundFitConfig:
     """Torch threads (set by the command-line entry point)."""
 
     def __post_init__(self) -> None:
-        from seal.core.config import ConfigError
-
         if self.stride < 1:
             raise ConfigError(f"stride must be >= 1, got {self.stride}")
         if not 0.0 <= self.drop_intent < 1.0:

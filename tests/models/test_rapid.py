@@ -128,3 +128,12 @@ def test_closest_points_kernel_matches_the_numpy_projection() -> None:
     k = np.argmin(((pts[:, None, :] - cand) ** 2).sum(-1), axis=1)
     np.testing.assert_allclose(q, cand[np.arange(50), k], atol=1e-12)
     np.testing.assert_allclose(np.linalg.norm(direction, axis=1), 1.0)
+
+
+def test_guidance_options_are_checked() -> None:
+    from seal.core.errors import SealError
+
+    with pytest.raises(SealError, match="w_social must be >= 0"):
+        Guidance(w_social=-0.1)
+    with pytest.raises(SealError, match="tau_s must be > 0"):
+        Guidance(tau_s=0.0)

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from seal.core.errors import SealError
 from seal.core.scenario import HEADING, LENGTH, VALID, VX, VY, WIDTH, X, Y
 from seal.models.rapid.features import ACC_SCALE_MPS2, MapGeometry
 
@@ -64,9 +65,11 @@ class Guidance:
     a_map_mps2: float = 3.0
     b_map_m: float = 0.5
 
-    @property
-    def active(self) -> bool:
-        return bool(self.w_destination or self.w_social or self.w_map)
+    def __post_init__(self) -> None:
+        for name, value in vars(self).items():
+            if not value >= 0.0 or (name in ("tau_s", "b_social_m", "b_map_m") and not value > 0.0):
+                raise SealError(f"RAPID guidance option {name} must be {'> 0' if name[0] in 'tb' else '>= 0'}, "
+                                f"got {value}")
 
 
 def destination_force(cur: np.ndarray, rows: np.ndarray, desired: np.ndarray, dest: np.ndarray,
