@@ -137,3 +137,13 @@ def test_guidance_options_are_checked() -> None:
         Guidance(w_social=-0.1)
     with pytest.raises(SealError, match="tau_s must be > 0"):
         Guidance(tau_s=0.0)
+
+
+def test_headway_makes_the_social_force_see_a_fast_approach() -> None:
+    cur = np.zeros((2, 8))
+    cur[:, 5], cur[:, 6], cur[:, VALID] = 5.0, 2.0, 1.0
+    cur[1, X] = 25.0  # 20 m gap ahead, stopped; agent 0 closes at 20 m/s
+    cur[0, 3] = 20.0
+    static = social_force(cur, np.array([0]), Guidance())
+    headway = social_force(cur, np.array([0]), Guidance(t_headway_s=1.0))
+    assert abs(static[0, 0]) < 1e-3 and headway[0, 0] == pytest.approx(-6.0)

@@ -12,7 +12,9 @@ Targets ``a_i`` (agent frame, m/s^2; `physics_targets`):
   speed (where an agent has none: its current speed; with no destination: its heading);
 * social (eq. 9): ``x0 + sum_j A_soc exp(-d_ij / B_soc) n_ij`` over the other agents (the ego and the adversary
   included), ``d_ij`` the gap between the two boxes (the larger of the longitudinal and lateral clearances in
-  i's frame, >= 0), weighted by the field of view (agents ahead count fully, behind by ``SOCIAL_BEHIND``);
+  i's frame) less what closing at the current closing speed eats of it in ``t_headway_s`` (>= 0; the
+  velocity-dependent form of the social force, Helbing's elliptical specification, for vehicles), weighted by
+  the field of view (agents ahead count fully, behind by ``SOCIAL_BEHIND``);
 * map (eq. 10): ``x0 + A_obs exp(-d / B_obs) n`` with ``d`` the clearance between the box side and the nearest
   road-edge point, ``n`` pointing away from it.
 
@@ -54,6 +56,10 @@ class Guidance:
         tau_s: relaxation time of the destination term (s).
         a_social_mps2, b_social_m: strength and range of the repulsion between agents.
         a_map_mps2, b_map_m: strength and range of the repulsion from the road's edges.
+        t_headway_s: the social gap is the box gap left after closing at the current closing speed for this
+            long (0, the default: the paper's static distance). On the validation scenarios 0.4 s / 1 s lowered
+            background collisions (0.040 -> 0.013 / 0.018) but raised the 8 s ADE (2.3 -> 3.2 / 4.4 m) and did
+            not lower the heuristic ego's crashes, so it is off by default.
     """
 
     w_destination: float = 0.2
@@ -64,11 +70,13 @@ class Guidance:
     b_social_m: float = 2.0
     a_map_mps2: float = 3.0
     b_map_m: float = 0.5
+    t_headway_s: float = 0.0
 
     def __post_init__(self) -> None:
+        positive = ("tau_s", "b_social_m", "b_map_m")
         for name, value in vars(self).items():
-            if not value >= 0.0 or (name in ("tau_s", "b_social_m", "b_map_m") and not value > 0.0):
-                raise SealError(f"RAPID guidance option {name} must be {'> 0' if name[0] in 'tb' else '>= 0'}, "
+            if not value >= 0.0 or (name in positive and not value > 0.0):
+                raise SealError(f"RAPID guidance option {name} must be {'> 0' if name in positive else '>= 0'}, "
                                 f"got {value}")
 
 
@@ -97,8 +105,10 @@ def social_force(cur: np.ndarray, rows: np.ndarray, g: Guidance) -> np.ndarray:
     lat = -s * d[..., 0] + c * d[..., 1]
     gap_lon = np.abs(lon) - 0.5 * (me[:, LENGTH, None] + other[None, :, LENGTH])
     gap_lat = np.abs(lat) - 0.5 * (me[:, WIDTH, None] + other[None, :, WIDTH])
-    gap = np.maximum(np.maximum(gap_lon, gap_lat), 0.0)
     dist = np.maximum(np.hypot(d[..., 0], d[..., 1]), 1e-6)
+    rel_v = me[:, None, [VX, VY]] - other[None, :, [VX, VY]]
+    closing = np.maximum((rel_v * d).sum(-1) / dist, 0.0)
+    gap = np.maximum(np.maximum(gap_lon, gap_lat) - g.t_headway_s * closing, 0.0)
     cos_phi = lon / dist
     fov = SOCIAL_BEHIND + (1.0 - SOCIAL_BEHIND) * 0.5 * (1.0 + cos_phi)
     mag = g.a_social_mps2 * np.exp(-gap / g.b_social_m) * fov
