@@ -84,8 +84,8 @@ def write_report(
         "acceleration and out-of-road rate to the logged adversaries (lower = more realistic); collision speed "
         "along the contact normal over colliding episodes; head-on rates of all episodes. `normal` = logged "
         "adversary (reference); `normal-reactive` = the same with reacting background traffic (the crashes the "
-        "replayed background caused are the difference). yaw+acc WD: the mean of the yaw and acceleration distances alone (thesis Table "
-        "7.6 leaves the out-of-road term out).\n",
+        "replayed background caused are the difference). yaw+acc WD: the mean of the yaw and acceleration "
+        "distances alone (thesis Table 7.6 leaves the out-of-road term out).\n",
         generator_markdown(t62) if t62 else "(no generator settings evaluated)\n",
     ]
     if figures:
