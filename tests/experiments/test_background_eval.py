@@ -151,3 +151,19 @@ def test_rapid_background_in_the_env_moves_agents_off_their_log(model_file: Path
         env.step(np.zeros(2))
     row = [i for i in range(sc.n_agents) if i not in (sc.ego_index, sc.adv_index) and sc.valid[i, CURRENT_STEP + 5]][0]
     assert not np.array_equal(env._cur[row], sc.tracks[row, CURRENT_STEP + 5].astype(np.float64))
+
+
+def test_table_6_2_keeps_normal_reactive_beside_normal() -> None:
+    from results_builders import episode
+
+    from seal.experiments.report.compare import generator_table
+
+    rows = [episode(setting=s, scenario_id=f"s{i}", outcome="crash" if (s == "normal" and i < 2) else "success")
+            for s in ("normal", "normal-reactive", "hard") for i in range(4)]
+    for r in rows:
+        r.update({k: list(r[k]) for k in ("adv_yaw_hist", "adv_acc_hist", "log_yaw_hist", "log_acc_hist")})
+    settings = [{"setting": s, "kind": "replay"} for s in ("normal", "normal-reactive", "hard")]
+    table = {r["setting"]: r for r in generator_table(rows, settings)}
+    assert set(table) == {"normal", "normal-reactive"}
+    assert table["normal"]["ego_success"] == pytest.approx(0.5)
+    assert table["normal-reactive"]["ego_success"] == pytest.approx(1.0)
