@@ -147,3 +147,10 @@ def test_headway_makes_the_social_force_see_a_fast_approach() -> None:
     static = social_force(cur, np.array([0]), Guidance())
     headway = social_force(cur, np.array([0]), Guidance(t_headway_s=1.0))
     assert abs(static[0, 0]) < 1e-3 and headway[0, 0] == pytest.approx(-6.0)
+
+
+def test_leader_term_moves_only_the_longitudinal_part_of_agents_with_a_leader() -> None:
+    x0 = torch.tensor([[1.0, 0.5], [1.0, 0.5]])
+    lead = torch.tensor([[-2.0, 1.0], [-2.0, 0.0]])  # agent 0 has a box ahead, agent 1 none
+    out = guide(x0, {"leader": lead}, Guidance(w_destination=0.0, w_social=0.0, w_map=0.0, w_leader=0.25))
+    torch.testing.assert_close(out, torch.tensor([[1.0 - 0.5 * 3.0, 0.5], [1.0, 0.5]]))
