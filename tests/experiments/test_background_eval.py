@@ -167,3 +167,15 @@ def test_table_6_2_keeps_normal_reactive_beside_normal() -> None:
     assert set(table) == {"normal", "normal-reactive"}
     assert table["normal"]["ego_success"] == pytest.approx(0.5)
     assert table["normal-reactive"]["ego_success"] == pytest.approx(1.0)
+
+
+def test_background_presets_resolve() -> None:
+    from seal.core.config import ConfigError
+    from seal.experiments.fitting.background import resolve_config
+
+    quick = resolve_config("quick")
+    assert (quick.limit, quick.eval_limit, quick.stride, quick.dim, quick.epochs) == (24, 6, 3, 32, 2)
+    standard = resolve_config("standard", sets=["epochs=2"], seed=5)
+    assert (standard.limit, standard.dim, standard.epochs, standard.seed) == (200, 64, 2, 5)
+    with pytest.raises(ConfigError, match="drop_intent"):
+        resolve_config("quick", sets=["drop_intent=1.5"])

@@ -41,9 +41,10 @@ def _resolved(key: str) -> dict[str, Any]:
 
 def test_every_recorded_case_is_covered() -> None:
     configs = Path(__file__).resolve().parents[2] / "experiments" / "configs"
-    # quick_ablations is newer than the recording (tests/experiments/test_run_pipeline.py checks it resolves).
+    # quick_ablations is newer than the recording (tests/experiments/test_run_pipeline.py checks it resolves), as
+    # are the background presets (tests/experiments/test_background_eval.py).
     presets = {p.stem for p in configs.glob("*.yaml")} - {"eval_generators", "eval_seal_ablations", "prior_default",
-                                                          "quick_ablations"}
+                                                          "quick_ablations", "background_quick", "background_standard"}
     recorded = {k.split("/")[1] if k.startswith("train/") else f"{k.split('/')[0]}_{k.split('/')[1]}"
                 for k in RECORDED}
     assert presets == recorded  # a new preset file needs a recorded case
