@@ -43,7 +43,7 @@ def evaluate_chunk(job: Mapping[str, Any]) -> dict[str, Any]:
 
     torch.set_num_threads(1)  # one core per worker: the workers are the parallelism
     use_session(str(job["session"]))
-    ego = read_run(job["run"])
+    ego = read_run(job["run"], job.get("algo"))
     settings = [Setting(**s) for s in job["settings"]]
     items = [(str(d), sp, int(i), list(m)) for d, sp, i, m in job["items"]]
     with ResultsStore(job["store"]) as store:
@@ -70,7 +70,7 @@ def chunk_jobs(
         for start in range(0, len(items), chunk_size):
             chunk: list[WorkItem] = items[start : start + chunk_size]
             jobs.append({
-                "store": store_path, "run": ego.ego if ego.path else ego.run,
+                "store": store_path, "run": ego.ego if ego.path else ego.run, "algo": ego.algo,
                 "settings": [vars(s) for s in settings], "config": dict(config),
                 "items": [list(it) for it in chunk], "session": session,
             })
@@ -103,12 +103,13 @@ def evaluate_parallel(
 def evaluate_runs(
     runs: Sequence[str], settings_spec: str | Sequence[str], store_path: str | Path, dataset: str | Path | None = None,
     config: Mapping[str, Any] | None = None, replay_ego: bool = True, workers: int = 1, progress: bool = True,
-    backend: Backend | None = None, chunk_size: int | None = None,
+    backend: Backend | None = None, chunk_size: int | None = None, algo: str | None = None,
 ) -> list[dict[str, Any]]:
     """Evaluate every run (plus the Replay ego unless ``replay_ego`` is False) on the settings; returns one
     ``{"run", "written"}`` per ego. Egos x scenarios run as chunk jobs (`evaluate_parallel`): in this process
-    (``workers`` <= 1), in ``workers`` local processes, or on a given `seal.experiments.backends` backend (Ray)."""
-    egos = [read_run(r) for r in runs]
+    (``workers`` <= 1), in ``workers`` local processes, or on a given `seal.experiments.backends` backend (Ray).
+    ``algo``: the SB3 algorithm of model files that do not record it."""
+    egos = [read_run(r, algo) for r in runs]
     if replay_ego and not any(e.run == "replay" for e in egos):
         egos.append(read_run("replay"))
     if not egos:
