@@ -325,9 +325,17 @@ def load_train_config(path: str | Path, overrides: Mapping[str, Any] | None = No
 
 
 def _generator(config: EgoTrainConfig) -> dict[str, Any]:
-    if config.pipeline not in config.pipelines:
-        raise ConfigError(f"--pipeline must be one of {sorted(config.pipelines)}, got {config.pipeline!r}")
-    spec = config.pipelines[config.pipeline]
+    """The run's ``generator: {name, kwargs}``: the pipeline the config defines, else a generator of that name (a
+    built-in, a ``--plugin`` or an installed ``seal.generators`` entry point) with its default options."""
+    from seal.adversaries.base import available_generators
+
+    if config.pipeline in config.pipelines:
+        spec = config.pipelines[config.pipeline]
+    elif config.pipeline in available_generators():
+        spec = PipelineSpec(config.pipeline, {})
+    else:
+        raise ConfigError(f"--pipeline must be one of {sorted(config.pipelines)} (train.pipelines) or a generator "
+                          f"name ({', '.join(available_generators())}), got {config.pipeline!r}")
     if spec is None:
         return {"name": None, "kwargs": {}}
     kwargs = dict(spec.kwargs)

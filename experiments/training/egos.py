@@ -18,9 +18,9 @@ from typing import Any, Protocol, cast
 import numpy as np
 import yaml
 
+from seal.core.errors import SealError
 from seal.core.scenario import CURRENT_STEP, Scenario
 from seal.envs.heuristic import HeuristicDriver
-from seal.core.errors import SealError
 from seal.envs.kinematics import recover_actions
 from seal.experiments.training.sb3_load import (
     MODEL_FILES,

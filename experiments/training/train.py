@@ -182,6 +182,10 @@ def train_run(config: dict[str, Any], out: Path, resume: bool = False, progress:
     train_scenarios = load_split(config["dataset"], config["train_split"], config["train_limit"], "train")
     eval_scenarios = (load_split(config["dataset"], config["eval_split"], int(config["eval_episodes"]), "eval")
                       if int(config["eval_every"]) else [])
+    if int(config["eval_every"]) and len(eval_scenarios) < int(config["eval_episodes"]):
+        logger.warning(f"train.eval_episodes is {config['eval_episodes']} but the {config['eval_split']!r} split of "
+                       f"{config['dataset']} has {len(eval_scenarios)} scenarios: each evaluation plays "
+                       f"{len(eval_scenarios)}")
     if len(train_scenarios) < n_envs:
         raise ValueError(f"{len(train_scenarios)} train scenarios cannot feed {n_envs} env workers; lower train.n_envs")
     if config["generator"]["name"]:
@@ -335,7 +339,8 @@ def _callbacks(config: Mapping[str, Any], out: Path, checkpoint: Path | None, re
     from seal.experiments.training.curriculum import CurriculumCallback
 
     total = int(config["total_timesteps"])
-    curriculum = CurriculumCallback(total, **config["curriculum"])
+    # p is pushed to every env either way; it is logged only where a generator uses it (noadv never perturbs).
+    curriculum = CurriculumCallback(total, **config["curriculum"], log=bool(config["generator"]["name"]))
     stats = EpisodeStatsCallback()
     eval_env_config = dict(config["eval_env"])
     counter, residual = reskill.callbacks() if reskill is not None else (None, None)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from seal.cli.args import CliError, add_set_option, pipeline_choices, positive_int
+from seal.cli.args import CliError, add_plugin_option, add_set_option, positive_int
 from seal.cli.tree import CommandTree
 
 DEFAULT_CONFIG = "standard"
@@ -94,8 +94,11 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--config", default=None,
                    help="preset name (quick | standard | paper: experiments/configs/<name>.yaml) or a YAML file with a "
                    f"train: section (default {DEFAULT_CONFIG})")
-    p.add_argument("--pipeline", choices=pipeline_choices(), default=None,
-                   help="adversary pipeline (default: the config's, cat)")
+    p.add_argument("--pipeline", default=None,
+                   help="adversary pipeline: noadv, a pipeline of the config's train.pipelines (built-in: goose, cat, "
+                   "seal, steered, cat-rcg, seal-rcg) or any generator name, e.g. one from --plugin (default: the "
+                   "config's, cat)")
+    add_plugin_option(p)
     p.add_argument("--seed", type=int, default=None, help="random seed (default: the config's, 0)")
     p.add_argument("--out", default=None, help="new run folder (must be absent or empty)")
     p.add_argument("--resume", default=None, metavar="RUN", help="continue the unfinished run in RUN")

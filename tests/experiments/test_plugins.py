@@ -1,0 +1,160 @@
+"""Third-party generators (issue 25): the README's `--plugin` generator and one from a tiny installed package
+(entry point) appear in `seal eval generators` and train through `seal train --pipeline`; consistent training
+logs."""
+
+from __future__ import annotations
+
+import csv
+import json
+import re
+from pathlib import Path
+
+import pytest
+from train_fixtures import tiny_dataset
+
+from seal.adversaries.base import available_generators, generator_class
+from seal.cli import main
+
+README = Path(__file__).resolve().parents[2] / "README.md"
+
+PACKAGE = '''
+import os
+from seal.adversaries.base import AdversaryGenerator, Generation
+from seal.envs.behaviors import ReplayBehavior
+
+
+class HardBrake(AdversaryGenerator):
+    """Replays the logged adversary and notes each call in $SEAL_TEST_PLUGIN_LOG."""
+
+    def _generate(self, scenario, history, rng):
+        with open(os.environ["SEAL_TEST_PLUGIN_LOG"], "a") as f:
+            f.write(scenario.scenario_id + "\\n")
+        return Generation(behavior=ReplayBehavior())
+'''
+
+
+def readme_section() -> str:
+    text = README.read_text()
+    start = text.index("## Use your own policy / generator")
+    return text[start:text.index("\n## ", start + 1)]
+
+
+def readme_block(first_line: str) -> str:
+    """The fenced code block of the README section whose first line is ``first_line``."""
+    for block in re.findall(r"```\w*\n(.*?)```", readme_section(), flags=re.S):
+        if block.startswith(first_line):
+            return str(block)
+    raise AssertionError(f"no README block starting with {first_line!r}")
+
+
+def install_package(site: Path) -> None:
+    """A tiny installed distribution: the package and its dist-info with a ``seal.generators`` entry point."""
+    (site / "seal_test_plugin").mkdir(parents=True)
+    (site / "seal_test_plugin" / "__init__.py").write_text(PACKAGE)
+    info = site / "seal_test_plugin-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: seal-test-plugin\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[seal.generators]\nhardbrake = seal_test_plugin:HardBrake\n")
+
+
+def train_yaml(tmp_path: Path, data: Path) -> Path:
+    path = tmp_path / "train.yaml"
+    path.write_text(f"""
+train:
+  dataset: {data}
+  total_timesteps: 240
+  n_envs: 1
+  eval_every: 0
+  checkpoint_every: 0
+  curriculum: {{slope: 100.0, cap: 1.0}}
+  hyperparams: {{td3: {{learning_starts: 40, batch_size: 16, net_arch: [16, 16], buffer_size: 400}}}}
+  pipelines: {{brake: {{name: brake, kwargs: {{decel_mps2: 8.0}}}}}}
+""")
+    return path
+
+
+def _csv(path: Path) -> list[dict[str, str]]:
+    return list(csv.DictReader(path.open()))
+
+
+def test_readme_plugin_generator_evaluates_and_trains(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("SEAL_PLUGINS", raising=False)
+    data = tiny_dataset(tmp_path)
+    (tmp_path / "my_brake.py").write_text(readme_block("# my_brake.py"))
+    code = main(["eval", "generators", str(data), "--plugin", "my_brake.py", "--generators", "replay,brake",
+                 "--ego", "heuristic", "--out", "gen-brake", "--no-progress"])
+    assert code == 0, capsys.readouterr().err
+    assert "brake" in available_generators()
+    rows = {r["generator"]: r for r in _csv(tmp_path / "gen-brake" / "generators.csv")}
+    assert set(rows) == {"replay", "brake"}
+    # the brake generator changed the adversary's accelerations (replay's distance to the log is ~0)
+    assert float(rows["brake"]["acc_wd"]) > 1.0 > 0.01 > float(rows["replay"]["acc_wd"])
+
+    code = main(["train", "--config", str(train_yaml(tmp_path, data)), "--plugin", "my_brake.py",
+                 "--pipeline", "brake", "--out", "runs/brake-s0", "--no-progress", "--json"])
+    assert code == 0, capsys.readouterr().err
+    run = tmp_path / "runs" / "brake-s0"
+    done = json.loads((run / "done.json").read_text())
+    assert done["steps"] == 240 and done["session_totals"]["perturbed"] > 0
+    progress = _csv(run / "progress.csv")
+    assert any(r.get("curriculum/p") for r in progress)  # a perturbing pipeline logs p
+    totals = done["session_totals"]
+    assert totals["crashed"] >= totals["crash"] and totals["episodes"] == sum(
+        totals[o] for o in ("success", "crash", "out_of_road", "timeout"))
+
+
+def test_installed_entry_point_generator(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    install_package(tmp_path / "site")
+    monkeypatch.syspath_prepend(str(tmp_path / "site"))
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path / "site"))  # spawned env workers see the package too
+    log = tmp_path / "calls.txt"
+    monkeypatch.setenv("SEAL_TEST_PLUGIN_LOG", str(log))
+    data = tiny_dataset(tmp_path)
+    assert "hardbrake" in available_generators()
+    assert generator_class("hardbrake").__name__ == "HardBrake"
+    code = main(["eval", "generators", str(data), "--generators", "replay,hardbrake", "--ego", "heuristic",
+                 "--k", "2", "--out", str(tmp_path / "gen"), "--no-progress"])
+    assert code == 0, capsys.readouterr().err
+    assert len(log.read_text().split()) == 2 * 2  # 2 eval scenarios x K = 2 passes
+    log.unlink()
+    config = train_yaml(tmp_path, data)
+    code = main(["train", "--config", str(config), "--pipeline", "hardbrake", "--out", str(tmp_path / "run"),
+                 "--no-progress"])
+    assert code == 0, capsys.readouterr().err
+    assert log.is_file() and log.read_text().split()  # the training workers called it
+    recorded = (tmp_path / "run" / "config.yaml").read_text()
+    assert "name: hardbrake" in recorded
+    # an unknown pipeline is refused with the names it could be
+    code = main(["train", "--config", str(config), "--pipeline", "nosuch", "--out", str(tmp_path / "x")])
+    assert code == 2 and "nosuch" in capsys.readouterr().err
+
+
+def test_noadv_does_not_log_curriculum_p() -> None:
+    from seal.experiments.training.curriculum import CurriculumCallback
+
+    class Logger:
+        def __init__(self) -> None:
+            self.keys: list[str] = []
+
+        def record(self, key: str, value: float) -> None:
+            self.keys.append(key)
+
+    class Env:
+        def env_method(self, *args: object) -> None:
+            pass
+
+    class Model:
+        def __init__(self) -> None:
+            self.logger = Logger()
+
+        def get_env(self) -> Env:
+            return Env()
+
+    for log, expected in ((True, ["curriculum/p"]), (False, [])):
+        cb = CurriculumCallback(100, log=log)
+        cb.model, cb.num_timesteps = Model(), 50  # what SB3's init_callback / on_step set
+        cb._on_step()
+        assert cb.model.logger.keys == expected and cb.p == pytest.approx(0.9)
