@@ -53,7 +53,7 @@ def base_setting(setting: str) -> str:
     return setting if setting.startswith(REAL_PREFIX) else setting.split(DATASET_SEP, 1)[0]
 
 
-def filter_datasets(rows: Sequence[Mapping[str, Any]], datasets: Sequence[str]) -> list[Mapping[str, Any]]:
+def filter_datasets(rows: Sequence[dict[str, Any]], datasets: Sequence[str]) -> list[dict[str, Any]]:
     """Rows whose dataset is one of ``datasets``, each given as a path or as the folder's name."""
     wanted = {str(Path(d).expanduser().resolve()) for d in datasets} | set(datasets)
     return [r for r in rows if r["dataset"] in wanted or Path(r["dataset"]).name in wanted]

@@ -37,19 +37,7 @@ def write_report(
     into ``out``; returns the tables. ``datasets``: only episodes on these datasets (paths or folder names);
     datasets and egos without a pipeline are kept apart (`seal.experiments.report.grouping`)."""
     out = Path(out)
-    with ResultsStore(store_path) as store:
-        setting_filter = _expand_settings(settings, store) if settings else None
-        rows = store.episodes(pipeline=pipelines or None, setting=setting_filter, decode_hists=True)
-        runs = store.runs(pipeline=pipelines or None)
-        settings_info = store.settings()
-    if datasets:
-        rows = filter_datasets(rows, datasets)
-    if not rows:
-        raise ValueError(
-            f"{store_path}: no evaluation episodes match (pipelines {pipelines or 'all'}, settings "
-            f"{settings or 'all'}, datasets {datasets or 'all'}); run `seal eval runs ...` first"
-        )
-    rows = separate(rows)
+    rows, runs, settings_info = _read_store(store_path, pipelines, settings, datasets)
     t61, t62 = ego_table(rows), generator_table(rows, settings_info)
     per_run = [
         {"pipeline": p, "setting": setting_label(s), "run": run, **rates}
@@ -110,6 +98,27 @@ def write_report(
             "videos": video_files, "episodes": len(rows), "outcomes": where["outcomes"],
             "by_layout": where["by_layout"], "by_source": where["by_source"], "failures": where["failures"],
             "failure_videos": where["videos"]}
+
+
+Rows = list[dict[str, Any]]
+
+
+def _read_store(store_path: str | Path, pipelines: Sequence[str] | None, settings: Sequence[str] | None,
+                datasets: Sequence[str] | None) -> tuple[Rows, Rows, Rows]:
+    """The filtered episode rows (relabelled by `seal.experiments.report.grouping.separate`), runs and settings."""
+    with ResultsStore(store_path) as store:
+        setting_filter = _expand_settings(settings, store) if settings else None
+        rows = store.episodes(pipeline=pipelines or None, setting=setting_filter, decode_hists=True)
+        runs = store.runs(pipeline=pipelines or None)
+        settings_info = store.settings()
+    if datasets:
+        rows = filter_datasets(rows, datasets)
+    if not rows:
+        raise ValueError(
+            f"{store_path}: no evaluation episodes match (pipelines {pipelines or 'all'}, settings "
+            f"{settings or 'all'}, datasets {datasets or 'all'}); run `seal eval runs ...` first"
+        )
+    return separate(rows), runs, settings_info
 
 
 def _expand_settings(settings: Sequence[str], store: Any) -> list[str]:
