@@ -31,6 +31,7 @@ import numpy as np
 import yaml
 
 from seal.core.errors import SealError
+from seal.experiments.training.zoo import ACTIVATIONS
 
 MODEL_FILES = ("model.zip", "final_model.zip", "best_model.zip")
 CONFIG_FILES = ("config.yaml", "config.yml")
@@ -44,8 +45,6 @@ TRAINING_STATE = (
 )
 """Pickled entries that only training uses: dropped for inference."""
 SCHEDULES = ("learning_rate", "lr_schedule", "clip_range", "clip_range_vf", "exploration_schedule")
-_ACTIVATIONS = ("ReLU", "Tanh", "ELU", "LeakyReLU", "GELU", "SiLU", "Mish", "Sigmoid", "Softplus", "SELU", "CELU",
-                "Hardswish", "Hardtanh", "PReLU", "Identity")
 _OPTIMIZERS = ("Adam", "AdamW", "RMSprop", "SGD")
 _CONFIG_SEARCH_DEPTH = 3
 """Folders above a model searched for a run config (``RUN/checkpoints/step_N/model.zip`` is three deep)."""
@@ -61,7 +60,7 @@ def safe_classes() -> dict[str, Any]:
     import torch
 
     out: dict[str, Any] = {}
-    for name in _ACTIVATIONS:
+    for name in ACTIVATIONS:
         cls = getattr(torch.nn, name)
         out[f"<class '{cls.__module__}.{cls.__qualname__}'>"] = cls
     for name in _OPTIMIZERS:
@@ -144,7 +143,7 @@ def _policy_kwargs(model: Path, entry: dict[str, Any]) -> dict[str, Any]:
             if value not in classes:
                 raise ModelLoadError(
                     f"{model}: policy_kwargs[{key!r}] = {value} cannot be rebuilt safely (allowed: torch.nn "
-                    f"activations {', '.join(_ACTIVATIONS)}; torch.optim {', '.join(_OPTIMIZERS)}); evaluate the "
+                    f"activations {', '.join(ACTIVATIONS)}; torch.optim {', '.join(_OPTIMIZERS)}); evaluate the "
                     "policy from Python instead (seal.experiments.evaluation.policies.evaluate_policy)"
                 )
             out[key] = classes[value]

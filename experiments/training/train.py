@@ -119,8 +119,17 @@ def build_model(config: Mapping[str, Any], env: Any) -> Any:
 
     if config["algo"] == "reskill":
         return build_model({**config, "algo": "td3", "hyperparams": config["hyperparams"]["high"]}, env)
+    import torch
+
+    from seal.experiments.training.zoo import parse_policy_kwargs, parse_schedule
+
     h = dict(config["hyperparams"])
-    policy_kwargs = {"net_arch": list(h.pop("net_arch"))}
+    policy_kwargs = {"net_arch": list(h.pop("net_arch")), **parse_policy_kwargs(h.pop("policy_kwargs", None) or {})}
+    if isinstance(policy_kwargs.get("activation_fn"), str):
+        policy_kwargs["activation_fn"] = getattr(torch.nn, policy_kwargs["activation_fn"])
+    for key in ("learning_rate", "clip_range"):
+        if key in h:
+            h[key] = parse_schedule(h[key], f"hyperparams.{config['algo']}.{key}")
     common = {"policy": "MlpPolicy", "env": env, "seed": int(config["seed"]), "device": config["device"],
               "policy_kwargs": policy_kwargs, "verbose": 0}
     algo = config["algo"]
