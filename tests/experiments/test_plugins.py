@@ -6,16 +6,14 @@ from __future__ import annotations
 
 import csv
 import json
-import re
 from pathlib import Path
 
 import pytest
+from readme_blocks import block
 from train_fixtures import tiny_dataset
 
 from seal.adversaries.base import available_generators, generator_class
 from seal.cli import main
-
-README = Path(__file__).resolve().parents[2] / "README.md"
 
 PACKAGE = '''
 import os
@@ -31,20 +29,6 @@ class HardBrake(AdversaryGenerator):
             f.write(scenario.scenario_id + "\\n")
         return Generation(behavior=ReplayBehavior())
 '''
-
-
-def readme_section() -> str:
-    text = README.read_text()
-    start = text.index("## Use your own policy / generator")
-    return text[start:text.index("\n## ", start + 1)]
-
-
-def readme_block(first_line: str) -> str:
-    """The fenced code block of the README section whose first line is ``first_line``."""
-    for block in re.findall(r"```\w*\n(.*?)```", readme_section(), flags=re.S):
-        if block.startswith(first_line):
-            return str(block)
-    raise AssertionError(f"no README block starting with {first_line!r}")
 
 
 def install_package(site: Path) -> None:
@@ -82,7 +66,7 @@ def test_readme_plugin_generator_evaluates_and_trains(tmp_path: Path, monkeypatc
     monkeypatch.chdir(tmp_path)
     monkeypatch.delenv("SEAL_PLUGINS", raising=False)
     data = tiny_dataset(tmp_path)
-    (tmp_path / "my_brake.py").write_text(readme_block("# my_brake.py"))
+    (tmp_path / "my_brake.py").write_text(block("Use your own policy / generator", "# my_brake.py"))
     code = main(["eval", "generators", str(data), "--plugin", "my_brake.py", "--generators", "replay,brake",
                  "--ego", "heuristic", "--out", "gen-brake", "--no-progress"])
     assert code == 0, capsys.readouterr().err
