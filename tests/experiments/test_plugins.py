@@ -41,14 +41,15 @@ def install_package(site: Path) -> None:
     (info / "entry_points.txt").write_text("[seal.generators]\nhardbrake = seal_test_plugin:HardBrake\n")
 
 
-def train_yaml(tmp_path: Path, data: Path) -> Path:
+def train_yaml(tmp_path: Path, data: Path, eval_every: int = 0) -> Path:
     path = tmp_path / "train.yaml"
     path.write_text(f"""
 train:
   dataset: {data}
   total_timesteps: 240
   n_envs: 1
-  eval_every: 0
+  eval_every: {eval_every}
+  eval_episodes: 5
   checkpoint_every: 0
   curriculum: {{slope: 100.0, cap: 1.0}}
   hyperparams: {{td3: {{learning_starts: 40, batch_size: 16, net_arch: [16, 16], buffer_size: 400}}}}
@@ -76,12 +77,16 @@ def test_readme_plugin_generator_evaluates_and_trains(tmp_path: Path, monkeypatc
     # the brake generator changed the adversary's accelerations (replay's distance to the log is ~0)
     assert float(rows["brake"]["acc_wd"]) > 1.0 > 0.01 > float(rows["replay"]["acc_wd"])
 
-    code = main(["train", "--config", str(train_yaml(tmp_path, data)), "--plugin", "my_brake.py",
+    code = main(["train", "--config", str(train_yaml(tmp_path, data, eval_every=240)), "--plugin", "my_brake.py",
                  "--pipeline", "brake", "--out", "runs/brake-s0", "--no-progress", "--json"])
-    assert code == 0, capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert "eval_episodes is 5 but the 'eval' split" in err and "has 2 scenarios" in err  # said, not silent
     run = tmp_path / "runs" / "brake-s0"
     done = json.loads((run / "done.json").read_text())
     assert done["steps"] == 240 and done["session_totals"]["perturbed"] > 0
+    with open(run / "eval" / "evaluations.csv") as f:
+        assert [int(r["episodes"]) for r in csv.DictReader(f)] == [2]
     progress = _csv(run / "progress.csv")
     assert any(r.get("curriculum/p") for r in progress)  # a perturbing pipeline logs p
     totals = done["session_totals"]

@@ -118,3 +118,14 @@ def test_render_any_ego_and_generator(store: tuple[Path, Path, Path], tmp_path: 
     assert main(["render", "--dataset", str(mixed), "--scenario", "nosuch", "--ego", "heuristic",
                  "--out", str(out)]) == 2
     assert "nosuch" in capsys.readouterr().err
+
+
+def test_runs_without_a_pipeline_are_not_seeds_of_one() -> None:
+    from seal.experiments.report.compare import ego_table
+    from seal.experiments.report.grouping import separate
+
+    rows = [{"run": f"/models/{name}", "pipeline": "unknown", "dataset": "/d", "setting": "normal",
+             "scenario_id": f"s{i}", "success": i % 2, "crash": 0, "out_of_road": 1 - i % 2}
+            for name in ("a", "b") for i in range(3)]
+    table = ego_table(separate(rows))
+    assert {(r["pipeline"], r["seeds"]) for r in table} == {("unknown:a", 1), ("unknown:b", 1)}
