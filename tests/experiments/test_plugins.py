@@ -21,6 +21,11 @@ from seal.adversaries.base import AdversaryGenerator, Generation
 from seal.envs.behaviors import ReplayBehavior
 
 
+def make_policy():
+    """An ego policy from the package: full brake."""
+    return lambda obs: [0.0, -1.0]
+
+
 class HardBrake(AdversaryGenerator):
     """Replays the logged adversary and notes each call in $SEAL_TEST_PLUGIN_LOG."""
 
@@ -38,7 +43,8 @@ def install_package(site: Path) -> None:
     info = site / "seal_test_plugin-0.1.dist-info"
     info.mkdir()
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: seal-test-plugin\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text("[seal.generators]\nhardbrake = seal_test_plugin:HardBrake\n")
+    (info / "entry_points.txt").write_text("[seal.generators]\nhardbrake = seal_test_plugin:HardBrake\n\n"
+                                           "[seal.egos]\nbrake-ego = seal_test_plugin:make_policy\n")
 
 
 def train_yaml(tmp_path: Path, data: Path, eval_every: int = 0) -> Path:
@@ -116,6 +122,16 @@ def test_installed_entry_point_generator(tmp_path: Path, monkeypatch: pytest.Mon
     assert log.is_file() and log.read_text().split()  # the training workers called it
     recorded = (tmp_path / "run" / "config.yaml").read_text()
     assert "name: hardbrake" in recorded
+    # the package's ego evaluates by name, and plays as the policy it returns (never moving: timeouts)
+    store = tmp_path / "r.sqlite"
+    code = main(["eval", "runs", "--ego", "brake-ego", "--dataset", str(data), "--settings", "normal,hardbrake",
+                 "--store", str(store), "--no-replay-ego", "--workers", "1", "--k", "1", "--no-progress"])
+    assert code == 0, capsys.readouterr().err
+    from seal.experiments.evaluation.results_store import ResultsStore
+
+    with ResultsStore(store) as s:
+        rows = s.episodes(run="brake-ego")
+    assert {(r["setting"], r["outcome"]) for r in rows} == {("normal", "timeout"), ("hardbrake", "timeout")}
     # an unknown pipeline is refused with the names it could be
     code = main(["train", "--config", str(config), "--pipeline", "nosuch", "--out", str(tmp_path / "x")])
     assert code == 2 and "nosuch" in capsys.readouterr().err

@@ -129,3 +129,19 @@ def test_runs_without_a_pipeline_are_not_seeds_of_one() -> None:
             for name in ("a", "b") for i in range(3)]
     table = ego_table(separate(rows))
     assert {(r["pipeline"], r["seeds"]) for r in table} == {("unknown:a", 1), ("unknown:b", 1)}
+
+
+def test_eval_curves_from_the_runs_periodic_evaluations(tmp_path: Path) -> None:
+    from seal.experiments.report.eval_curves import plot_eval_curves, read_eval_curves
+
+    run = tmp_path / "cat-s0"
+    (run / "eval").mkdir(parents=True)
+    (run / "eval" / "evaluations.csv").write_text(
+        "step,episodes,success_rate,crash_rate,out_of_road_rate,route_completion\n1000,20,0.1,0.5,0.4,0.3\n"
+        "2000,20,0.4,0.3,0.3,0.6\n")
+    runs = [{"run": str(run), "pipeline": "cat", "path": str(run)}, {"run": "replay", "pipeline": "replay"}]
+    ((_, cols),) = read_eval_curves(runs)
+    np.testing.assert_allclose(cols["success_rate"], [0.1, 0.4])
+    path = plot_eval_curves(runs, tmp_path / "eval_curves.png")
+    assert path is not None and path.stat().st_size > 0
+    assert plot_eval_curves(runs[1:], tmp_path / "none.png") is None
