@@ -217,7 +217,9 @@ def _model_file(path: Path, algo: str | None) -> EgoSpec:
         return _run_folder(model.parent, algo)
     cfg = dict(found[1]) if found is not None else {}
     if found is not None and cfg.get("pipeline"):
-        pipeline = f"{cfg['pipeline']}@{model.parent.name}"  # a checkpoint: not a seed of the final models
+        # a checkpoint (or a run's best model): not a seed of the final models
+        at = model.stem if model.parent == found[0].parent else model.parent.name
+        pipeline = f"{cfg['pipeline']}@{at}"
     else:
         pipeline = f"{model.parent.name}/{model.stem}"
     algo = (algo or resolve_algo(model)).lower()

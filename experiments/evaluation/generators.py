@@ -170,15 +170,16 @@ def _csv(rows: Sequence[dict[str, Any]]) -> bytes:
     return buf.getvalue().encode()
 
 
-def _jsonable(value: Any) -> Any:
+def jsonable(value: Any) -> Any:
+    """Plain JSON / YAML data: numpy scalars as Python numbers, non-finite floats as None, tuples as lists."""
     if isinstance(value, float) and not math.isfinite(value):
         return None
     if isinstance(value, np.generic):
-        return _jsonable(value.item())
+        return jsonable(value.item())
     if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
+        return {k: jsonable(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
+        return [jsonable(v) for v in value]
     return value
 
 
@@ -191,14 +192,14 @@ def run_eval_generators(
     shared = {key: config.get(key) for key in SHARED_OPTIONS}
     generators = {name: build_generator(name, kw, shared) for name, kw in config["generators"].items()}
     resolved = {**config, "dataset": str(dataset), "scenarios": len(scenarios)}
-    atomic_write_bytes(out / "config.yaml", yaml.safe_dump(_jsonable(resolved), sort_keys=True).encode())
+    atomic_write_bytes(out / "config.yaml", yaml.safe_dump(jsonable(resolved), sort_keys=True).encode())
     rows, records = evaluate_generators(
         scenarios, generators, config["ego"], k=int(config["k"]), seed=int(config["seed"]),
         env_config=config["env"], progress=progress, algo=config.get("algo"),
     )
     table = markdown_table(rows)
     atomic_write_bytes(out / "generators.csv", _csv(rows))
-    atomic_write_json(out / "generators.json", _jsonable({"config": resolved, "rows": rows}))
+    atomic_write_json(out / "generators.json", jsonable({"config": resolved, "rows": rows}))
     atomic_write_bytes(out / "episodes.csv", _csv([r.row() for r in records]))
     header = (
         f"# Generator evaluation\n\nDataset `{dataset}`, split `{config['split']}`, {len(scenarios)} scenarios, "

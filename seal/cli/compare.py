@@ -35,9 +35,11 @@ def cmd_compare(args: argparse.Namespace) -> int:
     if args.json:
         import json
 
+        from seal.experiments.evaluation.generators import jsonable
+
         keys = ("table_6_1", "table_6_2", "outcomes", "by_layout", "by_source", "failures", "figures", "videos",
                 "failure_videos", "episodes")
-        print(json.dumps({k: result[k] for k in keys}, default=str))
+        print(json.dumps(jsonable({k: result[k] for k in keys}), default=str))
         return 0
     print(ego_markdown(result["table_6_1"]))
     if result["table_6_2"]:

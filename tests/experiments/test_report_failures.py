@@ -52,7 +52,8 @@ def store(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Path]:
     return path, mixed, other
 
 
-def test_two_datasets_are_kept_apart_with_counts(store: tuple[Path, Path, Path], tmp_path: Path) -> None:
+def test_two_datasets_are_kept_apart_with_counts(store: tuple[Path, Path, Path], tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
     path, mixed, other = store
     result = write_report(path, tmp_path / "rep", plots=False, progress=False)
     cells = {(r["pipeline"], r["setting"]): r["scenarios"] for r in result["table_6_1"] if r["metric"] == "success"}
@@ -60,6 +61,11 @@ def test_two_datasets_are_kept_apart_with_counts(store: tuple[Path, Path, Path],
     assert cells[("heuristic", "normal@mixed")] == 4 and ("heuristic", "normal@other") not in cells
     md = (tmp_path / "rep" / "report.md").read_text()
     assert "normal@mixed" in md and "normal@other" in md and "(4) |" in md
+    assert main(["compare", "--store", str(path), "--out", str(tmp_path / "rep3"), "--no-plots", "--json",
+                 "--dataset", "mixed", "--no-progress"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert {r["setting"] for r in printed["outcomes"]} == {"normal", "rule"}  # one dataset: plain names
+    assert printed["failures"] and all(f["dataset"] == str(mixed) for f in printed["failures"])
     only = write_report(path, tmp_path / "rep2", plots=False, progress=False, datasets=["other"])
     assert {(r["pipeline"], r["setting"]) for r in only["outcomes"]} == {
         ("brake", "normal"), ("floor-it", "normal"), ("floor-it", "rule")}
