@@ -47,13 +47,13 @@ def install_package(site: Path) -> None:
                                            "[seal.egos]\nbrake-ego = seal_test_plugin:make_policy\n")
 
 
-def train_yaml(tmp_path: Path, data: Path, eval_every: int = 0) -> Path:
+def train_yaml(tmp_path: Path, data: Path, eval_every: int = 0, n_envs: int = 1) -> Path:
     path = tmp_path / "train.yaml"
     path.write_text(f"""
 train:
   dataset: {data}
   total_timesteps: 240
-  n_envs: 1
+  n_envs: {n_envs}
   eval_every: {eval_every}
   eval_episodes: 5
   checkpoint_every: 0
@@ -68,10 +68,21 @@ def _csv(path: Path) -> list[dict[str, str]]:
     return list(csv.DictReader(path.open()))
 
 
+@pytest.fixture(autouse=True)
+def isolated_registry(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Generators registered by a test's plugins, the plugins loaded and SEAL_PLUGINS are undone after it, so no
+    other test sees a 'brake' generator."""
+    from seal.adversaries import base
+    from seal.core import plugins
+
+    monkeypatch.setattr(base, "_REGISTRY", dict(base._REGISTRY))
+    monkeypatch.setattr(plugins, "_LOADED", dict(plugins._LOADED))
+    monkeypatch.setenv(plugins.PLUGIN_ENV, "")
+
+
 def test_readme_plugin_generator_evaluates_and_trains(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.chdir(tmp_path)
-    monkeypatch.delenv("SEAL_PLUGINS", raising=False)
     data = tiny_dataset(tmp_path)
     (tmp_path / "my_brake.py").write_text(block("Use your own policy / generator", "# my_brake.py"))
     code = main(["eval", "generators", str(data), "--plugin", "my_brake.py", "--generators", "replay,brake",
@@ -83,8 +94,10 @@ def test_readme_plugin_generator_evaluates_and_trains(tmp_path: Path, monkeypatc
     # the brake generator changed the adversary's accelerations (replay's distance to the log is ~0)
     assert float(rows["brake"]["acc_wd"]) > 1.0 > 0.01 > float(rows["replay"]["acc_wd"])
 
-    code = main(["train", "--config", str(train_yaml(tmp_path, data, eval_every=240)), "--plugin", "my_brake.py",
-                 "--pipeline", "brake", "--out", "runs/brake-s0", "--no-progress", "--json"])
+    # two env worker processes: the plugin reaches them through SEAL_PLUGINS
+    config = train_yaml(tmp_path, data, eval_every=240, n_envs=2)
+    code = main(["train", "--config", str(config), "--plugin", "my_brake.py", "--pipeline", "brake", "--out",
+                 "runs/brake-s0", "--no-progress", "--json"])
     err = capsys.readouterr().err
     assert code == 0, err
     assert "eval_episodes is 5 but the 'eval' split" in err and "has 2 scenarios" in err  # said, not silent
@@ -93,6 +106,15 @@ def test_readme_plugin_generator_evaluates_and_trains(tmp_path: Path, monkeypatc
     assert done["steps"] == 240 and done["session_totals"]["perturbed"] > 0
     with open(run / "eval" / "evaluations.csv") as f:
         assert [int(r["episodes"]) for r in csv.DictReader(f)] == [2]
+    # the README's third line: the run evaluates against its own generator (its config records the pipeline)
+    code = main(["eval", "runs", "runs/brake-s0", "--plugin", "my_brake.py", "--settings", "normal,brake", "--store",
+                 "results.sqlite", "--workers", "1", "--k", "1", "--no-progress"])
+    assert code == 0, capsys.readouterr().err
+    from seal.experiments.evaluation.results_store import ResultsStore
+
+    with ResultsStore(tmp_path / "results.sqlite") as store:
+        assert {(r["pipeline"], r["setting"]) for r in store.episodes()} >= {("brake", "brake"), ("brake", "normal")}
+        assert {s["setting"]: s["kwargs"] for s in store.settings()}["brake"] == {"decel_mps2": 8.0}
     progress = _csv(run / "progress.csv")
     assert any(r.get("curriculum/p") for r in progress)  # a perturbing pipeline logs p
     totals = done["session_totals"]
