@@ -182,7 +182,8 @@ def train_run(config: dict[str, Any], out: Path, resume: bool = False, progress:
     finished run (``done.json``) is never overwritten: `seal.experiments.training.state.RunFolderError` on misuse.
     ``done.json``: ``steps``, ``wall_s`` (seconds of training behind the final model: each session's time up to
     the checkpoint the next one resumed from, plus the last session), ``resumed_from`` (the step the last session
-    started at), ``episodes`` and ``session_totals`` (the last session's episode outcomes and generation time).
+    started at), ``episodes``, ``session_totals`` (the last session's episode outcomes, ``crashed`` episodes with
+    any contact, and generation time) and ``final_rates`` (the ``episode/*`` rates progress.csv logged last).
     Torch's thread count is the caller's (entry points set ``config["torch_threads"]``, `run_torch_threads`).
     """
     out = Path(out)
@@ -317,7 +318,8 @@ def _learn(config: Mapping[str, Any], out: Path, venv: Any, checkpoint: Path | N
         reskill.save_final(out)
     wall = wall_before + time.perf_counter() - session_start
     done = {"steps": int(model.num_timesteps), "wall_s": round(wall, 1), "resumed_from": start_step,
-            "episodes": int(model._episode_num), "session_totals": stats.totals}
+            "episodes": int(model._episode_num), "session_totals": stats.totals,
+            "final_rates": stats.rates()}  # the last logged episode/* values (window of the last episodes)
     atomic_write_json(out / ts.DONE, done)
     logger.info(f"finished {out}: {done['steps']} steps in {done['wall_s']} s")
 

@@ -117,6 +117,8 @@ def test_readme_plugin_generator_evaluates_and_trains(tmp_path: Path, monkeypatc
         assert {s["setting"]: s["kwargs"] for s in store.settings()}["brake"] == {"decel_mps2": 8.0}
     progress = _csv(run / "progress.csv")
     assert any(r.get("curriculum/p") for r in progress)  # a perturbing pipeline logs p
+    last = [r["episode/crash_rate"] for r in progress if r.get("episode/crash_rate")][-1]
+    assert done["final_rates"]["crash_rate"] == pytest.approx(float(last))  # done.json agrees with the log
     totals = done["session_totals"]
     assert totals["crashed"] >= totals["crash"] and totals["episodes"] == sum(
         totals[o] for o in ("success", "crash", "out_of_road", "timeout"))
