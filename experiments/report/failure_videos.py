@@ -50,16 +50,18 @@ def render_failure_videos(
     chosen = pick_failures(failures, per_kind)
     for f in tqdm(chosen, desc="failure videos", unit="video", disable=not progress or not chosen):
         setting = setting_of.get((f["dataset"], f["setting_name"]))
-        ego, algo = ego_of.get(str(f["run"]), (f["run"], None))
+        spec_ego, algo = ego_of.get(str(f["run"]), (f["run"], None))
         if setting is None:
             logger.info(f"no video of {f['scenario_id']} ({f['setting']}): the store has no record of the setting")
             continue
         spec = EpisodeSpec(
-            dataset=f["dataset"], scenario_id=f["scenario_id"], ego=ego, generator=setting.get("generator"),
+            dataset=f["dataset"], scenario_id=f["scenario_id"], ego=spec_ego, generator=setting.get("generator"),
             kwargs=setting.get("kwargs") or {}, k=int(setting.get("k") or 1), seed=int(setting.get("seed") or 0),
             split=setting.get("split"), algo=algo if algo and algo != "reskill" else None,
         )
-        name = f"{f['outcome']}_{_slug(f['setting'])}_{_slug(Path(str(f['run'])).name)}_{f['scenario_id']}.{fmt}"
+        # pipeline labels tell egos apart (cat@step_2000, dir/model); the run's name tells seeds apart
+        ego = f"{_slug(str(f['pipeline']))}_{_slug(Path(str(f['run'])).name)}"
+        name = f"{f['outcome']}_{_slug(f['setting'])}_{ego}_{f['scenario_id']}.{fmt}"
         try:
             render(spec, out / name)
         except (SealError, ValueError, OSError) as exc:
