@@ -24,7 +24,7 @@ import contextlib
 import logging
 import os
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -77,11 +77,18 @@ def _generator_kwargs(config: Mapping[str, Any]) -> dict[str, Any]:
     return kwargs
 
 
-def _worker(fn: Callable[[], Any], threads: int) -> Callable[[], Any]:
+def _worker(fn: Callable[[], Any], threads: int, plugins: Sequence[str] = ()) -> Callable[[], Any]:
+    """``fn`` in an env worker: torch threads set and this process's ``--plugin`` modules imported first (SB3's
+    forkserver workers do not see environment variables set after the server started)."""
+    plugins = list(plugins)
+
     def build() -> Any:
         import torch
 
+        from seal.core.plugins import load_plugins
+
         torch.set_num_threads(threads)
+        load_plugins(plugins)
         return fn()
 
     return build
@@ -104,7 +111,9 @@ def build_vec_env(config: Mapping[str, Any], scenarios: list[Any], n_envs: int) 
         from seal.experiments.training.reskill import wrap_env_fns
 
         fns = wrap_env_fns(fns, config["hyperparams"], int(config["seed"]))
-    workers: list[Callable[[], Any]] = [_worker(fn, 1) for fn in fns]
+    from seal.core.plugins import plugin_specs
+
+    workers: list[Callable[[], Any]] = [_worker(fn, 1, plugin_specs()) for fn in fns]
     venv = VecMonitor(SubprocVecEnv(workers) if n_envs > 1 else DummyVecEnv(workers))
     return OverlapVecEnv(venv) if config.get("overlap_updates") and config["algo"] != "ppo" else venv
 

@@ -9,7 +9,8 @@
   ``@register("name")`` decorators run on import. The plugins are also put into the environment variable
   `PLUGIN_ENV` (``SEAL_PLUGINS``, ``os.pathsep``-separated), which worker processes (env workers of ``seal
   train``, evaluation workers) inherit and load on their first registry lookup (`load_env_plugins`), so a plugin
-  given to the parent is known in every process.
+  given to the parent is known in every process; where a worker may not inherit the environment as it is now
+  (a forkserver started earlier), the parent passes `plugin_specs` along with the job.
 """
 
 from __future__ import annotations
@@ -107,8 +108,13 @@ def load_plugins(specs: Sequence[str]) -> None:
         os.environ[PLUGIN_ENV] = os.pathsep.join(recorded)
 
 
+def plugin_specs() -> list[str]:
+    """The ``--plugin`` modules / files of this process (`PLUGIN_ENV`), to hand to workers that do not inherit
+    the environment as it is now (SB3's forkserver env workers fork from a server started earlier)."""
+    return [spec for spec in os.environ.get(PLUGIN_ENV, "").split(os.pathsep) if spec]
+
+
 def load_env_plugins() -> None:
     """Import the plugins `PLUGIN_ENV` lists (a worker process inheriting its parent's ``--plugin``)."""
-    for spec in os.environ.get(PLUGIN_ENV, "").split(os.pathsep):
-        if spec:
-            load_plugin(spec)
+    for spec in plugin_specs():
+        load_plugin(spec)

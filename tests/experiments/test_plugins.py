@@ -82,6 +82,11 @@ def isolated_registry(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def test_readme_plugin_generator_evaluates_and_trains(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    from multiprocessing import forkserver
+
+    # SB3 env workers fork from a forkserver; one started before --plugin (as in any long-lived process) never
+    # sees SEAL_PLUGINS: the plugin must reach the workers with their env functions
+    forkserver.ensure_running()
     monkeypatch.chdir(tmp_path)
     data = tiny_dataset(tmp_path)
     (tmp_path / "my_brake.py").write_text(block("Use your own policy / generator", "# my_brake.py"))
