@@ -19,6 +19,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from seal.core.plugins import load_plugins, plugin_specs
 from seal.experiments.backends import Backend, InlineBackend, LocalBackend
 from seal.experiments.evaluation.evaluate import (
     EgoSpec,
@@ -37,11 +38,13 @@ from seal.experiments.evaluation.worker_cache import use_session
 
 
 def evaluate_chunk(job: Mapping[str, Any]) -> dict[str, Any]:
-    """One chunk job (keys: ``store``, ``run``, ``settings`` (`Setting` fields), ``config``, ``items`` (`WorkItem`
-    lists), ``session``): plays the items and writes their rows; returns ``{"run", "written", "rows"}``."""
+    """One chunk job (keys: ``store``, ``run``, ``algo``, ``settings`` (`Setting` fields), ``config``, ``items``
+    (`WorkItem` lists), ``session``, ``plugins`` (the parent's ``--plugin`` modules)): plays the items and writes
+    their rows; returns ``{"run", "written", "rows"}``."""
     import torch
 
     torch.set_num_threads(1)  # one core per worker: the workers are the parallelism
+    load_plugins(job.get("plugins") or [])  # a Ray worker does not inherit this process's SEAL_PLUGINS
     use_session(str(job["session"]))
     ego = read_run(job["run"], job.get("algo"))
     settings = [Setting(**s) for s in job["settings"]]
@@ -72,7 +75,7 @@ def chunk_jobs(
             jobs.append({
                 "store": store_path, "run": ego.ego if ego.path else ego.run, "algo": ego.algo,
                 "settings": [vars(s) for s in settings], "config": dict(config),
-                "items": [list(it) for it in chunk], "session": session,
+                "items": [list(it) for it in chunk], "session": session, "plugins": plugin_specs(),
             })
     return jobs
 

@@ -120,6 +120,13 @@ def test_readme_plugin_generator_evaluates_and_trains(tmp_path: Path, monkeypatc
     with ResultsStore(tmp_path / "results.sqlite") as store:
         assert {(r["pipeline"], r["setting"]) for r in store.episodes()} >= {("brake", "brake"), ("brake", "normal")}
         assert {s["setting"]: s["kwargs"] for s in store.settings()}["brake"] == {"decel_mps2": 8.0}
+    # evaluation chunk jobs name the plugin, for workers that do not inherit SEAL_PLUGINS (Ray)
+    from seal.experiments.evaluation.evaluate import parse_settings, read_run, resolve_eval_config
+    from seal.experiments.evaluation.parallel import chunk_jobs
+
+    jobs = chunk_jobs(str(tmp_path / "fresh.sqlite"), [read_run(run)], parse_settings("brake", data),
+                      resolve_eval_config(run_configs=[read_run(run).config]))
+    assert jobs and all(job["plugins"] == [str(tmp_path / "my_brake.py")] for job in jobs)
     progress = _csv(run / "progress.csv")
     assert any(r.get("curriculum/p") for r in progress)  # a perturbing pipeline logs p
     last = [r["episode/crash_rate"] for r in progress if r.get("episode/crash_rate")][-1]
