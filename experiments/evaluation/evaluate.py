@@ -203,6 +203,10 @@ def _run_folder(path: Path, algo: str | None) -> EgoSpec:
     if not isinstance(cfg, dict):
         raise ValueError(f"{cfg_path}: expected a mapping")
     pipeline = str(cfg.get("pipeline") or path.name)  # no pipeline: the run is its own group
+    if cfg.get("plugins"):  # trained against a --plugin generator: import it again (seal.core.plugins)
+        from seal.core.plugins import load_plugins
+
+        load_plugins([str(p) for p in cfg["plugins"]])
     return EgoSpec(str(path), pipeline, int(cfg.get("seed") or 0), str(path), cfg, algo)
 
 

@@ -240,14 +240,20 @@ def run_torch_threads(config: Mapping[str, Any], out: Path, resume: bool) -> int
 
 
 def _run_config(config: dict[str, Any], out: Path, resume: bool) -> dict[str, Any]:
-    """The config the run trains with: the recorded one when resuming, else ``config`` with absolute paths and the
-    resolved env-worker count; steps checked against the worker count."""
+    """The config the run trains with: the recorded one when resuming (its ``plugins`` imported), else ``config``
+    with absolute paths, the resolved env-worker count and the ``--plugin`` modules in force (``plugins``); steps
+    checked against the worker count."""
+    from seal.core.plugins import load_plugins, plugin_specs
+
     ts.check_out_folder(out, resume)
     if resume:
         config = check_resolved(yaml.safe_load((out / ts.CONFIG).read_text()), str(out / ts.CONFIG))
+        load_plugins(config.get("plugins") or [])  # the run's generator may come from a --plugin module
     else:
         config = _absolute_paths(dict(config))
         config["n_envs"] = resolve_n_envs(config)
+        if plugin_specs():  # recorded, so --resume and `seal eval runs RUN` find a plugin generator again
+            config["plugins"] = plugin_specs()
     check_steps(config, int(config["n_envs"]))
     return config
 

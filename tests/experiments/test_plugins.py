@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 
 import pytest
+import yaml
 from readme_blocks import block
 from train_fixtures import tiny_dataset
 
@@ -114,6 +115,7 @@ def test_readme_plugin_generator_evaluates_and_trains(tmp_path: Path, monkeypatc
     # the README's third line: the run evaluates against its own generator (its config records the pipeline)
     code = main(["eval", "runs", "runs/brake-s0", "--plugin", "my_brake.py", "--settings", "normal,brake", "--store",
                  "results.sqlite", "--workers", "1", "--k", "1", "--no-progress"])
+    assert yaml.safe_load((run / "config.yaml").read_text())["plugins"] == [str(tmp_path / "my_brake.py")]
     assert code == 0, capsys.readouterr().err
     from seal.experiments.evaluation.results_store import ResultsStore
 
