@@ -172,37 +172,79 @@ def resolve_eval_config(
 # ---------------------------------------------------------------------------------------------------- egos
 @dataclass(frozen=True)
 class EgoSpec:
-    """An ego to evaluate: ``run`` is the results-store key (absolute run folder, or a built-in ego name)."""
+    """An ego to evaluate: ``run`` is the results-store key (absolute run folder or model file, or an ego name);
+    ``pipeline`` groups egos as seeds in the report (an ego without a recorded pipeline gets a label of its own,
+    so unrelated models are never taken for seeds of one); ``algo`` the SB3 algorithm of a model file (None: the
+    file's or its run config's own)."""
 
     run: str
     pipeline: str
     seed: int
     path: str | None
     config: dict[str, Any]
+    algo: str | None = None
 
     @property
     def ego(self) -> str:
         return self.path or self.run
 
 
-def read_run(run: str | Path) -> EgoSpec:
-    """A built-in ego (``replay``, ``heuristic``) or a trained run folder (``config.yaml`` with ``pipeline`` /
-    ``seed`` / ``algo``, and a model; a model ``.zip`` inside a run folder also works)."""
+def read_run(run: str | Path, algo: str | None = None) -> EgoSpec:
+    """A built-in ego (``replay``, ``heuristic``), a Python policy (`seal.experiments.training.egos.
+    register_policy`), an installed ``seal.egos`` entry point, a trained run folder (``config.yaml`` with
+    ``pipeline`` / ``seed`` / ``algo``, and a model), a checkpoint of one (``RUN/checkpoints/step_N/model.zip``:
+    pipeline ``<pipeline>@step_N``) or any SB3 model ``.zip`` (``algo`` if the file does not say)."""
+    from seal.core.plugins import EGO_GROUP, entry_point_names
+    from seal.experiments.training.egos import python_ego_names
+
     text = str(run)
-    if text in BUILTIN_EGOS:
+    if text in BUILTIN_EGOS or text in python_ego_names():
         return EgoSpec(text, text, 0, None, {})
     path = Path(run).expanduser().resolve()
-    if path.is_file() and path.suffix == ".zip":
-        path = path.parent
-    cfg_path = path / "config.yaml"
-    if not cfg_path.is_file():
+    if not path.exists():
+        if text in entry_point_names(EGO_GROUP):
+            return EgoSpec(text, text, 0, None, {})
         raise FileNotFoundError(
-            f"{run}: not 'replay', 'heuristic' or a run folder with config.yaml (train one with `seal train`)"
+            f"{run}: not 'replay', 'heuristic', a registered Python policy, an installed seal.egos entry point, a "
+            "run folder (seal train) or an SB3 model .zip"
         )
+    if path.is_dir() and (path / "config.yaml").is_file():
+        return _run_folder(path, algo)
+    return _model_file(path, algo)
+
+
+def _run_folder(path: Path, algo: str | None) -> EgoSpec:
+    cfg_path = path / "config.yaml"
     cfg = yaml.safe_load(cfg_path.read_text()) or {}
     if not isinstance(cfg, dict):
         raise ValueError(f"{cfg_path}: expected a mapping")
-    return EgoSpec(str(path), str(cfg.get("pipeline") or "unknown"), int(cfg.get("seed") or 0), str(path), cfg)
+    pipeline = str(cfg.get("pipeline") or path.name)  # no pipeline: the run is its own group
+    if cfg.get("plugins"):  # trained against a --plugin generator: import it again (seal.core.plugins)
+        from seal.core.plugins import load_plugins
+
+        load_plugins([str(p) for p in cfg["plugins"]])
+    return EgoSpec(str(path), pipeline, int(cfg.get("seed") or 0), str(path), cfg, algo)
+
+
+def _model_file(path: Path, algo: str | None) -> EgoSpec:
+    """An SB3 model file (or a folder holding one without a run config): the final model of a seal run folder is
+    that run; a checkpoint or any other model is an ego of its own."""
+    from seal.experiments.training.sb3_load import find_model, find_run_config, resolve_algo
+
+    model = find_model(path)
+    found = find_run_config(model)
+    if found is not None and found[0].parent == model.parent and model.name != "best_model.zip":
+        return _run_folder(model.parent, algo)
+    cfg = dict(found[1]) if found is not None else {}
+    if found is not None and cfg.get("pipeline"):
+        # a checkpoint (or a run's best model): not a seed of the final models
+        at = model.stem if model.parent == found[0].parent else model.parent.name
+        pipeline = f"{cfg['pipeline']}@{at}"
+    else:
+        pipeline = f"{model.parent.name}/{model.stem}"
+    algo = (algo or resolve_algo(model)).lower()
+    cfg.update(algo=algo, model=str(model))
+    return EgoSpec(str(model), pipeline, int(cfg.get("seed") or 0), str(model), cfg, algo)
 
 
 def _base_row(ego: EgoSpec, setting: Setting, scenario_id: str, k: int) -> dict[str, Any]:
@@ -266,7 +308,7 @@ def play_items(
     written = {s.name: 0 for s in settings}
     if not items:
         return written
-    policy = cached_ego(ego.ego)
+    policy = cached_ego(ego.ego, ego.algo)
     for dataset, split, i, missing in items:
         scenarios = cached_split(dataset, split, config.get("limit"))
         env, scenario = cached_env(dataset, split, config), scenarios[i]
@@ -341,7 +383,7 @@ def evaluate_job(job: Mapping[str, Any]) -> dict[str, Any]:
     import torch
 
     torch.set_num_threads(1)
-    ego = read_run(job["run"])
+    ego = read_run(job["run"], job.get("algo"))
     settings = [Setting(**s) for s in job["settings"]]
     with ResultsStore(job["store"]) as store:
         written = evaluate_ego(store, ego, settings, job["config"], progress=bool(job.get("progress", False)))

@@ -32,14 +32,14 @@ def use_session(token: str) -> None:
         _SESSION["token"] = token
 
 
-def cached_ego(spec: str) -> Any:
+def cached_ego(spec: str, algo: str | None = None) -> Any:
     """`seal.experiments.training.egos.make_ego` of ``spec`` (egos act deterministically: one serves every chunk)."""
     from seal.experiments.training.egos import make_ego
 
     egos = _CACHE["egos"]
-    if spec not in egos:
-        egos[spec] = make_ego(spec)
-    return egos[spec]
+    if (spec, algo) not in egos:
+        egos[(spec, algo)] = make_ego(spec, algo)
+    return egos[(spec, algo)]
 
 
 def cached_split(dataset: str, split: str | None, limit: int | None) -> list[Scenario]:

@@ -45,11 +45,13 @@ def setting_label(setting: str) -> str:
 
 def ordered_settings(settings: Iterable[str]) -> list[str]:
     """normal, hard, then generator settings (alphabetical), then real-data settings."""
+    from seal.experiments.report.grouping import base_setting
+
     unique = set(settings)
 
     def rank(s: str) -> tuple[int, str]:
-        if s in REPLAY_SETTINGS:
-            return (REPLAY_SETTINGS.index(s), s)
+        if base_setting(s) in REPLAY_SETTINGS:  # normal@pool ranks as normal
+            return (REPLAY_SETTINGS.index(base_setting(s)), s)
         return (3 if s.startswith(REAL_PREFIX) else 2, s)
 
     return sorted(unique, key=rank)
@@ -103,7 +105,7 @@ def ego_table(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
 
 def ego_markdown(table: Sequence[Mapping[str, Any]]) -> str:
     """Table 6.1 as Markdown: a block per metric, pipelines as rows, settings as columns, cells
-    ``median % [q25-q75]``."""
+    ``median % [q25-q75] (n)``, n the scored episodes of the cell (all seeds)."""
     out = []
     settings = list(dict.fromkeys(r["setting"] for r in table))
     settings = [setting_label(s) for s in ordered_settings(settings)] if settings else []
@@ -123,7 +125,7 @@ def ego_markdown(table: Sequence[Mapping[str, Any]]) -> str:
 def _pct_cell(row: Mapping[str, Any] | None) -> str:
     if row is None or not math.isfinite(row["median"]):
         return "-"
-    return f"{100 * row['median']:.1f} [{100 * row['q25']:.1f}-{100 * row['q75']:.1f}]"
+    return f"{100 * row['median']:.1f} [{100 * row['q25']:.1f}-{100 * row['q75']:.1f}] ({row['scenarios']})"
 
 
 def generator_table(rows: Sequence[Mapping[str, Any]], settings_info: Sequence[Mapping[str, Any]] = ()
@@ -131,16 +133,19 @@ def generator_table(rows: Sequence[Mapping[str, Any]], settings_info: Sequence[M
     """Table 6.2: one row per generator setting (and ``normal`` as reference) over all egos in ``rows``
     (histogram columns decoded). ``settings_info`` (the store's settings rows) marks generator settings; without
     it, any setting not normal / hard / real:... counts as a generator."""
+    from seal.experiments.report.grouping import base_setting
+
     generators = {s["setting"] for s in settings_info if s.get("kind") == "generator"}
     by_setting: dict[str, list[Mapping[str, Any]]] = {}
     for r in rows:
         by_setting.setdefault(r["setting"], []).append(r)
     table = []
     for setting in ordered_settings(by_setting):
-        is_generator = setting in generators or (
-            not settings_info and setting not in REPLAY_SETTINGS and not setting.startswith(REAL_PREFIX)
+        base = base_setting(setting)  # the stored name of a setting relabelled `setting@dataset`
+        is_generator = base in generators or (
+            not settings_info and base not in REPLAY_SETTINGS and not setting.startswith(REAL_PREFIX)
         )
-        if not (is_generator or setting in ("normal", "normal-reactive")):
+        if not (is_generator or base in ("normal", "normal-reactive")):
             continue
         eps = by_setting[setting]
         per_run: dict[str, list[Mapping[str, Any]]] = {}

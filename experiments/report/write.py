@@ -21,27 +21,23 @@ from seal.experiments.report.compare import (
     to_csv,
 )
 from seal.experiments.report.compare_plots import plot_setting_bars, plot_training_curves, render_generator_videos
+from seal.experiments.report.failure_section import write_failure_section
+from seal.experiments.report.grouping import filter_datasets, separate
 from seal.experiments.report.stats import ci_markdown, ego_ci_table, improvement_markdown, improvement_table
 
 
 def write_report(
     store_path: str | Path, out: str | Path, pipelines: Sequence[str] | None = None,
     settings: Sequence[str] | None = None, plots: bool = True, videos: int = 0, video_format: str = "mp4",
-    progress: bool = True,
+    progress: bool = True, datasets: Sequence[str] | None = None, failure_videos: int = 0,
 ) -> dict[str, Any]:
-    """Write ``report.md``, ``table_6_1.csv``, ``table_6_2.csv``, ``episodes_per_run.csv`` and (``plots``)
-    the figures, (``videos`` > 0) that many videos per generator, into ``out``; returns the tables."""
+    """Write ``report.md``, ``table_6_1.csv``, ``table_6_2.csv``, ``episodes_per_run.csv``, the outcome /
+    failure tables (`seal.experiments.report.failure_section`) and (``plots``) the figures, (``videos`` > 0) that
+    many videos per generator, (``failure_videos`` > 0) that many videos of each failure kind per ego and setting,
+    into ``out``; returns the tables. ``datasets``: only episodes on these datasets (paths or folder names);
+    datasets and egos without a pipeline are kept apart (`seal.experiments.report.grouping`)."""
     out = Path(out)
-    with ResultsStore(store_path) as store:
-        setting_filter = _expand_settings(settings, store) if settings else None
-        rows = store.episodes(pipeline=pipelines or None, setting=setting_filter, decode_hists=True)
-        runs = store.runs(pipeline=pipelines or None)
-        settings_info = store.settings()
-    if not rows:
-        raise ValueError(
-            f"{store_path}: no evaluation episodes match (pipelines {pipelines or 'all'}, settings "
-            f"{settings or 'all'}); run `seal eval runs ...` first"
-        )
+    rows, runs, settings_info = _read_store(store_path, pipelines, settings, datasets)
     t61, t62 = ego_table(rows), generator_table(rows, settings_info)
     per_run = [
         {"pipeline": p, "setting": setting_label(s), "run": run, **rates}
@@ -64,6 +60,8 @@ def write_report(
         video_files = [str(p.relative_to(out)) for p in render_generator_videos(
             rows, runs, settings_info, out / "videos", per_generator=videos, fmt=video_format, progress=progress
         )]
+    where = write_failure_section(rows, runs, settings_info, out, failure_videos, video_format, plots, progress)
+    figures += where["figures"]
     n_runs = len({r["run"] for r in rows})
     md = [
         "# Evaluation report\n",
@@ -87,17 +85,41 @@ def write_report(
         "replayed background caused are the difference). yaw+acc WD: the mean of the yaw and acceleration "
         "distances alone (thesis Table 7.6 leaves the out-of-road term out).\n",
         generator_markdown(t62) if t62 else "(no generator settings evaluated)\n",
+        where["markdown"],
     ]
     if figures:
         md.append("## Figures\n")
-        md += [f"![{f}]({f})\n" for f in figures]
+        md += [f"![{f}]({f})\n" for f in figures if f not in where["figures"]]
     if video_files:
         md.append("## Videos\n")
         md += [f"- [{v}]({v})" for v in video_files]
         md.append("")
     atomic_write_bytes(out / "report.md", "\n".join(md).encode())
     return {"table_6_1": t61, "table_6_2": t62, "ego_ci": cis, "improvement": poi, "figures": figures,
-            "videos": video_files, "episodes": len(rows)}
+            "videos": video_files, "episodes": len(rows), "outcomes": where["outcomes"],
+            "by_layout": where["by_layout"], "by_source": where["by_source"], "failures": where["failures"],
+            "failure_videos": where["videos"]}
+
+
+Rows = list[dict[str, Any]]
+
+
+def _read_store(store_path: str | Path, pipelines: Sequence[str] | None, settings: Sequence[str] | None,
+                datasets: Sequence[str] | None) -> tuple[Rows, Rows, Rows]:
+    """The filtered episode rows (relabelled by `seal.experiments.report.grouping.separate`), runs and settings."""
+    with ResultsStore(store_path) as store:
+        setting_filter = _expand_settings(settings, store) if settings else None
+        rows = store.episodes(pipeline=pipelines or None, setting=setting_filter, decode_hists=True)
+        runs = store.runs(pipeline=pipelines or None)
+        settings_info = store.settings()
+    if datasets:
+        rows = filter_datasets(rows, datasets)
+    if not rows:
+        raise ValueError(
+            f"{store_path}: no evaluation episodes match (pipelines {pipelines or 'all'}, settings "
+            f"{settings or 'all'}, datasets {datasets or 'all'}); run `seal eval runs ...` first"
+        )
+    return separate(rows), runs, settings_info
 
 
 def _expand_settings(settings: Sequence[str], store: Any) -> list[str]:

@@ -70,6 +70,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     from seal.core.scenario import ScenarioError
 
     try:
+        if getattr(args, "plugin", None):
+            from seal.core.plugins import load_plugins
+
+            load_plugins(args.plugin)
         return int(args.func(args) or 0)
     except BrokenPipeError:
         # The reader of stdout went away (`seal data info | head`): stop quietly, as other command-line tools do.

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from seal.cli.args import CliError, add_set_option, positive_int
+from seal.cli.args import CliError, add_plugin_option, add_set_option, positive_int
 from seal.cli.tree import CommandTree
 
 
@@ -56,5 +56,6 @@ def register(tree: CommandTree) -> None:
                    help="local worker processes (default: the preset's backend.workers, else the CPU count)")
     p.add_argument("--address", default=None, help="Ray cluster address (default RAY_ADDRESS, else auto)")
     add_set_option(p, "eval.limit=5 or seeds=[0]")
+    add_plugin_option(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_run)
