@@ -169,16 +169,46 @@ def register(name: str) -> Callable[[type[AdversaryGenerator]], type[AdversaryGe
 
 
 def available_generators() -> list[str]:
-    return sorted(set(_REGISTRY) | set(GENERATOR_MODULES))
+    """Every generator name: built-ins, ones registered by imported modules and ``--plugin`` files, and the
+    installed packages' ``seal.generators`` entry points (`seal.core.plugins`; not imported by this call)."""
+    from seal.core.plugins import GENERATOR_GROUP, entry_point_names, load_env_plugins
+
+    load_env_plugins()
+    return sorted(set(_REGISTRY) | set(GENERATOR_MODULES) | set(entry_point_names(GENERATOR_GROUP)))
 
 
 def generator_class(name: str) -> Callable[..., AdversaryGenerator]:
-    """The class (factory) registered as ``name``; unknown names get an error listing the known ones."""
+    """The class (factory) registered as ``name``: a built-in (its module imported on first lookup), one registered
+    by a ``--plugin`` module, or an installed ``seal.generators`` entry point; unknown names get an error listing
+    the known ones."""
     if name not in _REGISTRY and name in GENERATOR_MODULES:
         importlib.import_module(GENERATOR_MODULES[name])
     if name not in _REGISTRY:
+        _load_plugin_generator(name)
+    if name not in _REGISTRY:
         raise ValueError(f"unknown generator {name!r}; available: {', '.join(available_generators())}")
     return _REGISTRY[name]
+
+
+def _load_plugin_generator(name: str) -> None:
+    """Look ``name`` up in the inherited ``--plugin`` modules, then in the ``seal.generators`` entry points: an
+    entry point naming a module registers on import; one naming an `AdversaryGenerator` subclass is registered
+    here under the entry point's name."""
+    from seal.core.plugins import GENERATOR_GROUP, PluginError, load_entry_point, load_env_plugins
+
+    load_env_plugins()
+    if name in _REGISTRY:
+        return
+    target = load_entry_point(GENERATOR_GROUP, name)
+    if name in _REGISTRY or target is None:
+        return
+    if isinstance(target, type) and issubclass(target, AdversaryGenerator):
+        register(name)(target)
+        return
+    raise PluginError(
+        f"entry point {GENERATOR_GROUP}:{name} gave {target!r}: it must name a module that registers {name!r} "
+        "with @seal.adversaries.base.register, or an AdversaryGenerator subclass"
+    )
 
 
 def make_generator(name: str, **kwargs: Any) -> AdversaryGenerator:

@@ -217,8 +217,11 @@ def rollout_bounds(rollout: Rollout, route: np.ndarray | None = None, margin_m: 
 
 
 def render_rollout(rollout: Rollout, road: RoadDescription, scenario: Scenario | None = None,
-                   trail_steps: int = 30) -> list[np.ndarray]:
-    """Frames (one per executed step, from ``CURRENT_STEP``) of a roll-out on a fixed view."""
+                   trail_steps: int = 30, adversary_label: str | None = None, ego_label: str | None = None
+                   ) -> list[np.ndarray]:
+    """Frames (one per executed step, from ``CURRENT_STEP``) of a roll-out on a fixed view. The caption names the
+    adversary (``adversary_label``, e.g. the generator; default: its behaviour class) and the ego
+    (``ego_label``, when given)."""
     route = None
     if scenario is not None:
         tr = scenario.track(scenario.ego_id)
@@ -242,7 +245,8 @@ def render_rollout(rollout: Rollout, road: RoadDescription, scenario: Scenario |
             trails[i] = seg[seg[:, VALID] > 0.5][:, [X, Y]]
         speed = float(np.hypot(*agents[ego, 3:5]))
         text = (f"{rollout.scenario_id}  t={(t - CURRENT_STEP) / 10:4.1f}s  step {t}  ego {speed:4.1f} m/s"
-                f"\nadversary: {rollout.adversary}" + (f"\n{', '.join(events)}" if events else ""))
+                f"\nadversary: {adversary_label or rollout.adversary}" + (f"  ego: {ego_label}" if ego_label else "")
+                + (f"\n{', '.join(events)}" if events else ""))
         frames.append(renderer.draw_state(agents, ego, adv, text=text, trails=trails, route=route))
     return frames
 

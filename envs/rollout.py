@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from seal.core.outcome import Outcome
-from seal.core.scenario import CURRENT_STEP, VALID
+from seal.core.scenario import CURRENT_STEP, HEADING, VALID, X, Y
 
 
 @dataclass
@@ -78,3 +78,23 @@ class Rollout:
     def valid(self) -> np.ndarray:
         """``[A, T]`` bool validity."""
         return self.tracks[:, :, VALID] > 0.5
+
+    def rear_end_by_background(self, max_heading_deg: float = 45.0) -> bool:
+        """Whether the ego's first crash is a hit from behind by background traffic: the agent it touches first
+        (not the adversary) has its centre behind the ego's (in the ego's frame) and drives within
+        ``max_heading_deg`` of the ego's heading (issue 22: the crashes a replayed background causes)."""
+        if not self.ego_crashes:
+            return False
+        t = self.ego_crashes[0][0]
+        others = [i for s, i in self.ego_crashes if s == t and i != self.adv_id]
+        if not others or t >= self.tracks.shape[1]:
+            return False
+        ego = self.tracks[self.index_of(self.ego_id), t].astype(np.float64)
+        c, s = np.cos(ego[HEADING]), np.sin(ego[HEADING])
+        for agent_id in others:
+            other = self.tracks[self.index_of(agent_id), t].astype(np.float64)
+            behind = c * (other[X] - ego[X]) + s * (other[Y] - ego[Y]) < 0.0
+            dh = abs(float(np.angle(np.exp(1j * (other[HEADING] - ego[HEADING])))))
+            if behind and dh < np.radians(max_heading_deg):
+                return True
+        return False

@@ -7,7 +7,9 @@ scenario time by one 10 Hz step:
    bicycle (`seal.envs.kinematics`: +-pi/3 rad steering, +-6 m/s^2, speed clipped to [0, 40] m/s);
 2. the adversary moves as its `AdversaryBehavior` says (default: `ReplayBehavior` of its log);
 3. every other agent is placed at its logged state of the new step (present while ``valid``; after its log
-   ends - the 91 logged steps - it is gone);
+   ends - the 91 logged steps - it is gone) with ``background: replay`` (the default); with ``idm`` or ``rapid``
+   it is moved by a `seal.envs.background.BackgroundController` from the box table of the step before (so it
+   reacts to the ego and the adversary), with the same lifetime;
 4. collisions (oriented-box overlap), road checks, reward and the ego's observation are computed (with the
    adversary's own, for a behaviour that acts on it next step, in the same pass: `ObservationBuilder.build_many`).
 
@@ -54,6 +56,7 @@ from gymnasium import spaces
 from seal.core.outcome import Outcome
 from seal.core.road_area import OFFROAD_TOLERANCE_M
 from seal.core.scenario import CURRENT_STEP, VALID, Scenario
+from seal.envs.background import BACKGROUND_KINDS, BackgroundController, IDMBackground
 from seal.envs.behaviors import AdversaryBehavior, BehaviorOutput, ReplayBehavior
 from seal.envs.kinematics import AgentState, bicycle_step
 from seal.envs.observation import ObservationBuilder, observation_space
@@ -84,6 +87,7 @@ DEFAULT_CONFIG: dict[str, Any] = {
     "check_continuous_lines": True,
     "offroad_tolerance_m": OFFROAD_TOLERANCE_M,
     "split": None,
+    "background": "replay",
 }
 """Config keys (see the module docstring):
 
@@ -95,6 +99,8 @@ DEFAULT_CONFIG: dict[str, Any] = {
 * ``check_continuous_lines``: crossing a ``continuous`` line is out of road (True).
 * ``offroad_tolerance_m``: how far a box corner may stick out of the drivable area (0.5 m).
 * ``split``: dataset split to load when ``scenarios`` is a dataset path (None = all).
+* ``background``: how the agents other than the ego and the adversary move: ``replay`` (their log, the default),
+  ``idm`` (`seal.envs.background.IDMBackground`) or ``rapid`` (the learned model given as ``background_model``).
 """
 
 AdversarySpec = AdversaryBehavior | Callable[[Scenario, np.random.Generator], AdversaryBehavior] | None
@@ -119,6 +125,19 @@ def _checked_action(action: Any) -> tuple[float, float]:
     return float(steering), float(acceleration)
 
 
+def _background_controller(kind: object, model: BackgroundController | None) -> BackgroundController | None:
+    """The controller of the ``background`` option (None for replay); a clear error for a wrong combination."""
+    if kind not in BACKGROUND_KINDS:
+        raise ValueError(f"ScenarioEnv config background must be one of {list(BACKGROUND_KINDS)}, got {kind!r}")
+    if kind == "rapid":
+        if model is None:
+            raise ValueError("ScenarioEnv background 'rapid' needs background_model (seal.models.rapid.load_rapid)")
+        return model
+    if model is not None:
+        raise ValueError(f"ScenarioEnv background_model is only used with background 'rapid', not {kind!r}")
+    return IDMBackground() if kind == "idm" else None
+
+
 class ScenarioEnv(gym.Env):
     """Gymnasium env over a set of scenarios (see the module docstring).
 
@@ -129,6 +148,8 @@ class ScenarioEnv(gym.Env):
         adversary: see `AdversarySpec`; change it later with `set_adversary`, or for one episode with
             ``reset(options={"adversary": behavior})``.
         render_mode: None or ``"rgb_array"`` (top-down frame following the ego, `seal.envs.render`).
+        background_model: the controller of ``background: rapid`` (`seal.models.rapid.RapidBackground`); with
+            another ``background`` it must be None.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -154,12 +175,14 @@ class ScenarioEnv(gym.Env):
         config: dict[str, Any] | None = None,
         adversary: AdversarySpec = None,
         render_mode: str | None = None,
+        background_model: BackgroundController | None = None,
     ) -> None:
         super().__init__()
         unknown = set(config or {}) - set(DEFAULT_CONFIG)
         if unknown:
             raise ValueError(f"unknown ScenarioEnv config keys {sorted(unknown)}; known: {sorted(DEFAULT_CONFIG)}")
         self.config = {**DEFAULT_CONFIG, **(config or {})}
+        self._background = _background_controller(self.config["background"], background_model)
         if isinstance(scenarios, str | Path):
             from seal.core.dataset import load_scenarios
 
@@ -225,9 +248,10 @@ class ScenarioEnv(gym.Env):
         steering, acceleration = _checked_action(action)
         ego = bicycle_step(self._ego, steering, acceleration)
         adv = self._move_adversary(self._t)
+        background = None if self._background is None else self._background.step(self._t, self._cur)
         self._t = t = self._t + 1
         self._ego, self._adv = ego, adv
-        self._place_agents(t)
+        self._place_agents(t, background)
         crashed, crash_id = self._ego_collisions(t, ego)
         adv_crashed = self._adv_collisions(t, adv)
         progress, out_of_road = self._road_progress(ego)
@@ -288,6 +312,8 @@ class ScenarioEnv(gym.Env):
         self._route = self._ego_route(scenario, ego_track)
         self._exempt = self._exempt_for(scenario, ego_track) if self.config["check_continuous_lines"] else None
 
+        if self._background is not None:
+            self._background.reset(scenario, self.np_random, self._not_ego_adv)
         self._behavior = behavior
         behavior.reset(scenario, self.np_random)
         self._adv_route = behavior.make_route(scenario) if behavior.needs_observation else None
@@ -353,8 +379,12 @@ class ScenarioEnv(gym.Env):
             return None if adv is None else bicycle_step(adv, out.action[0], out.action[1])
         return out.state
 
-    def _place_agents(self, t: int) -> None:
+    def _place_agents(self, t: int, background: np.ndarray | None = None) -> None:
+        """The box table of step ``t``: logged rows, the background controller's ``background`` rows ``[A, 8]``
+        for the agents it drives (None: replay), the ego's and the adversary's states."""
         cur = logged_rows(self._log, t)
+        if background is not None:
+            cur[self._not_ego_adv] = background[self._not_ego_adv]
         cur[self._ego_idx] = state_row(self._ego)
         cur[self._adv_idx] = state_row(self._adv) if self._adv is not None else 0.0
         self._cur = cur

@@ -4,6 +4,9 @@ Each ego (a trained run folder, plus the Replay ego by default) is evaluated on 
 
 * ``normal``: the dataset's ``eval`` split (Normal scenarios), logged (replayed) adversary, one episode.
 * ``hard``: the ``hard`` split, replayed adversary.
+* ``normal-reactive``: ``normal`` with reactive background traffic (config ``background``: ``idm``, or ``rapid``
+  with ``background_model``; `ScenarioEnv`'s ``background`` option): compared with ``normal`` it shows how many of
+  an ego's crashes the replayed (non-reacting) background caused.
 * ``<generator>`` (``cat``, ``goose``, ``seal``, ``rule``, ... any registered generator): "X-Gen", the Normal
   eval scenarios perturbed by that generator. Per scenario one normal episode, then K sequential perturbation
   passes against the same ego, each roll-out appended to the scenario's queue; the last pass is scored
@@ -30,7 +33,9 @@ from seal.adversaries.base import K_ROLLOUTS, available_generators
 from seal.core.config import ConfigError, apply_overrides, build, check_keys, defaults_of, safe_load_file
 from seal.experiments.evaluation.results_store import ResultsStore
 
-REPLAY_SETTINGS = ("normal", "hard")
+REPLAY_SETTINGS = ("normal", "hard", "normal-reactive")
+REACTIVE_SETTING = "normal-reactive"
+REACTIVE_BACKGROUNDS = ("idm", "rapid")
 REAL_PREFIX = "real:"
 BUILTIN_EGOS = ("replay", "heuristic")
 
@@ -52,10 +57,18 @@ class EvalRunsConfig:
     """Episode / generator rng seed, the same for every ego."""
     env: dict[str, Any] = field(default_factory=dict)
     """`ScenarioEnv` config overrides."""
+    background: str = "idm"
+    """Background traffic of the ``normal-reactive`` setting: ``idm`` or ``rapid`` (needs ``background_model``)."""
+    background_model: str | None = None
+    """RAPID model file (`seal fit background`) of ``background: rapid``."""
 
     def __post_init__(self) -> None:
         if self.k < 1:
             raise ConfigError(f"k must be >= 1, got {self.k}")
+        if self.background not in REACTIVE_BACKGROUNDS:
+            raise ConfigError(f"background must be one of {list(REACTIVE_BACKGROUNDS)}, got {self.background!r}")
+        if self.background == "rapid" and not self.background_model:
+            raise ConfigError("background: rapid needs background_model (a seal fit background model file)")
 
 
 DEFAULTS: dict[str, Any] = defaults_of(EvalRunsConfig)
@@ -71,12 +84,14 @@ class Setting:
         dataset: absolute dataset directory its scenarios come from.
         split: dataset split, or None for every scenario.
         generator: generator name for X-Gen settings, None for replayed-adversary settings.
+        reactive: the background traffic reacts (``normal-reactive``) instead of replaying its log.
     """
 
     name: str
     dataset: str
     split: str | None
     generator: str | None = None
+    reactive: bool = False
 
     @property
     def kind(self) -> str:
@@ -106,13 +121,14 @@ def parse_settings(spec: str | Sequence[str], dataset: str | Path | None) -> lis
                 f"--settings {name}: needs a dataset (--dataset DIR, or runs whose config.yaml names one)"
             )
         if name in REPLAY_SETTINGS:
-            settings.append(Setting(name, base, "eval" if name == "normal" else "hard"))
+            split = "hard" if name == "hard" else "eval"
+            settings.append(Setting(name, base, split, reactive=name == REACTIVE_SETTING))
         elif name in available_generators():
             settings.append(Setting(name, base, "eval", generator=name))
         else:
             raise ValueError(
-                f"--settings: unknown setting {name!r}; use normal, hard, real:DIR or a generator name "
-                f"({', '.join(available_generators())})"
+                f"--settings: unknown setting {name!r}; use normal, hard, normal-reactive, real:DIR or a generator "
+                f"name ({', '.join(available_generators())})"
             )
     return settings
 
@@ -156,37 +172,79 @@ def resolve_eval_config(
 # ---------------------------------------------------------------------------------------------------- egos
 @dataclass(frozen=True)
 class EgoSpec:
-    """An ego to evaluate: ``run`` is the results-store key (absolute run folder, or a built-in ego name)."""
+    """An ego to evaluate: ``run`` is the results-store key (absolute run folder or model file, or an ego name);
+    ``pipeline`` groups egos as seeds in the report (an ego without a recorded pipeline gets a label of its own,
+    so unrelated models are never taken for seeds of one); ``algo`` the SB3 algorithm of a model file (None: the
+    file's or its run config's own)."""
 
     run: str
     pipeline: str
     seed: int
     path: str | None
     config: dict[str, Any]
+    algo: str | None = None
 
     @property
     def ego(self) -> str:
         return self.path or self.run
 
 
-def read_run(run: str | Path) -> EgoSpec:
-    """A built-in ego (``replay``, ``heuristic``) or a trained run folder (``config.yaml`` with ``pipeline`` /
-    ``seed`` / ``algo``, and a model; a model ``.zip`` inside a run folder also works)."""
+def read_run(run: str | Path, algo: str | None = None) -> EgoSpec:
+    """A built-in ego (``replay``, ``heuristic``), a Python policy (`seal.experiments.training.egos.
+    register_policy`), an installed ``seal.egos`` entry point, a trained run folder (``config.yaml`` with
+    ``pipeline`` / ``seed`` / ``algo``, and a model), a checkpoint of one (``RUN/checkpoints/step_N/model.zip``:
+    pipeline ``<pipeline>@step_N``) or any SB3 model ``.zip`` (``algo`` if the file does not say)."""
+    from seal.core.plugins import EGO_GROUP, entry_point_names
+    from seal.experiments.training.egos import python_ego_names
+
     text = str(run)
-    if text in BUILTIN_EGOS:
+    if text in BUILTIN_EGOS or text in python_ego_names():
         return EgoSpec(text, text, 0, None, {})
     path = Path(run).expanduser().resolve()
-    if path.is_file() and path.suffix == ".zip":
-        path = path.parent
-    cfg_path = path / "config.yaml"
-    if not cfg_path.is_file():
+    if not path.exists():
+        if text in entry_point_names(EGO_GROUP):
+            return EgoSpec(text, text, 0, None, {})
         raise FileNotFoundError(
-            f"{run}: not 'replay', 'heuristic' or a run folder with config.yaml (train one with `seal train`)"
+            f"{run}: not 'replay', 'heuristic', a registered Python policy, an installed seal.egos entry point, a "
+            "run folder (seal train) or an SB3 model .zip"
         )
+    if path.is_dir() and (path / "config.yaml").is_file():
+        return _run_folder(path, algo)
+    return _model_file(path, algo)
+
+
+def _run_folder(path: Path, algo: str | None) -> EgoSpec:
+    cfg_path = path / "config.yaml"
     cfg = yaml.safe_load(cfg_path.read_text()) or {}
     if not isinstance(cfg, dict):
         raise ValueError(f"{cfg_path}: expected a mapping")
-    return EgoSpec(str(path), str(cfg.get("pipeline") or "unknown"), int(cfg.get("seed") or 0), str(path), cfg)
+    pipeline = str(cfg.get("pipeline") or path.name)  # no pipeline: the run is its own group
+    if cfg.get("plugins"):  # trained against a --plugin generator: import it again (seal.core.plugins)
+        from seal.core.plugins import load_plugins
+
+        load_plugins([str(p) for p in cfg["plugins"]])
+    return EgoSpec(str(path), pipeline, int(cfg.get("seed") or 0), str(path), cfg, algo)
+
+
+def _model_file(path: Path, algo: str | None) -> EgoSpec:
+    """An SB3 model file (or a folder holding one without a run config): the final model of a seal run folder is
+    that run; a checkpoint or any other model is an ego of its own."""
+    from seal.experiments.training.sb3_load import find_model, find_run_config, resolve_algo
+
+    model = find_model(path)
+    found = find_run_config(model)
+    if found is not None and found[0].parent == model.parent and model.name != "best_model.zip":
+        return _run_folder(model.parent, algo)
+    cfg = dict(found[1]) if found is not None else {}
+    if found is not None and cfg.get("pipeline"):
+        # a checkpoint (or a run's best model): not a seed of the final models
+        at = model.stem if model.parent == found[0].parent else model.parent.name
+        pipeline = f"{cfg['pipeline']}@{at}"
+    else:
+        pipeline = f"{model.parent.name}/{model.stem}"
+    algo = (algo or resolve_algo(model)).lower()
+    cfg.update(algo=algo, model=str(model))
+    return EgoSpec(str(model), pipeline, int(cfg.get("seed") or 0), str(model), cfg, algo)
 
 
 def _base_row(ego: EgoSpec, setting: Setting, scenario_id: str, k: int) -> dict[str, Any]:
@@ -212,6 +270,8 @@ def plan_ego(store: ResultsStore, ego: EgoSpec, settings: Sequence[Setting], con
     store.upsert_run(ego.run, ego.pipeline, ego.seed, ego.ego, ego.path, ego.config)
     for s in settings:
         kwargs = dict(config["generators"].get(s.generator, {})) if s.generator else {}
+        if s.reactive:
+            kwargs = {"background": config.get("background", "idm"), "background_model": config.get("background_model")}
         store.upsert_setting(s.dataset, s.name, s.kind, s.split, s.generator, {**_shared_for(s, shared), **kwargs},
                              k if s.generator else 0, seed)
     groups: dict[tuple[str, str | None], list[Setting]] = {}
@@ -248,7 +308,7 @@ def play_items(
     written = {s.name: 0 for s in settings}
     if not items:
         return written
-    policy = cached_ego(ego.ego)
+    policy = cached_ego(ego.ego, ego.algo)
     for dataset, split, i, missing in items:
         scenarios = cached_split(dataset, split, config.get("limit"))
         env, scenario = cached_env(dataset, split, config), scenarios[i]
@@ -258,7 +318,11 @@ def play_items(
         for name in missing:
             s = by_name[name]
             row = _base_row(ego, s, scenario.scenario_id, k if s.generator else 0)
-            if s.generator is None:
+            if s.reactive:
+                reactive_env = cached_env(dataset, split, config, reactive=True)
+                rollout = protocol.normal_episode(reactive_env, scenario, i, policy, seed)
+                row.update(episode_metrics(scenario, rollout, (), logged))
+            elif s.generator is None:
                 row.update(episode_metrics(scenario, normal, (), logged))
             else:
                 generator = cached_generator(ego.run, s.generator, config)
@@ -319,7 +383,7 @@ def evaluate_job(job: Mapping[str, Any]) -> dict[str, Any]:
     import torch
 
     torch.set_num_threads(1)
-    ego = read_run(job["run"])
+    ego = read_run(job["run"], job.get("algo"))
     settings = [Setting(**s) for s in job["settings"]]
     with ResultsStore(job["store"]) as store:
         written = evaluate_ego(store, ego, settings, job["config"], progress=bool(job.get("progress", False)))

@@ -43,6 +43,8 @@ class EvalGeneratorsConfig:
     """Generator names (a list or comma-separated text), or a mapping name -> constructor kwargs."""
     ego: str = "replay"
     """The ego: ``heuristic``, ``replay`` or a run folder / model path."""
+    algo: str | None = None
+    """SB3 algorithm of an ``ego`` model file that does not record it (td3 | sac | ppo | ...)."""
     split: str | None = "eval"
     """Dataset split (None: every scenario)."""
     limit: int | None = None
@@ -130,13 +132,14 @@ def resolve_config(
 
 def evaluate_generators(
     scenarios: Sequence[Scenario], generators: Mapping[str, AdversaryGenerator], ego_spec: str, k: int = K_ROLLOUTS,
-    seed: int = 0, env_config: Mapping[str, Any] | None = None, progress: bool = True,
+    seed: int = 0, env_config: Mapping[str, Any] | None = None, progress: bool = True, algo: str | None = None,
 ) -> tuple[list[dict[str, Any]], list[EpisodeRecord]]:
-    """Run the protocol (module docstring); returns the summary rows (one per generator) and the episode records."""
+    """Run the protocol (module docstring); returns the summary rows (one per generator) and the episode records.
+    ``ego_spec``: anything `seal.experiments.training.egos.make_ego` takes (``algo`` for a model file)."""
     from tqdm import tqdm
 
     env = ScenarioEnv(list(scenarios), config=dict(env_config or {}))
-    ego = make_ego(ego_spec)
+    ego = make_ego(ego_spec, algo)
     records: dict[str, list[EpisodeRecord]] = {name: [] for name in generators}
     logged: list[LoggedAdversary] = []
     for i, scenario in enumerate(tqdm(scenarios, desc="scenarios", unit="scenario", disable=not progress)):
@@ -167,15 +170,16 @@ def _csv(rows: Sequence[dict[str, Any]]) -> bytes:
     return buf.getvalue().encode()
 
 
-def _jsonable(value: Any) -> Any:
+def jsonable(value: Any) -> Any:
+    """Plain JSON / YAML data: numpy scalars as Python numbers, non-finite floats as None, tuples as lists."""
     if isinstance(value, float) and not math.isfinite(value):
         return None
     if isinstance(value, np.generic):
-        return _jsonable(value.item())
+        return jsonable(value.item())
     if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
+        return {k: jsonable(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
+        return [jsonable(v) for v in value]
     return value
 
 
@@ -188,14 +192,14 @@ def run_eval_generators(
     shared = {key: config.get(key) for key in SHARED_OPTIONS}
     generators = {name: build_generator(name, kw, shared) for name, kw in config["generators"].items()}
     resolved = {**config, "dataset": str(dataset), "scenarios": len(scenarios)}
-    atomic_write_bytes(out / "config.yaml", yaml.safe_dump(_jsonable(resolved), sort_keys=True).encode())
+    atomic_write_bytes(out / "config.yaml", yaml.safe_dump(jsonable(resolved), sort_keys=True).encode())
     rows, records = evaluate_generators(
         scenarios, generators, config["ego"], k=int(config["k"]), seed=int(config["seed"]),
-        env_config=config["env"], progress=progress,
+        env_config=config["env"], progress=progress, algo=config.get("algo"),
     )
     table = markdown_table(rows)
     atomic_write_bytes(out / "generators.csv", _csv(rows))
-    atomic_write_json(out / "generators.json", _jsonable({"config": resolved, "rows": rows}))
+    atomic_write_json(out / "generators.json", jsonable({"config": resolved, "rows": rows}))
     atomic_write_bytes(out / "episodes.csv", _csv([r.row() for r in records]))
     header = (
         f"# Generator evaluation\n\nDataset `{dataset}`, split `{config['split']}`, {len(scenarios)} scenarios, "

@@ -19,6 +19,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from seal.core.plugins import load_plugins, plugin_specs
 from seal.experiments.backends import Backend, InlineBackend, LocalBackend
 from seal.experiments.evaluation.evaluate import (
     EgoSpec,
@@ -37,13 +38,15 @@ from seal.experiments.evaluation.worker_cache import use_session
 
 
 def evaluate_chunk(job: Mapping[str, Any]) -> dict[str, Any]:
-    """One chunk job (keys: ``store``, ``run``, ``settings`` (`Setting` fields), ``config``, ``items`` (`WorkItem`
-    lists), ``session``): plays the items and writes their rows; returns ``{"run", "written", "rows"}``."""
+    """One chunk job (keys: ``store``, ``run``, ``algo``, ``settings`` (`Setting` fields), ``config``, ``items``
+    (`WorkItem` lists), ``session``, ``plugins`` (the parent's ``--plugin`` modules)): plays the items and writes
+    their rows; returns ``{"run", "written", "rows"}``."""
     import torch
 
     torch.set_num_threads(1)  # one core per worker: the workers are the parallelism
+    load_plugins(job.get("plugins") or [])  # a Ray worker does not inherit this process's SEAL_PLUGINS
     use_session(str(job["session"]))
-    ego = read_run(job["run"])
+    ego = read_run(job["run"], job.get("algo"))
     settings = [Setting(**s) for s in job["settings"]]
     items = [(str(d), sp, int(i), list(m)) for d, sp, i, m in job["items"]]
     with ResultsStore(job["store"]) as store:
@@ -70,9 +73,9 @@ def chunk_jobs(
         for start in range(0, len(items), chunk_size):
             chunk: list[WorkItem] = items[start : start + chunk_size]
             jobs.append({
-                "store": store_path, "run": ego.ego if ego.path else ego.run,
+                "store": store_path, "run": ego.ego if ego.path else ego.run, "algo": ego.algo,
                 "settings": [vars(s) for s in settings], "config": dict(config),
-                "items": [list(it) for it in chunk], "session": session,
+                "items": [list(it) for it in chunk], "session": session, "plugins": plugin_specs(),
             })
     return jobs
 
@@ -103,12 +106,13 @@ def evaluate_parallel(
 def evaluate_runs(
     runs: Sequence[str], settings_spec: str | Sequence[str], store_path: str | Path, dataset: str | Path | None = None,
     config: Mapping[str, Any] | None = None, replay_ego: bool = True, workers: int = 1, progress: bool = True,
-    backend: Backend | None = None, chunk_size: int | None = None,
+    backend: Backend | None = None, chunk_size: int | None = None, algo: str | None = None,
 ) -> list[dict[str, Any]]:
     """Evaluate every run (plus the Replay ego unless ``replay_ego`` is False) on the settings; returns one
     ``{"run", "written"}`` per ego. Egos x scenarios run as chunk jobs (`evaluate_parallel`): in this process
-    (``workers`` <= 1), in ``workers`` local processes, or on a given `seal.experiments.backends` backend (Ray)."""
-    egos = [read_run(r) for r in runs]
+    (``workers`` <= 1), in ``workers`` local processes, or on a given `seal.experiments.backends` backend (Ray).
+    ``algo``: the SB3 algorithm of model files that do not record it."""
+    egos = [read_run(r, algo) for r in runs]
     if replay_ego and not any(e.run == "replay" for e in egos):
         egos.append(read_run("replay"))
     if not egos:

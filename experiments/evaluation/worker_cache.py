@@ -32,14 +32,14 @@ def use_session(token: str) -> None:
         _SESSION["token"] = token
 
 
-def cached_ego(spec: str) -> Any:
+def cached_ego(spec: str, algo: str | None = None) -> Any:
     """`seal.experiments.training.egos.make_ego` of ``spec`` (egos act deterministically: one serves every chunk)."""
     from seal.experiments.training.egos import make_ego
 
     egos = _CACHE["egos"]
-    if spec not in egos:
-        egos[spec] = make_ego(spec)
-    return egos[spec]
+    if (spec, algo) not in egos:
+        egos[(spec, algo)] = make_ego(spec, algo)
+    return egos[(spec, algo)]
 
 
 def cached_split(dataset: str, split: str | None, limit: int | None) -> list[Scenario]:
@@ -52,15 +52,25 @@ def cached_split(dataset: str, split: str | None, limit: int | None) -> list[Sce
     return splits[key]
 
 
-def cached_env(dataset: str, split: str | None, config: Mapping[str, Any]) -> Any:
+def cached_env(dataset: str, split: str | None, config: Mapping[str, Any], reactive: bool = False) -> Any:
     """One `ScenarioEnv` per (dataset, split, env config): every episode resets it with its own seed, so one env
-    serves every ego and chunk alike."""
+    serves every ego and chunk alike. ``reactive``: the env of ``normal-reactive`` (config ``background``, and
+    ``background_model`` for ``rapid``)."""
     from seal.envs.scenario_env import ScenarioEnv
 
     env_config = dict(config.get("env") or {})
-    envs, key = _CACHE["envs"], (dataset, split, json.dumps(env_config, sort_keys=True, default=str))
+    model = None
+    if reactive:
+        env_config["background"] = config.get("background", "idm")
+        if env_config["background"] == "rapid":
+            from seal.models.rapid import load_rapid
+
+            model = load_rapid(str(config["background_model"]))
+    envs, key = _CACHE["envs"], (dataset, split, json.dumps(env_config, sort_keys=True, default=str),
+                                 config.get("background_model") if reactive else None)
     if key not in envs:
-        envs[key] = ScenarioEnv(cached_split(dataset, split, config.get("limit")), config=env_config)
+        envs[key] = ScenarioEnv(cached_split(dataset, split, config.get("limit")), config=env_config,
+                                background_model=model)
     return envs[key]
 
 

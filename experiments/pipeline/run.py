@@ -35,7 +35,7 @@ The preset's sections (all but ``train`` belong to this module; ``train`` is pas
 * ``pipelines``: training pipelines (``noadv`` = no adversary; ``goose``, ``cat``, ``seal``, ... = that
   generator; or a name of ``variants``); ``seeds``: list of seeds; ``algos`` (optional): ego algorithms to train
   each pipeline x seed with (``[reskill, td3]``: the main and a secondary row of the report, which labels and
-  compares them apart, `seal.experiments.report.groups`).
+  compares them apart, `seal.experiments.report.grouping`).
 * ``variants``: pipeline name -> ``{generator: NAME, kwargs: {...}, train: {...}}``: a training pipeline that uses
   generator NAME with its ``generators`` kwargs updated by ``kwargs``, and the ``train`` section updated by
   ``train`` (nested keys, e.g. ``{curriculum: {warmup: 0.0}}``): the training-pipeline ablations of thesis

@@ -3,7 +3,8 @@
 * Table 6.1 (`ego_table`): per training pipeline and setting, the median and interquartile range (25th-75th
   percentile, linear interpolation) over seeds of the ego's success / crash / out-of-road rate; each seed's
   rate is over the scenarios of that setting. The Replay ego appears as pipeline ``replay``.
-* Table 6.2 (`generator_table`): per generator setting (plus ``normal`` as the replayed-log reference), the ego
+* Table 6.2 (`generator_table`): per generator setting (plus ``normal`` as the replayed-log reference and
+  ``normal-reactive``, the same with reacting background traffic, where evaluated), the ego
   success / crash rates averaged over the evaluated egos (each ego's rate over scenarios, then the mean), the
   adversary-collision and close-call rates, the realism Wasserstein distances of the pooled episodes' adversary
   against the logged adversaries (yaw rate, acceleration, out-of-road rate, their mean), the mean collision
@@ -29,7 +30,7 @@ from seal.adversaries.base import pipeline_names
 from seal.experiments.evaluation.evaluate import REAL_PREFIX, REPLAY_SETTINGS
 from seal.experiments.evaluation.generator_metrics import format_markdown_table
 from seal.experiments.evaluation.metrics import pooled_realism
-from seal.experiments.report.groups import algo_of, base_pipeline
+from seal.experiments.report.grouping import algo_of, base_pipeline
 
 EGO_METRICS = ("success", "crash", "out_of_road")
 PIPELINE_ORDER = ("replay", "heuristic", *pipeline_names())
@@ -45,11 +46,13 @@ def setting_label(setting: str) -> str:
 
 def ordered_settings(settings: Iterable[str]) -> list[str]:
     """normal, hard, then generator settings (alphabetical), then real-data settings."""
+    from seal.experiments.report.grouping import base_setting
+
     unique = set(settings)
 
     def rank(s: str) -> tuple[int, str]:
-        if s in REPLAY_SETTINGS:
-            return (REPLAY_SETTINGS.index(s), s)
+        if base_setting(s) in REPLAY_SETTINGS:  # normal@pool ranks as normal
+            return (REPLAY_SETTINGS.index(base_setting(s)), s)
         return (3 if s.startswith(REAL_PREFIX) else 2, s)
 
     return sorted(unique, key=rank)
@@ -57,7 +60,7 @@ def ordered_settings(settings: Iterable[str]) -> list[str]:
 
 def ordered_pipelines(pipelines: Iterable[str]) -> list[str]:
     """Registry order (`PIPELINE_ORDER`), unknown names after it alphabetically; labels ``<pipeline> (<algo>)``
-    (`seal.experiments.report.groups`) sort by their pipeline, then by algorithm."""
+    (`seal.experiments.report.grouping`) sort by their pipeline, then by algorithm."""
 
     def rank(label: str) -> tuple[int, str, str]:
         base = base_pipeline(label)
@@ -108,7 +111,7 @@ def ego_table(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
 
 def ego_markdown(table: Sequence[Mapping[str, Any]]) -> str:
     """Table 6.1 as Markdown: a block per metric, pipelines as rows, settings as columns, cells
-    ``median % [q25-q75]``."""
+    ``median % [q25-q75] (n)``, n the scored episodes of the cell (all seeds)."""
     out = []
     settings = list(dict.fromkeys(r["setting"] for r in table))
     settings = [setting_label(s) for s in ordered_settings(settings)] if settings else []
@@ -128,7 +131,7 @@ def ego_markdown(table: Sequence[Mapping[str, Any]]) -> str:
 def _pct_cell(row: Mapping[str, Any] | None) -> str:
     if row is None or not math.isfinite(row["median"]):
         return "-"
-    return f"{100 * row['median']:.1f} [{100 * row['q25']:.1f}-{100 * row['q75']:.1f}]"
+    return f"{100 * row['median']:.1f} [{100 * row['q25']:.1f}-{100 * row['q75']:.1f}] ({row['scenarios']})"
 
 
 def generator_table(rows: Sequence[Mapping[str, Any]], settings_info: Sequence[Mapping[str, Any]] = ()
@@ -136,16 +139,19 @@ def generator_table(rows: Sequence[Mapping[str, Any]], settings_info: Sequence[M
     """Table 6.2: one row per generator setting (and ``normal`` as reference) over all egos in ``rows``
     (histogram columns decoded). ``settings_info`` (the store's settings rows) marks generator settings; without
     it, any setting not normal / hard / real:... counts as a generator."""
+    from seal.experiments.report.grouping import base_setting
+
     generators = {s["setting"] for s in settings_info if s.get("kind") == "generator"}
     by_setting: dict[str, list[Mapping[str, Any]]] = {}
     for r in rows:
         by_setting.setdefault(r["setting"], []).append(r)
     table = []
     for setting in ordered_settings(by_setting):
-        is_generator = setting in generators or (
-            not settings_info and setting not in REPLAY_SETTINGS and not setting.startswith(REAL_PREFIX)
+        base = base_setting(setting)  # the stored name of a setting relabelled `setting@dataset`
+        is_generator = base in generators or (
+            not settings_info and base not in REPLAY_SETTINGS and not setting.startswith(REAL_PREFIX)
         )
-        if not (is_generator or setting == "normal"):
+        if not (is_generator or base in ("normal", "normal-reactive")):
             continue
         eps = by_setting[setting]
         per_run: dict[str, list[Mapping[str, Any]]] = {}

@@ -153,11 +153,12 @@ def render_generator_videos(
     paths = []
     gen_settings = [s for s in settings_info if s["kind"] == "generator"]
     for s in tqdm(gen_settings, desc="videos", unit="generator", disable=not progress):
-        eps = [r for r in rows if r["run"] == ego_run["run"] and r["setting"] == s["setting"]
+        eps = [r for r in rows if r["run"] == ego_run["run"] and r.get("setting_name", r["setting"]) == s["setting"]
                and r["dataset"] == s["dataset"]]
         if not eps:
             continue
-        eps.sort(key=lambda r: (not r["crash"], not r["adv_collision"], r["scenario_id"]))
+        # failures first (crash, then any other), never a success before an off-road episode
+        eps.sort(key=lambda r: (not r["crash"], r["outcome"] == "success", not r["adv_collision"], r["scenario_id"]))
         scenarios = load_split(s["dataset"], s["split"])
         index = {sc.scenario_id: i for i, sc in enumerate(scenarios)}
         generator = build_generator(s["generator"], s["kwargs"], {})
@@ -170,6 +171,8 @@ def render_generator_videos(
             normal = normal_episode(env, sc, i, policy, int(s["seed"]))
             rollout, _ = scored_pass(env, sc, i, policy, generator, int(s["k"]), int(s["seed"]), normal)
             name = f"{s['setting']}_{Path(ego_run['run']).name}_{sc.scenario_id}.{fmt}"
-            paths.append(write_video(render_rollout(rollout, sc.road, sc), out / name))
+            frames = render_rollout(rollout, sc.road, sc, adversary_label=f"{s['setting']} (pass {s['k']} of {s['k']})",
+                                    ego_label=Path(str(ego_run["run"])).name)
+            paths.append(write_video(frames, out / name))
         env.close()
     return paths

@@ -18,7 +18,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from seal.experiments.report.groups import algo_of, is_trained
+from seal.experiments.report.grouping import algo_of, is_trained
 from seal.experiments.report.stats import MIN_SEEDS_FOR_POI, enough_seeds
 from seal.experiments.report.thesis_claims import claims_markdown
 

@@ -3,7 +3,7 @@
 Every ego of a setting plays the same scenarios, so two pipelines can be compared scenario by scenario instead of
 by their rates alone. A pipeline *solves* a scenario when its egos succeed on it in more than half of its seeds
 (with 4 seeds: 3 or 4 of them); `paired_counts` counts, per setting and pair of pipelines of the same algorithm
-(`seal.experiments.report.groups.comparable`), the scenarios both solve, only the first, only the second and
+(`seal.experiments.report.grouping.comparable`), the scenarios both solve, only the first, only the second and
 neither. `scenario_rates` is the long table behind it (each scenario's success share over seeds per pipeline).
 """
 
@@ -13,7 +13,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from seal.experiments.report.compare import ordered_pipelines, ordered_settings, setting_label
-from seal.experiments.report.groups import algo_of, comparable
+from seal.experiments.report.grouping import algo_of, comparable
 from seal.experiments.report.stats import ScoreMatrix, score_matrices
 
 

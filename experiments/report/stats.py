@@ -23,7 +23,7 @@ a training pipeline) on one scenario of a setting. Per (pipeline, setting) the s
 
 rliable draws from NumPy's global generator; `seeded` seeds it for each estimate and restores it afterwards, so
 the intervals are reproducible and the caller's random stream is untouched. Egos with another algorithm are
-labelled apart by `seal.experiments.report.groups` before they get here and are only compared within their algorithm.
+labelled apart by `seal.experiments.report.grouping` before they get here and are only compared within their algorithm.
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from seal.experiments.report.compare import EGO_METRICS, ordered_pipelines, ordered_settings, setting_label
-from seal.experiments.report.groups import algo_of, comparable, is_trained
+from seal.experiments.report.grouping import algo_of, comparable, is_trained
 
 N_BOOT = 2000
 """Bootstrap resamples of the mean / IQM intervals."""

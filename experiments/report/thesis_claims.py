@@ -16,7 +16,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from seal.experiments.report.groups import algo_of, base_pipeline
+from seal.experiments.report.grouping import algo_of, base_pipeline
 from seal.experiments.report.stats import MIN_SEEDS_FOR_POI, ci_cell, enough_seeds
 
 EGO_CLAIMS = (("seal", "cat"), ("cat", "goose"), ("cat", "noadv"), ("seal", "goose"), ("seal", "noadv"),

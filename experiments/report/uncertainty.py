@@ -48,7 +48,7 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
                        plots: bool = True, n_boot: int = N_BOOT, n_boot_poi: int = N_BOOT_POI, seed: int = 0
                        ) -> Uncertainty:
     """Write `FILES` (and with ``plots`` the interval figures) into ``out`` from the episode rows (pipelines
-    already labelled by algorithm, `seal.experiments.report.groups.label_by_algo`) and Table 6.2 rows."""
+    already labelled by algorithm, `seal.experiments.report.grouping.label_by_algo`) and Table 6.2 rows."""
     cis = ego_ci_table(ego_rows, n_boot, seed)
     poi = improvement_table(ego_rows, n_boot_poi, seed)
     # Per setting only what the first page reads (leader vs runner-up): each pair costs ~1 s per setting.

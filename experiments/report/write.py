@@ -21,7 +21,8 @@ from seal.experiments.report.compare import (
     to_csv,
 )
 from seal.experiments.report.compare_plots import plot_setting_bars, plot_training_curves, render_generator_videos
-from seal.experiments.report.groups import label_by_algo
+from seal.experiments.report.failure_section import write_failure_section
+from seal.experiments.report.grouping import filter_datasets, label_by_algo, separate
 from seal.experiments.report.stats import N_BOOT, N_BOOT_POI
 from seal.experiments.report.uncertainty import uncertainty_report
 
@@ -29,23 +30,19 @@ from seal.experiments.report.uncertainty import uncertainty_report
 def write_report(
     store_path: str | Path, out: str | Path, pipelines: Sequence[str] | None = None,
     settings: Sequence[str] | None = None, plots: bool = True, videos: int = 0, video_format: str = "mp4",
-    progress: bool = True, n_boot: int = N_BOOT, n_boot_poi: int = N_BOOT_POI,
+    progress: bool = True, datasets: Sequence[str] | None = None, failure_videos: int = 0, n_boot: int = N_BOOT,
+    n_boot_poi: int = N_BOOT_POI,
 ) -> dict[str, Any]:
-    """Write ``report.md`` (first page: `seal.experiments.report.first_page`), ``table_6_1.csv``,
-    ``table_6_2.csv``, ``rates_per_run.csv``, the statistics files of `seal.experiments.report.uncertainty` and
-    (``plots``) the figures, (``videos`` > 0) that many videos per generator, into ``out``; returns the tables.
-    ``n_boot`` / ``n_boot_poi``: bootstrap resamples of the intervals / of the probabilities of improvement."""
+    """Write ``report.md``, ``table_6_1.csv``, ``table_6_2.csv``, ``episodes_per_run.csv``, the outcome /
+    failure tables (`seal.experiments.report.failure_section`) and (``plots``) the figures, (``videos`` > 0) that
+    many videos per generator, (``failure_videos`` > 0) that many videos of each failure kind per ego and setting,
+    into ``out``; returns the tables. ``datasets``: only episodes on these datasets (paths or folder names);
+    datasets, egos without a pipeline and egos of different algorithms are kept apart
+    (`seal.experiments.report.grouping`). The first page (`seal.experiments.report.first_page`) and the
+    statistics files come from `seal.experiments.report.uncertainty`; ``n_boot`` / ``n_boot_poi``: bootstrap
+    resamples of the intervals / of the probabilities of improvement."""
     out = Path(out)
-    with ResultsStore(store_path) as store:
-        setting_filter = _expand_settings(settings, store) if settings else None
-        rows = store.episodes(pipeline=pipelines or None, setting=setting_filter, decode_hists=True)
-        runs = store.runs(pipeline=pipelines or None)
-        settings_info = store.settings()
-    if not rows:
-        raise ValueError(
-            f"{store_path}: no evaluation episodes match (pipelines {pipelines or 'all'}, settings "
-            f"{settings or 'all'}); run `seal eval runs ...` first"
-        )
+    rows, runs, settings_info = _read_store(store_path, pipelines, settings, datasets)
     ego_rows = label_by_algo(rows, runs)  # egos of different algorithms stay apart in the ego tables
     t61, t62 = ego_table(ego_rows), generator_table(rows, settings_info)
     per_run = [
@@ -67,6 +64,8 @@ def write_report(
         video_files = [str(p.relative_to(out)) for p in render_generator_videos(
             rows, runs, settings_info, out / "videos", per_generator=videos, fmt=video_format, progress=progress
         )]
+    where = write_failure_section(rows, runs, settings_info, out, failure_videos, video_format, plots, progress)
+    figures += where["figures"]
     n_runs = len({r["run"] for r in rows})
     md = [
         "# Evaluation report\n",
@@ -82,13 +81,15 @@ def write_report(
         "Ego success / crash averaged over egos; realism = Wasserstein distances of the pooled adversary yaw rate, "
         "acceleration and out-of-road rate to the logged adversaries (lower = more realistic); collision speed "
         "along the contact normal over colliding episodes; head-on rates of all episodes. `normal` = logged "
-        "adversary (reference). yaw+acc WD: the mean of the yaw and acceleration distances alone (thesis Table "
-        "7.6 leaves the out-of-road term out).\n",
+        "adversary (reference); `normal-reactive` = the same with reacting background traffic (the crashes the "
+        "replayed background caused are the difference). yaw+acc WD: the mean of the yaw and acceleration "
+        "distances alone (thesis Table 7.6 leaves the out-of-road term out).\n",
         generator_markdown(t62) if t62 else "(no generator settings evaluated)\n",
+        where["markdown"],
     ]
     if figures:
         md.append("## Figures\n")
-        md += [f"![{f}]({f})\n" for f in figures]
+        md += [f"![{f}]({f})\n" for f in figures if f not in where["figures"]]
     if video_files:
         md.append("## Videos\n")
         md += [f"- [{v}]({v})" for v in video_files]
@@ -97,7 +98,30 @@ def write_report(
     return {"table_6_1": t61, "table_6_2": t62, "ego_ci": stats.ego_ci, "improvement": stats.improvement,
             "improvement_per_setting": stats.improvement_per_setting, "paired": stats.paired,
             "generator_ci": stats.generator_ci, "figures": figures,
-            "videos": video_files, "episodes": len(rows)}
+            "videos": video_files, "episodes": len(rows), "outcomes": where["outcomes"],
+            "by_layout": where["by_layout"], "by_source": where["by_source"], "failures": where["failures"],
+            "failure_videos": where["videos"]}
+
+
+Rows = list[dict[str, Any]]
+
+
+def _read_store(store_path: str | Path, pipelines: Sequence[str] | None, settings: Sequence[str] | None,
+                datasets: Sequence[str] | None) -> tuple[Rows, Rows, Rows]:
+    """The filtered episode rows (relabelled by `seal.experiments.report.grouping.separate`), runs and settings."""
+    with ResultsStore(store_path) as store:
+        setting_filter = _expand_settings(settings, store) if settings else None
+        rows = store.episodes(pipeline=pipelines or None, setting=setting_filter, decode_hists=True)
+        runs = store.runs(pipeline=pipelines or None)
+        settings_info = store.settings()
+    if datasets:
+        rows = filter_datasets(rows, datasets)
+    if not rows:
+        raise ValueError(
+            f"{store_path}: no evaluation episodes match (pipelines {pipelines or 'all'}, settings "
+            f"{settings or 'all'}, datasets {datasets or 'all'}); run `seal eval runs ...` first"
+        )
+    return separate(rows), runs, settings_info
 
 
 def _expand_settings(settings: Sequence[str], store: Any) -> list[str]:

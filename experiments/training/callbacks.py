@@ -37,12 +37,14 @@ class EpisodeStatsCallback(BaseCallback):
     """Outcome rates of the last ``window`` training episodes, logged as ``episode/*`` (success, crash: the ego
     touched another agent at any step, out-of-road, timeout, route completion, share perturbed by the generator)
     and ``generator/time_ms`` (mean generation time of the perturbed ones). ``totals`` counts every episode of
-    this session."""
+    this session: by final outcome (``crash`` only counts episodes a crash ended, never with
+    ``terminate_on_crash: false``) and ``crashed``, the episodes in which the ego touched another agent at any
+    step (what ``episode/crash_rate`` is a rate of)."""
 
     def __init__(self, window: int = 100) -> None:
         super().__init__()
         self.recent: deque[dict[str, Any]] = deque(maxlen=window)
-        self.totals: dict[str, float] = {"episodes": 0, "generation_s": 0.0, "perturbed": 0,
+        self.totals: dict[str, float] = {"episodes": 0, "generation_s": 0.0, "perturbed": 0, "crashed": 0,
                                          **{o: 0 for o in OUTCOMES}}
 
     def _on_step(self) -> bool:
@@ -61,6 +63,7 @@ class EpisodeStatsCallback(BaseCallback):
             t["episodes"] += 1
             t[rollout.outcome] = t.get(rollout.outcome, 0) + 1
             t["perturbed"] += record["perturbed"]
+            t["crashed"] += bool(record["crashed"])
             t["generation_s"] += record["generation_s"]
             self._record()
         return True

@@ -18,6 +18,7 @@ from typing import Any
 
 from seal.adversaries.base import GENERATORS, NO_ADVERSARY, model_file_options, pipeline_names
 from seal.core.config import ConfigError, coerce, load_config, read_yaml, to_dict
+from seal.experiments.training.zoo import check_algo_settings, check_schedule, parse_policy_kwargs
 
 ALGOS = ("td3", "sac", "ppo", "reskill")
 PIPELINES = pipeline_names()
@@ -28,6 +29,7 @@ _POSITIVE = (lambda v: v > 0, "> 0")
 _AT_LEAST_1 = (lambda v: v >= 1, ">= 1")
 _NON_NEGATIVE = (lambda v: v >= 0, ">= 0")
 _UNIT = (lambda v: 0 < v <= 1, "in (0, 1]")
+_RATE = (lambda v: check_schedule(v), "> 0, or an rl-zoo schedule lin_<start> with start > 0")
 
 
 def _check_ranges(config: Any, rules: dict[str, tuple[Callable[[Any], bool], str]]) -> None:
@@ -43,8 +45,8 @@ class OffPolicyHyperparams:
     """SB3 settings shared by the off-policy algorithms (``train_freq`` in vec-env steps, each ``n_envs`` env
     steps)."""
 
-    learning_rate: float = 3e-4
-    """Adam learning rate."""
+    learning_rate: float | str = 3e-4
+    """Adam learning rate, or an rl-zoo schedule ``lin_<start>`` (linear from start to 0 over the run)."""
     gamma: float = 0.99
     """Discount factor."""
     tau: float = 0.005
@@ -57,6 +59,9 @@ class OffPolicyHyperparams:
     """Replay buffer capacity (transitions)."""
     net_arch: tuple[int, ...] = (256, 256)
     """Hidden layer widths of actor and critics."""
+    policy_kwargs: dict[str, Any] = field(default_factory=dict)
+    """Other SB3 ``policy_kwargs`` (``activation_fn`` by name: ReLU, Tanh, ...; ``log_std_init``, ``n_critics``,
+    ...); a ``net_arch`` here replaces the one above."""
     train_freq: int = 1
     """Vec-env steps between training calls."""
     gradient_steps: int = -1
@@ -64,7 +69,7 @@ class OffPolicyHyperparams:
 
     def __post_init__(self) -> None:
         _check_ranges(self, {
-            "learning_rate": _POSITIVE, "gamma": _UNIT, "tau": _UNIT, "batch_size": _AT_LEAST_1,
+            "learning_rate": _RATE, "gamma": _UNIT, "tau": _UNIT, "batch_size": _AT_LEAST_1,
             "learning_starts": _NON_NEGATIVE, "buffer_size": _AT_LEAST_1, "train_freq": _AT_LEAST_1,
             "gradient_steps": (lambda v: v >= 1 or v == -1, ">= 1 or -1"),
         })
@@ -96,8 +101,8 @@ class SACHyperparams(OffPolicyHyperparams):
 class PPOHyperparams:
     """SB3 PPO settings."""
 
-    learning_rate: float = 3e-4
-    """Adam learning rate."""
+    learning_rate: float | str = 3e-4
+    """Adam learning rate, or an rl-zoo schedule ``lin_<start>``."""
     gamma: float = 0.99
     """Discount factor."""
     n_steps: int = 1024
@@ -108,18 +113,21 @@ class PPOHyperparams:
     """Epochs over each roll-out."""
     gae_lambda: float = 0.95
     """GAE lambda."""
-    clip_range: float = 0.2
-    """Policy ratio clip."""
+    clip_range: float | str = 0.2
+    """Policy ratio clip, or an rl-zoo schedule ``lin_<start>``."""
     ent_coef: float = 0.0
     """Entropy bonus weight."""
 
     def __post_init__(self) -> None:
         _check_ranges(self, {
-            "learning_rate": _POSITIVE, "gamma": _UNIT, "n_steps": _AT_LEAST_1, "batch_size": _AT_LEAST_1,
-            "n_epochs": _AT_LEAST_1, "gae_lambda": _UNIT, "clip_range": _POSITIVE, "ent_coef": _NON_NEGATIVE,
+            "learning_rate": _RATE, "gamma": _UNIT, "n_steps": _AT_LEAST_1, "batch_size": _AT_LEAST_1,
+            "n_epochs": _AT_LEAST_1, "gae_lambda": _UNIT, "clip_range": _RATE, "ent_coef": _NON_NEGATIVE,
         })
     net_arch: tuple[int, ...] = (256, 256)
     """Hidden layer widths of policy and value networks."""
+    policy_kwargs: dict[str, Any] = field(default_factory=dict)
+    """Other SB3 ``policy_kwargs`` (``activation_fn`` by name, ``ortho_init``, ``log_std_init``, a ``net_arch``
+    mapping ``{pi: [...], vf: [...]}`` replacing the one above, ...)."""
 
 
 def _high_level_td3() -> TD3Hyperparams:
@@ -321,13 +329,23 @@ def load_train_config(path: str | Path, overrides: Mapping[str, Any] | None = No
     ``train:`` section), ``overrides`` (dotted keys; None values ignored) and ``sets`` (``--set`` strings).
     ``preset`` is the file's stem."""
     config = load_ego_train_config(path, overrides, sets)
+    # A --set for another algorithm would be dropped by `resolve` (files keep every algorithm's section: presets do).
+    check_algo_settings(config.algo.lower(), [s.partition("=")[0].strip() for s in sets], "--set")
     return resolve(config, preset=preset_path(path).stem)
 
 
 def _generator(config: EgoTrainConfig) -> dict[str, Any]:
-    if config.pipeline not in config.pipelines:
-        raise ConfigError(f"--pipeline must be one of {sorted(config.pipelines)}, got {config.pipeline!r}")
-    spec = config.pipelines[config.pipeline]
+    """The run's ``generator: {name, kwargs}``: the pipeline the config defines, else a generator of that name (a
+    built-in, a ``--plugin`` or an installed ``seal.generators`` entry point) with its default options."""
+    from seal.adversaries.base import available_generators
+
+    if config.pipeline in config.pipelines:
+        spec = config.pipelines[config.pipeline]
+    elif config.pipeline in available_generators():
+        spec = PipelineSpec(config.pipeline, {})
+    else:
+        raise ConfigError(f"--pipeline must be one of {sorted(config.pipelines)} (train.pipelines) or a generator "
+                          f"name ({', '.join(available_generators())}), got {config.pipeline!r}")
     if spec is None:
         return {"name": None, "kwargs": {}}
     kwargs = dict(spec.kwargs)
@@ -363,6 +381,9 @@ def resolve(config: EgoTrainConfig, preset: str) -> dict[str, Any]:
     if config.n_envs is not None and config.n_envs < 1:
         raise ConfigError(f"train.n_envs must be >= 1 or null (all cores), got {config.n_envs}")
     _check_env_keys(config)
+    chosen = getattr(config.hyperparams, algo)
+    if hasattr(chosen, "policy_kwargs"):
+        parse_policy_kwargs(chosen.policy_kwargs)  # activation names checked before any run folder exists
     plain = to_dict(config)
     out = {k: v for k, v in plain.items() if k not in ("pipelines", "hyperparams")}
     out.update(algo=algo, generator=generator, hyperparams=plain["hyperparams"][algo], preset=preset)

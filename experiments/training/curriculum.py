@@ -38,11 +38,13 @@ class CurriculumCallback(BaseCallback):
         total_steps: T, the run's total env steps (not the steps left after a resume).
         slope, cap, warmup: the schedule (`perturb_probability`).
         resolution: smallest change of p sent to the workers.
+        log: log ``curriculum/p`` (False for a pipeline without a generator, where p changes nothing).
     """
 
     def __init__(self, total_steps: int, slope: float = SLOPE, cap: float = CAP, resolution: float = 0.005,
-                 warmup: float = 0.0) -> None:
+                 warmup: float = 0.0, log: bool = True) -> None:
         super().__init__()
+        self.log = bool(log)
         self.total_steps = int(total_steps)
         self.slope, self.cap, self.resolution = float(slope), float(cap), float(resolution)
         self.warmup = float(warmup)
@@ -62,5 +64,6 @@ class CurriculumCallback(BaseCallback):
         p = self.target()
         if self.p is None or abs(p - self.p) >= self.resolution or (p == self.cap and self.p != self.cap):
             self._push(p)
-        self.logger.record("curriculum/p", self.p)
+        if self.log:
+            self.logger.record("curriculum/p", self.p)
         return True

@@ -1,5 +1,7 @@
-"""Egos for evaluation episodes: the heuristic reactive driver, the logged ego replayed open loop, or a trained
-SB3 policy from a run folder.
+"""Egos for evaluation episodes: the heuristic reactive driver, the logged ego replayed open loop, an SB3 model
+(a seal run folder, a checkpoint or any SB3 ``.zip``, loaded safely by `seal.experiments.training.sb3_load`), a
+Python policy (`register_policy`: a callable ``obs -> action`` or an object with SB3's ``predict``) or an
+installed package's ``seal.egos`` entry point (`seal.core.plugins`).
 
 An `Ego` is reset with the scenario of each episode and then maps (observation, scenario step) to a normalised
 action ``[steering, acceleration]``.
@@ -7,21 +9,35 @@ action ``[steering, acceleration]``.
 
 from __future__ import annotations
 
+import inspect
 import json
-import zipfile
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, cast
 
 import numpy as np
 import yaml
 
+from seal.core.errors import SealError
 from seal.core.scenario import CURRENT_STEP, Scenario
 from seal.envs.heuristic import HeuristicDriver
 from seal.envs.kinematics import recover_actions
+from seal.experiments.training.sb3_load import (
+    MODEL_FILES,
+    find_model,
+    find_vecnormalize,
+    load_sb3_model,
+    read_vecnormalize,
+    resolve_algo,
+)
+
+__all__ = ["MODEL_FILES", "Ego", "as_ego", "load_sb3_model", "make_ego", "register_policy"]
 
 EGO_NAMES = ("heuristic", "replay")
-MODEL_FILES = ("model.zip", "final_model.zip", "best_model.zip")
-CONFIG_FILES = ("config.yaml", "config.yml")
+
+
+class EgoError(SealError, ValueError):
+    """An ego specification names nothing that can drive."""
 
 
 class Ego(Protocol):
@@ -66,18 +82,100 @@ class ReplayEgo:
 
 
 class PolicyEgo:
-    """A trained SB3 policy (deterministic actions)."""
+    """A policy with SB3's ``predict`` (a loaded SB3 model, `HeuristicDriver`, any object of the same interface):
+    deterministic actions; a recurrent policy's state is carried through the episode. ``normalize`` (VecNormalize
+    statistics saved with an SB3 model) is applied to each observation first."""
 
-    def __init__(self, model: Any, name: str) -> None:
+    def __init__(self, model: Any, name: str, normalize: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         self.model = model
+        self.name = name
+        self.normalize = normalize
+        params = inspect.signature(model.predict).parameters
+        varkw = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
+        self._kwargs = [k for k in ("state", "episode_start", "deterministic") if varkw or k in params]
+        self._state: Any = None
+
+    def reset(self, scenario: Scenario) -> None:
+        self._state = None
+
+    def act(self, observation: np.ndarray, step: int) -> np.ndarray:
+        obs = np.asarray(observation, dtype=np.float32)
+        if self.normalize is not None:
+            obs = self.normalize(obs).astype(np.float32)
+        given = {"state": self._state, "episode_start": np.array([step == 0]), "deterministic": True}
+        action, self._state = self.model.predict(obs, **{k: given[k] for k in self._kwargs})
+        return np.asarray(action, dtype=np.float64).reshape(-1)
+
+
+class CallableEgo:
+    """A plain function (or callable object) ``observation [100] -> action [2]``."""
+
+    def __init__(self, policy: Callable[[np.ndarray], Any], name: str) -> None:
+        self.policy = policy
         self.name = name
 
     def reset(self, scenario: Scenario) -> None:
-        pass
+        reset = getattr(self.policy, "reset", None)
+        if callable(reset):
+            reset()
 
     def act(self, observation: np.ndarray, step: int) -> np.ndarray:
-        action, _ = self.model.predict(np.asarray(observation, dtype=np.float32), deterministic=True)
-        return np.asarray(action, dtype=np.float64).reshape(-1)
+        return np.asarray(self.policy(np.asarray(observation, dtype=np.float32)), dtype=np.float64).reshape(-1)
+
+
+def as_ego(policy: Any, name: str) -> Ego:
+    """Adapt a Python policy to `Ego`: an `Ego` itself (``reset(scenario)`` and ``act(obs, step)``), an object with
+    SB3's ``predict(obs, state, episode_start, deterministic)`` (`PolicyEgo`), or a callable ``obs -> action``
+    (`CallableEgo`). Actions are normalised ``[steering, acceleration]`` in ``[-1, 1]``."""
+    act = getattr(policy, "act", None)
+    if callable(act) and callable(getattr(policy, "reset", None)) and _positional(act) >= 2:
+        if not getattr(policy, "name", None):
+            policy.name = name
+        return cast(Ego, policy)
+    if callable(getattr(policy, "predict", None)):
+        return PolicyEgo(policy, name)
+    if callable(policy):
+        return CallableEgo(policy, name)
+    raise EgoError(f"ego {name!r}: {type(policy).__name__} is not a policy (give a callable obs -> action, an "
+                   "object with SB3's predict(obs), or one with reset(scenario) and act(obs, step))")
+
+
+def _positional(fn: Callable[..., Any]) -> int:
+    try:
+        params = inspect.signature(fn).parameters.values()
+    except (TypeError, ValueError):
+        return 0
+    kinds = (inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+    return sum(p.kind in kinds for p in params)
+
+
+_PYTHON_EGOS: dict[str, Any] = {}
+
+
+def register_policy(name: str, policy: Any) -> None:
+    """Make the Python ``policy`` (anything `as_ego` accepts) available as ego ``name`` in this process (what
+    `seal.experiments.evaluation.policies.evaluate_policy` evaluates)."""
+    if name in EGO_NAMES:
+        raise EgoError(f"ego name {name!r} is a built-in ego; choose another")
+    as_ego(policy, name)  # refuse a non-policy now, not in the first episode
+    _PYTHON_EGOS[name] = policy
+
+
+def python_ego_names() -> list[str]:
+    """Egos registered from Python (`register_policy`)."""
+    return sorted(_PYTHON_EGOS)
+
+
+def plugin_ego(name: str) -> Any | None:
+    """The policy of installed entry point ``seal.egos:name`` (its factory called with no arguments), or None."""
+    from seal.core.plugins import EGO_GROUP, load_entry_point
+
+    factory = load_entry_point(EGO_GROUP, name)
+    if factory is None:
+        return None
+    if not callable(factory):
+        raise EgoError(f"entry point {EGO_GROUP}:{name} is not callable: it must name a factory returning a policy")
+    return factory()
 
 
 class ReSkillEgo:
@@ -95,28 +193,42 @@ class ReSkillEgo:
         return np.asarray(self.policy.act(observation), dtype=np.float64)
 
 
-def make_ego(spec: str) -> Ego:
-    """``"heuristic"``, ``"replay"`` or the path of a trained run (a folder or its model ``.zip``; a ReSkill run
-    folder gives a `ReSkillEgo`)."""
+def make_ego(spec: str, algo: str | None = None) -> Ego:
+    """``"heuristic"``, ``"replay"``, a policy registered from Python (`register_policy`), an installed
+    ``seal.egos`` entry point, or the path of an SB3 model: a seal run folder, its final model or a checkpoint,
+    or any SB3 ``.zip`` (``algo``: td3 | sac | ppo | ..., default: the run config's or the file's own; VecNormalize
+    statistics beside it are applied). A ReSkill run folder gives a `ReSkillEgo`."""
     if spec == "heuristic":
         return HeuristicEgo()
     if spec == "replay":
         return ReplayEgo()
+    if spec in _PYTHON_EGOS:
+        return as_ego(_PYTHON_EGOS[spec], spec)
     path = Path(spec)
     if not path.exists():
-        raise FileNotFoundError(
-            f"--ego {spec!r}: not 'heuristic', 'replay' or an existing run folder / SB3 model .zip"
+        from seal.core.plugins import load_env_plugins
+
+        load_env_plugins()
+        plugin = plugin_ego(spec)
+        if plugin is not None:
+            return as_ego(plugin, spec)
+        raise EgoError(
+            f"--ego {spec!r}: not 'heuristic', 'replay', an installed seal.egos entry point or an existing run "
+            "folder / SB3 model .zip"
         )
-    if _find_algo(_find_model(path)) == "RESKILL":
+    model = find_model(path)
+    if algo is None and resolve_algo(model) == "RESKILL":
         return ReSkillEgo(load_reskill(path), name=str(path))
-    return PolicyEgo(load_sb3_model(path), name=str(path))
+    vecnormalize = find_vecnormalize(model)
+    normalize = read_vecnormalize(vecnormalize) if vecnormalize is not None else None
+    return PolicyEgo(load_sb3_model(path, algo_name=algo), name=str(path), normalize=normalize)
 
 
 def load_reskill(path: Path) -> Any:
     """The `ReSkillPolicy` of a finished ``seal train --algo reskill`` run folder (or its final model file)."""
     from seal.experiments.training.reskill import FINAL_RESIDUAL, load_reskill_policy, load_skills, residual_spaces
 
-    model_path = _find_model(Path(path))
+    model_path = find_model(Path(path))
     run = model_path.parent
     config = yaml.safe_load((run / "config.yaml").read_text()) or {}
     residual_path = run / FINAL_RESIDUAL
@@ -132,79 +244,3 @@ def load_reskill(path: Path) -> Any:
     done = run / "done.json"
     steps = json.loads(done.read_text())["steps"] if done.is_file() else int(config["total_timesteps"])
     return load_reskill_policy(run, config, high, residual, int(steps))
-
-
-def _find_model(path: Path) -> Path:
-    if path.is_file():
-        return path
-    for name in MODEL_FILES:
-        if (path / name).is_file():
-            return path / name
-    raise FileNotFoundError(f"run folder {path} has none of {', '.join(MODEL_FILES)}")
-
-
-def _find_algo(model: Path) -> str:
-    for folder in (model.parent, model.parent.parent):
-        for name in CONFIG_FILES:
-            cfg_path = folder / name
-            if cfg_path.is_file():
-                cfg = yaml.safe_load(cfg_path.read_text()) or {}
-                algo = cfg.get("algo") or cfg.get("algorithm") if isinstance(cfg, dict) else None
-                if algo:
-                    return str(algo).upper()
-                raise ValueError(f"{cfg_path}: no 'algo' (e.g. td3, sac, ppo) to load {model} with")
-    raise FileNotFoundError(
-        f"no {' / '.join(CONFIG_FILES)} with the algorithm name next to {model}: pass a `seal train` run folder "
-        "(it writes one), or put a config.yaml with 'algo: td3|sac|ppo' beside the model to load it"
-    )
-
-
-def load_sb3_model(path: Path, algo_name: str | None = None, observation_space: Any = None,
-                   action_space: Any = None) -> Any:
-    """Load an SB3 model for inference without unpickling anything: every cloudpickled entry of the model's
-    ``data`` is replaced by a known-safe object (the env's spaces, the algorithm's ``MlpPolicy``, SB3's buffer
-    classes, constant schedules; an unknown pickled entry is an error); parameters are read by SB3 with
-    ``torch.load(weights_only=True)``. ``algo_name`` (default: the run config's) and the spaces (default: the
-    ego's observation and ``[steering, acceleration]``) are for models of other shapes (the ReSkill agents)."""
-    import stable_baselines3 as sb3
-    from gymnasium import spaces
-    from stable_baselines3.common.buffers import ReplayBuffer, RolloutBuffer
-
-    from seal.envs.observation import observation_space as default_observation_space
-
-    obs_space = observation_space
-    model_path = _find_model(Path(path))
-    algo_name = algo_name or _find_algo(model_path)
-    algo = getattr(sb3, algo_name, None)
-    if algo is None:
-        raise ValueError(f"{model_path}: unknown SB3 algorithm {algo_name!r} in its config")
-    with zipfile.ZipFile(model_path) as zf:
-        data = json.loads(zf.read("data"))
-    safe: dict[str, Any] = {
-        "observation_space": obs_space if obs_space is not None else default_observation_space(),
-        "action_space": action_space if action_space is not None else spaces.Box(-1.0, 1.0, shape=(2,),
-                                                                                  dtype=np.float32),
-        "policy_class": algo.policy_aliases["MlpPolicy"],
-        "rollout_buffer_class": RolloutBuffer,
-        "replay_buffer_class": ReplayBuffer,
-        "train_freq": (1, "step"),
-    }
-    # Inference only: a 1-transition replay buffer instead of allocating the training-size one.
-    custom: dict[str, Any] = {"buffer_size": 1} if "buffer_size" in data else {}
-    for key, value in data.items():
-        if not (isinstance(value, dict) and ":serialized:" in value):
-            continue
-        if key in safe:
-            custom[key] = safe[key]
-        elif key.endswith("schedule") or key in ("learning_rate", "clip_range", "clip_range_vf"):
-            custom[key] = _constant_zero
-        else:
-            raise ValueError(
-                f"{model_path}: entry {key!r} is pickled and cannot be loaded safely; save runs with "
-                "JSON-serialisable settings"
-            )
-    return algo.load(model_path, device="cpu", custom_objects=custom)
-
-
-def _constant_zero(_progress: float) -> float:
-    return 0.0

@@ -24,7 +24,7 @@ import contextlib
 import logging
 import os
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -77,11 +77,18 @@ def _generator_kwargs(config: Mapping[str, Any]) -> dict[str, Any]:
     return kwargs
 
 
-def _worker(fn: Callable[[], Any], threads: int) -> Callable[[], Any]:
+def _worker(fn: Callable[[], Any], threads: int, plugins: Sequence[str] = ()) -> Callable[[], Any]:
+    """``fn`` in an env worker: torch threads set and this process's ``--plugin`` modules imported first (SB3's
+    forkserver workers do not see environment variables set after the server started)."""
+    plugins = list(plugins)
+
     def build() -> Any:
         import torch
 
+        from seal.core.plugins import load_plugins
+
         torch.set_num_threads(threads)
+        load_plugins(plugins)
         return fn()
 
     return build
@@ -104,7 +111,9 @@ def build_vec_env(config: Mapping[str, Any], scenarios: list[Any], n_envs: int) 
         from seal.experiments.training.reskill import wrap_env_fns
 
         fns = wrap_env_fns(fns, config["hyperparams"], int(config["seed"]))
-    workers: list[Callable[[], Any]] = [_worker(fn, 1) for fn in fns]
+    from seal.core.plugins import plugin_specs
+
+    workers: list[Callable[[], Any]] = [_worker(fn, 1, plugin_specs()) for fn in fns]
     venv = VecMonitor(SubprocVecEnv(workers) if n_envs > 1 else DummyVecEnv(workers))
     return OverlapVecEnv(venv) if config.get("overlap_updates") and config["algo"] != "ppo" else venv
 
@@ -119,8 +128,17 @@ def build_model(config: Mapping[str, Any], env: Any) -> Any:
 
     if config["algo"] == "reskill":
         return build_model({**config, "algo": "td3", "hyperparams": config["hyperparams"]["high"]}, env)
+    import torch
+
+    from seal.experiments.training.zoo import parse_policy_kwargs, parse_schedule
+
     h = dict(config["hyperparams"])
-    policy_kwargs = {"net_arch": list(h.pop("net_arch"))}
+    policy_kwargs = {"net_arch": list(h.pop("net_arch")), **parse_policy_kwargs(h.pop("policy_kwargs", None) or {})}
+    if isinstance(policy_kwargs.get("activation_fn"), str):
+        policy_kwargs["activation_fn"] = getattr(torch.nn, policy_kwargs["activation_fn"])
+    for key in ("learning_rate", "clip_range"):
+        if key in h:
+            h[key] = parse_schedule(h[key], f"hyperparams.{config['algo']}.{key}")
     common = {"policy": "MlpPolicy", "env": env, "seed": int(config["seed"]), "device": config["device"],
               "policy_kwargs": policy_kwargs, "verbose": 0}
     algo = config["algo"]
@@ -173,7 +191,8 @@ def train_run(config: dict[str, Any], out: Path, resume: bool = False, progress:
     finished run (``done.json``) is never overwritten: `seal.experiments.training.state.RunFolderError` on misuse.
     ``done.json``: ``steps``, ``wall_s`` (seconds of training behind the final model: each session's time up to
     the checkpoint the next one resumed from, plus the last session), ``resumed_from`` (the step the last session
-    started at), ``episodes`` and ``session_totals`` (the last session's episode outcomes and generation time).
+    started at), ``episodes``, ``session_totals`` (the last session's episode outcomes, ``crashed`` episodes with
+    any contact, and generation time) and ``final_rates`` (the ``episode/*`` rates progress.csv logged last).
     Torch's thread count is the caller's (entry points set ``config["torch_threads"]``, `run_torch_threads`).
     """
     out = Path(out)
@@ -182,6 +201,10 @@ def train_run(config: dict[str, Any], out: Path, resume: bool = False, progress:
     train_scenarios = load_split(config["dataset"], config["train_split"], config["train_limit"], "train")
     eval_scenarios = (load_split(config["dataset"], config["eval_split"], int(config["eval_episodes"]), "eval")
                       if int(config["eval_every"]) else [])
+    if int(config["eval_every"]) and len(eval_scenarios) < int(config["eval_episodes"]):
+        logger.warning(f"train.eval_episodes is {config['eval_episodes']} but the {config['eval_split']!r} split of "
+                       f"{config['dataset']} has {len(eval_scenarios)} scenarios: each evaluation plays "
+                       f"{len(eval_scenarios)}")
     if len(train_scenarios) < n_envs:
         raise ValueError(f"{len(train_scenarios)} train scenarios cannot feed {n_envs} env workers; lower train.n_envs")
     if config["generator"]["name"]:
@@ -217,14 +240,20 @@ def run_torch_threads(config: Mapping[str, Any], out: Path, resume: bool) -> int
 
 
 def _run_config(config: dict[str, Any], out: Path, resume: bool) -> dict[str, Any]:
-    """The config the run trains with: the recorded one when resuming, else ``config`` with absolute paths and the
-    resolved env-worker count; steps checked against the worker count."""
+    """The config the run trains with: the recorded one when resuming (its ``plugins`` imported), else ``config``
+    with absolute paths, the resolved env-worker count and the ``--plugin`` modules in force (``plugins``); steps
+    checked against the worker count."""
+    from seal.core.plugins import load_plugins, plugin_specs
+
     ts.check_out_folder(out, resume)
     if resume:
         config = check_resolved(yaml.safe_load((out / ts.CONFIG).read_text()), str(out / ts.CONFIG))
+        load_plugins(config.get("plugins") or [])  # the run's generator may come from a --plugin module
     else:
         config = _absolute_paths(dict(config))
         config["n_envs"] = resolve_n_envs(config)
+        if plugin_specs():  # recorded, so --resume and `seal eval runs RUN` find a plugin generator again
+            config["plugins"] = plugin_specs()
     check_steps(config, int(config["n_envs"]))
     return config
 
@@ -304,7 +333,8 @@ def _learn(config: Mapping[str, Any], out: Path, venv: Any, checkpoint: Path | N
         reskill.save_final(out)
     wall = wall_before + time.perf_counter() - session_start
     done = {"steps": int(model.num_timesteps), "wall_s": round(wall, 1), "resumed_from": start_step,
-            "episodes": int(model._episode_num), "session_totals": stats.totals}
+            "episodes": int(model._episode_num), "session_totals": stats.totals,
+            "final_rates": stats.rates()}  # the last logged episode/* values (window of the last episodes)
     atomic_write_json(out / ts.DONE, done)
     logger.info(f"finished {out}: {done['steps']} steps in {done['wall_s']} s")
 
@@ -335,7 +365,8 @@ def _callbacks(config: Mapping[str, Any], out: Path, checkpoint: Path | None, re
     from seal.experiments.training.curriculum import CurriculumCallback
 
     total = int(config["total_timesteps"])
-    curriculum = CurriculumCallback(total, **config["curriculum"])
+    # p is pushed to every env either way; it is logged only where a generator uses it (noadv never perturbs).
+    curriculum = CurriculumCallback(total, **config["curriculum"], log=bool(config["generator"]["name"]))
     stats = EpisodeStatsCallback()
     eval_env_config = dict(config["eval_env"])
     counter, residual = reskill.callbacks() if reskill is not None else (None, None)

@@ -24,7 +24,7 @@ __all__ = ["COMMAND_MODULES", "CliError", "build_parser", "main"]
 COMMAND_MODULES = (
     "seal.cli.data", "seal.cli.bench", "seal.cli.generators", "seal.cli.importers", "seal.cli.goose", "seal.cli.prior",
     "seal.cli.skills", "seal.cli.evaluate", "seal.cli.compare", "seal.cli.run", "seal.cli.train",
-    "seal.cli.objective", "seal.cli.steering", "seal.cli.behavior",
+    "seal.cli.objective", "seal.cli.steering", "seal.cli.behavior", "seal.cli.background",
 )
 
 
@@ -70,6 +70,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     from seal.core.scenario import ScenarioError
 
     try:
+        if getattr(args, "plugin", None):
+            from seal.core.plugins import load_plugins
+
+            load_plugins(args.plugin)
         return int(args.func(args) or 0)
     except BrokenPipeError:
         # The reader of stdout went away (`seal data info | head`): stop quietly, as other command-line tools do.

@@ -103,6 +103,15 @@ SET_HELP = ("override a config key (dotted, value read as YAML), e.g. {example};
             "preset, --config and the named options")
 
 
+def add_plugin_option(p: argparse.ArgumentParser) -> None:
+    """``--plugin MODULE_OR_FILE`` (repeatable): imported before the command runs (`seal.core.plugins`), so the
+    generators it registers can be named in this command."""
+    p.add_argument("--plugin", action="append", default=[], metavar="MODULE_OR_FILE",
+                   help="import a Python module (dotted name) or .py file first, e.g. one whose "
+                   "@seal.adversaries.base.register('brake') adds a generator (repeatable; worker processes "
+                   "load it too)")
+
+
 def add_set_option(p: argparse.ArgumentParser, example: str) -> None:
     """``--set KEY=VALUE`` (repeatable) for a command whose config is loaded by `seal.core.config.load_config`;
     the strings are kept as given (``args.set``) and parsed by the loader, which names a bad key or value."""

@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from seal.cli.args import LAYOUTS, CliError, layouts, positive_int, share
+from seal.cli.args import LAYOUTS, CliError, add_plugin_option, layouts, positive_int, share
 from seal.cli.tree import CommandTree
 
 
@@ -124,9 +124,27 @@ def cmd_render(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in (".mp4", ".gif"):
         raise CliError(f"--out must end in .mp4 or .gif, got {out.name!r}")
+    if args.ego or args.generator:
+        return _render_protocol_episode(args)
     scenario = Dataset.open(args.dataset).get(args.scenario)
     summary = render_episode(scenario, out, fps=args.fps)
     print(json.dumps(summary, default=str))
+    return 0
+
+
+def _render_protocol_episode(args: argparse.Namespace) -> int:
+    """``seal render --ego ... [--generator ...]``: the episode `seal eval runs` scores, played again."""
+    from seal.experiments.evaluation.generators import apply_generator_options
+    from seal.experiments.evaluation.replay_episode import EpisodeSpec, render
+
+    kwargs: dict[str, dict] = {args.generator: {}} if args.generator else {}
+    if args.gen_opt and not args.generator:
+        raise CliError("--gen-opt needs --generator")
+    apply_generator_options(kwargs, args.gen_opt)
+    spec = EpisodeSpec(dataset=args.dataset, scenario_id=args.scenario, ego=args.ego or "heuristic",
+                       generator=args.generator, kwargs=kwargs.get(args.generator or "", {}), k=args.k,
+                       seed=args.seed, split=args.split, algo=args.algo)
+    print(json.dumps(render(spec, args.out, fps=args.fps), default=str))
     return 0
 
 
@@ -259,10 +277,23 @@ def _register_render(tree: CommandTree) -> None:
         "render",
         help="top-down video of a scenario roll-out",
         description="Roll a scenario out (heuristic ego, replayed adversary and traffic) and write a top-down "
-        "video; the ego is green, the adversary red, other traffic blue.",
+        "video; the ego is green, the adversary red, other traffic blue. With --ego and / or --generator: the "
+        "episode `seal eval runs` scored for that ego and setting, played again with the evaluation's seeds "
+        "(the normal episode, then K passes of the generator; the last is shown).",
     )
     render.add_argument("--dataset", required=True, help="dataset directory")
     render.add_argument("--scenario", required=True, help="scenario id (see `seal data info --json` or manifest)")
     render.add_argument("--out", required=True, help="output file, .mp4 or .gif")
     render.add_argument("--fps", type=positive_int("--fps"), default=10, help="frames per second (default 10)")
+    render.add_argument("--ego", default=None, help="heuristic | replay | run folder | SB3 model .zip | seal.egos "
+                        "entry point (default heuristic)")
+    render.add_argument("--algo", default=None, help="SB3 algorithm of an --ego model file that does not record it")
+    render.add_argument("--generator", default=None, help="adversary generator of the setting (default: the log)")
+    render.add_argument("--gen-opt", action="append", default=[], metavar="NAME.KEY=VALUE",
+                        help="generator option, as in seal eval runs (repeatable)")
+    render.add_argument("--k", type=positive_int("--k"), default=5, help="perturbation passes (default 5)")
+    render.add_argument("--seed", type=int, default=0, help="the evaluation's seed (default 0)")
+    render.add_argument("--split", default=None,
+                        help="split the scenario was evaluated in (default: the split holding it, eval first)")
+    add_plugin_option(render)
     render.set_defaults(func=cmd_render)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import os
 
-from seal.cli.args import CliError, add_set_option, positive_int
+from seal.cli.args import CliError, add_plugin_option, add_set_option, positive_int
 from seal.cli.tree import CommandTree
 
 
@@ -21,8 +21,9 @@ def cmd_eval_runs(args: argparse.Namespace) -> int:
     from seal.experiments.evaluation.generators import apply_generator_options
     from seal.experiments.evaluation.parallel import evaluate_runs
 
+    runs = [*args.runs, *args.ego]
     try:
-        egos = [read_run(r) for r in args.runs]
+        egos = [read_run(r, args.algo) for r in runs]
         config = resolve_eval_config(
             args.config, run_configs=[e.config for e in egos], k=args.k, limit=args.limit, seed=args.seed,
             prior=args.prior, candidates=args.candidates, sets=args.set,
@@ -34,13 +35,14 @@ def cmd_eval_runs(args: argparse.Namespace) -> int:
         backend = None
         if args.backend == "ray":
             backend = make_backend("ray", address=args.address, ray_local_cpus=args.ray_local_cpus)
-    except (ValueError, RuntimeError) as exc:
+    except (ValueError, RuntimeError, FileNotFoundError) as exc:
         raise CliError(str(exc)) from None
     workers = args.workers or os.cpu_count() or 1
     try:
         results = evaluate_runs(
-            args.runs, args.settings, args.store, dataset=args.dataset, config=config,
+            runs, args.settings, args.store, dataset=args.dataset, config=config,
             replay_ego=not args.no_replay_ego, workers=workers, progress=not args.no_progress, backend=backend,
+            algo=args.algo,
         )
     finally:
         if backend is not None:
@@ -61,15 +63,23 @@ def register(tree: CommandTree) -> None:
         "unless --no-replay-ego, the Replay ego (logged ego replayed open loop). Settings: normal (eval split, "
         "logged adversary), hard (hard split), a generator name such as cat, goose, seal, rule (the Normal eval "
         "scenarios: one normal episode, then K sequential perturbation passes against the same ego, the last "
-        "scored), real:DIR (an imported dataset, its eval split or every scenario, logged adversary). One row per "
+        "scored), normal-reactive (normal with reacting background traffic: --set background=idm, or "
+        "background=rapid with background_model=FILE), real:DIR (an imported dataset, its eval split or every "
+        "scenario, logged adversary). One row per "
         "(run, dataset, setting, scenario) goes into the SQLite --store; scenarios already there are skipped, so "
         "re-running adds only what is missing.",
     )
     p.add_argument("runs", nargs="*", metavar="RUN",
-                   help="run folders (or 'heuristic' for the rule-based driver); none = only the Replay ego")
+                   help="run folders, checkpoints (RUN/checkpoints/step_N/model.zip), any SB3 model .zip, "
+                   "'heuristic' or an installed seal.egos entry point; none = only the Replay ego")
+    p.add_argument("--ego", action="append", default=[], metavar="EGO",
+                   help="one more ego, as RUN (repeatable; e.g. --ego my_sac.zip --algo sac)")
+    p.add_argument("--algo", default=None, help="SB3 algorithm of model files that do not record it "
+                   "(td3 | sac | ppo | ddpg | a2c; default: read from the file or its run's config.yaml)")
+    add_plugin_option(p)
     p.add_argument("--settings", default="normal,hard",
-                   help="comma-separated: normal, hard, GENERATOR (cat, goose, seal, rule, replay), real:DIR "
-                   "(default normal,hard)")
+                   help="comma-separated: normal, hard, normal-reactive, GENERATOR (cat, goose, seal, rule, replay), "
+                   "real:DIR (default normal,hard)")
     p.add_argument("--store", default="results.sqlite", help="SQLite results store (default results.sqlite)")
     p.add_argument("--dataset", default=None,
                    help="dataset with eval / hard splits (default: the 'dataset' of the first run's config.yaml)")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from seal.cli.args import CliError, positive_int, print_result
+from seal.cli.args import CliError, add_plugin_option, positive_int, print_result
 from seal.cli.tree import CommandTree
 
 
@@ -14,7 +14,7 @@ def _generator_options(args: argparse.Namespace) -> tuple[dict, dict]:
 
     try:
         config = resolve_config(
-            args.config, generators=args.generators, ego=getattr(args, "ego", None),
+            args.config, generators=args.generators, ego=getattr(args, "ego", None), algo=getattr(args, "algo", None),
             split=args.split, limit=args.limit, k=getattr(args, "k", None), seed=args.seed, prior=args.prior,
             candidates=args.candidates, objective=args.objective, skills=args.skills, gen_opts=args.gen_opt,
         )
@@ -101,6 +101,7 @@ def _common(p: argparse.ArgumentParser, default_generators: str) -> None:
     p.add_argument("--config", default=None, help="YAML config (keys as in "
         "seal.experiments.evaluation.generators.EvalGeneratorsConfig)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
+    add_plugin_option(p)
 
 
 def register(tree: CommandTree) -> None:
@@ -114,8 +115,11 @@ def register(tree: CommandTree) -> None:
     _common(ev, "replay,rule,cat")
     ev.add_argument(
         "--ego", default=None,
-        help="heuristic | replay | path of a trained run (folder or SB3 .zip with config.yaml); default replay",
+        help="heuristic | replay | a seal run folder, checkpoint or any SB3 model .zip (VecNormalize stats beside "
+        "it are applied) | an installed seal.egos entry point; default replay",
     )
+    ev.add_argument("--algo", default=None, help="SB3 algorithm of an --ego model file that does not record it "
+                    "(td3 | sac | ppo | ddpg | a2c; default: read from the file)")
     ev.add_argument("--k", type=positive_int("--k"), default=None, help="perturbation passes = queue length (5)")
     ev.add_argument("--out", required=True, help="output folder")
     ev.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from seal.cli.args import CliError, add_set_option, positive_int
+from seal.cli.args import CliError, add_plugin_option, add_set_option, positive_int
 from seal.cli.tree import CommandTree
 
 
@@ -71,5 +71,6 @@ def register(tree: CommandTree) -> None:
                    help="check the whole plan (every step's options, names, paths) and print what it would run; "
                    "writes nothing")
     p.add_argument("--json", action="store_true", help="with --check: print the plan as JSON")
+    add_plugin_option(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_run)

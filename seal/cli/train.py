@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from seal.cli.args import CliError, add_set_option, pipeline_choices, positive_int
+from seal.cli.args import CliError, add_plugin_option, add_set_option, positive_int
 from seal.cli.tree import CommandTree
 
 DEFAULT_CONFIG = "standard"
@@ -33,6 +33,28 @@ def overrides_from_args(args: argparse.Namespace) -> dict[str, object]:
     return over
 
 
+def _keyed_by_env(path: str) -> bool:
+    """A zoo file keyed by env id (its algorithm must come from --algo or the config) rather than by algorithm."""
+    from seal.core.config import read_yaml
+    from seal.experiments.training.zoo import ZOO_ALGOS
+
+    data = read_yaml(path)
+    return isinstance(data, dict) and not all(str(k).lower() in ZOO_ALGOS for k in data)
+
+
+def _overrides(args: argparse.Namespace) -> dict[str, object]:
+    """The named options, on top of the settings of a ``--hyperparams`` zoo file."""
+    overrides = {k: v for k, v in overrides_from_args(args).items() if v is not None}
+    if args.hyperparams is None:
+        return overrides
+    from seal.experiments.training.config import read_train_section
+    from seal.experiments.training.zoo import zoo_overrides
+
+    algo = args.algo or (read_train_section(args.config or DEFAULT_CONFIG).get("algo") or "td3")
+    zoo = zoo_overrides(args.hyperparams, algo if args.algo or _keyed_by_env(args.hyperparams) else None)
+    return {**zoo, **overrides}
+
+
 def cmd_train(args: argparse.Namespace) -> int:
     import json
     import signal
@@ -46,7 +68,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     if (args.out is None) == (args.resume is None):
         raise CliError("give exactly one of --out RUN (a new run) or --resume RUN (continue a killed run)")
     if args.resume is not None:
-        options = (("--config", args.config), ("--pipeline", args.pipeline), ("--seed", args.seed),
+        options = (("--config", args.config), ("--hyperparams", args.hyperparams), ("--pipeline", args.pipeline),
+                   ("--seed", args.seed),
                    ("--set", args.set or None), ("--steps", args.steps), ("--algo", args.algo),
                    ("--dataset", args.dataset),
                    ("--n-envs", args.n_envs), ("--prior", args.prior), ("--goose-model", args.goose_model),
@@ -58,7 +81,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         out, config = Path(args.resume), {}
     else:
         out = Path(args.out)
-        config = load_train_config(args.config or DEFAULT_CONFIG, overrides_from_args(args), sets=args.set)
+        config = load_train_config(args.config or DEFAULT_CONFIG, _overrides(args), sets=args.set)
+
     def interrupt(signum: int, frame: object) -> None:
         raise KeyboardInterrupt  # `timeout` / a scheduler's SIGTERM: close the env workers, say how to resume
 
@@ -94,8 +118,11 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--config", default=None,
                    help="preset name (quick | standard | paper: experiments/configs/<name>.yaml) or a YAML file with a "
                    f"train: section (default {DEFAULT_CONFIG})")
-    p.add_argument("--pipeline", choices=pipeline_choices(), default=None,
-                   help="adversary pipeline (default: the config's, cat)")
+    p.add_argument("--pipeline", default=None,
+                   help="adversary pipeline: noadv, a pipeline of the config's train.pipelines (built-in: goose, cat, "
+                   "seal, steered, cat-rcg, seal-rcg) or any generator name, e.g. one from --plugin (default: the "
+                   "config's, cat)")
+    add_plugin_option(p)
     p.add_argument("--seed", type=int, default=None, help="random seed (default: the config's, 0)")
     p.add_argument("--out", default=None, help="new run folder (must be absent or empty)")
     p.add_argument("--resume", default=None, metavar="RUN", help="continue the unfinished run in RUN")
@@ -114,7 +141,11 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--skills", default=None, help="SEAL skills folder (seal fit skills) for the seal pipeline")
     p.add_argument("--ego-skills", default=None,
                    help="skills folder (seal fit skills) the reskill ego draws its benign skills from")
-    add_set_option(p, "hyperparams.td3.learning_starts=500 (a train: key)")
+    p.add_argument("--hyperparams", default=None, metavar="FILE",
+                   help="rl-baselines3-zoo hyperparameter file: keyed by env id (seal/Scenario-v0; the algorithm from "
+                   "--algo or the config) or by algorithm (td3 / sac / ppo); n_timesteps, n_envs, policy_kwargs as "
+                   "text or mapping, lin_<x> schedules; unsupported zoo keys (normalize, wrappers) are refused")
+    add_set_option(p, "hyperparams.td3.learning_starts=500 (a train: key; settings of another algo are refused)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print done.json as JSON")
     p.set_defaults(func=cmd_train)

@@ -255,6 +255,27 @@ class Dataset:
         atomic_write_json(self.root / MANIFEST, self.manifest)
 
 
+def scenario_facts(root: str | Path) -> dict[str, dict[str, str]]:
+    """``{scenario_id: {"layout", "source"}}`` of every scenario of a dataset, read from the shards' id, road and
+    metadata columns only (no tracks are decoded): ``layout`` as `Scenario.layout` gives it, ``source`` the
+    recording file an imported scenario came from (``metadata["source_file"]``), else `Scenario.source`."""
+    ds = Dataset.open(root)
+    facts: dict[str, dict[str, str]] = {}
+    for entry in ds.manifest["shards"]:
+        try:
+            with np.load(ds.root / entry["file"], allow_pickle=False) as z:
+                ids, metas, roads = z["scenario_ids"], z["metadata_json"], z["roads_json"]
+                road_index, sources = z["road_index"], z["sources"]
+        except (KeyError, zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
+            raise DatasetError(f"shard file {ds.root / entry['file']} is unreadable ({exc})") from None
+        road_layouts = [str(json.loads(str(r)).get("layout", "")) for r in roads]
+        for sid, meta_json, ri, source in zip(ids, metas, road_index, sources, strict=True):
+            meta = json.loads(str(meta_json))
+            facts[str(sid)] = {"layout": str(meta.get("layout", road_layouts[int(ri)])),
+                               "source": str(meta.get("source_file") or source)}
+    return facts
+
+
 def load_scenarios(root: str | Path, split: str | None = None) -> list[Scenario]:
     """Shortcut for ``Dataset.open(root).load(split)``."""
     return Dataset.open(root).load(split)

@@ -86,8 +86,10 @@ def test_invalid_yaml_is_one_line_naming_the_file(tmp_path, capsys, command) -> 
 
 @pytest.mark.parametrize(("setting", "message"), [
     ("hyperparams.td3.batch_size=-1", "TD3Hyperparams.batch_size must be >= 1, got -1"),
-    ("hyperparams.td3.learning_rate=-1", "TD3Hyperparams.learning_rate must be > 0, got -1.0"),
-    ("hyperparams.td3.learning_rate=fast", "learning_rate must be float, got 'fast'"),
+    ("hyperparams.td3.learning_rate=-1", "TD3Hyperparams.learning_rate must be > 0, or an rl-zoo schedule "
+     "lin_<start> with start > 0, got -1.0"),
+    ("hyperparams.td3.learning_rate=fast", "learning_rate must be > 0, or an rl-zoo schedule lin_<start> with "
+     "start > 0, got 'fast'"),
     ("total_timesteps=0", "EgoTrainConfig.total_timesteps must be >= 1, got 0"),
 ])
 def test_train_refuses_bad_values_before_writing(tmp_path, capsys, setting: str, message: str) -> None:

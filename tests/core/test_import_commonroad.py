@@ -123,7 +123,8 @@ def test_the_cut_in_becomes_one_scenario_with_the_cutting_truck_as_adversary(tmp
     assert s.scenario_id == "good-00" and s.source == "commonroad:good.xml"
     assert (s.ego_id, s.adv_id) == (10, 11)  # the truck changes lane: it is the adversary
     # 10 s of log: every start up to step 10 keeps 91 logged steps; the closest approach then sits near step 40.
-    assert s.layout == "commonroad" and s.metadata["lane_change"] and 0 <= s.metadata["t0_step"] <= 10
+    assert s.layout == "TEST" and s.metadata["source"] == "commonroad"  # the benchmark ID's location
+    assert s.metadata["lane_change"] and 0 <= s.metadata["t0_step"] <= 10
     assert s.metadata["logged_steps"] == N_STEPS and s.metadata["benchmark_id"] == "TEST-1"
     # Once in lane: bumper gap 8 m - (4.5 + 6) / 2 = 2.75 m; the angled truck's corner comes a bit closer before.
     ego, adv = s.track(10), s.track(11)
@@ -294,3 +295,18 @@ def test_the_replay_check_explains_its_failures(tmp_path: Path, good_file: Path)
     assert rows["crash"]["logged_boxes_overlap"] is True
     assert result["success_rate"] == pytest.approx(1 / 3)
     assert result["failure_reasons"] == {"crash:logged overlap": 1, "out_of_road:off_drivable": 1}
+
+
+def test_imported_recordings_keep_their_location_as_layout() -> None:
+    from seal.core.importers.commonroad import describe, recording_layout, road_type
+
+    assert recording_layout("USA_US101-26_1_T-1") == "USA_US101"
+    assert recording_layout("DEU_Flensburg-1_1_T-1") == "DEU_Flensburg"
+    assert road_type(("critical", "interstate")) == "highway" and road_type(("urban", "comfort")) == "urban"
+    assert road_type(("comfort",)) is None
+    shared = Path(__file__).resolve().parents[3] / "shared" / "data" / "ngsim-us101"
+    if not shared.is_dir():
+        pytest.skip("no shared NGSIM recordings")
+    described = [describe(read_commonroad(shared / f)) for f in ("USA_Lanker-1_1_T-1.xml", "USA_US101-26_1_T-1.xml")]
+    found = {d["layout"]: d["road_type"] for d in described}
+    assert found == {"USA_Lanker": "urban", "USA_US101": "highway"}  # freeway and urban streets apart

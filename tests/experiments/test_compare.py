@@ -142,7 +142,7 @@ def test_report_files_tables_and_plots(tmp_path):
     row = next(r for r in rows if r["pipeline"] == "noadv" and r["setting"] == "normal" and r["metric"] == "success")
     assert float(row["median"]) == pytest.approx(0.75) and float(row["iqr"]) == pytest.approx(0.25)
     md = (out / "report.md").read_text()
-    assert "| noadv | 3 | 75.0 [62.5-87.5] | 25.0 [12.5-37.5] |" in md  # success: normal, cat
+    assert "| noadv | 3 | 75.0 [62.5-87.5] (12) | 25.0 [12.5-37.5] (12) |" in md  # success: normal, cat; n episodes
     assert [r["setting"] for r in result["table_6_2"]] == ["normal", "cat"]
     # filters: one pipeline, one setting
     only = write_report(store_path, tmp_path / "r2", pipelines=["cat"], settings=["normal"], plots=False)

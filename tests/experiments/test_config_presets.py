@@ -41,10 +41,11 @@ def _resolved(key: str) -> dict[str, Any]:
 
 def test_every_recorded_case_is_covered() -> None:
     configs = Path(__file__).resolve().parents[2] / "experiments" / "configs"
-    # quick_ablations and decisive are newer than the recording (tests/experiments/test_run_pipeline.py and
-    # test_decisive.py check they resolve).
+    # quick_ablations is newer than the recording (tests/experiments/test_run_pipeline.py checks it resolves), as
+    # are the background presets (tests/experiments/test_background_eval.py) and decisive (test_decisive.py).
     presets = {p.stem for p in configs.glob("*.yaml")} - {"eval_generators", "eval_seal_ablations", "prior_default",
-                                                          "quick_ablations", "decisive"}
+                                                          "quick_ablations", "background_quick", "background_standard",
+                                                          "decisive"}
     recorded = {k.split("/")[1] if k.startswith("train/") else f"{k.split('/')[0]}_{k.split('/')[1]}"
                 for k in RECORDED}
     assert presets == recorded  # a new preset file needs a recorded case
@@ -57,4 +58,7 @@ def test_preset_resolves_to_recorded_values(key: str) -> None:
     if key.startswith("train/"):
         # Added after the recording (issue 17): off-policy updates overlap env stepping by default.
         assert resolved.pop("overlap_updates") is True
+        # Added after the recording (issue 25): SB3 policy_kwargs besides net_arch, none by default.
+        if "policy_kwargs" in resolved["hyperparams"]:
+            assert resolved["hyperparams"].pop("policy_kwargs") == {}
     assert resolved == RECORDED[key]

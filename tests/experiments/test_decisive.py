@@ -47,7 +47,8 @@ def test_decisive_plan_is_every_pipeline_times_two_algorithms_times_four_seeds(t
     assert (split["n_train"], split["n_eval"], split["n_hard"], split["hard_by"]) == (1000, 300, 300, "pair")
     ev = config["eval"]
     assert ev["k"] == 5 and ev["limit"] is None
-    assert set(pipeline_names()) - {"noadv"} <= set(ev["settings"]) and {"normal", "hard"} <= set(ev["settings"])
+    assert set(pipeline_names()) - {"noadv"} <= set(ev["settings"])
+    assert {"normal", "hard", "normal-reactive"} <= set(ev["settings"])
     assert any(s.startswith("real:") for s in ev["settings"])
     assert set(fits_needed(config)) == {"prior", "goose", "skills", "objective", "behavior", "probes"}
     assert "skills" in fits_needed({**config, "pipelines": ["noadv"], "eval": {}})  # the ReSkill ego needs them

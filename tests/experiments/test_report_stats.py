@@ -17,7 +17,7 @@ from seal.experiments.report.first_page import (
     overall_lines,
     setting_verdicts,
 )
-from seal.experiments.report.groups import algo_of, base_pipeline, comparable, label_by_algo
+from seal.experiments.report.grouping import algo_of, base_pipeline, comparable, label_by_algo
 from seal.experiments.report.paired import paired_counts, scenario_rates
 from seal.experiments.report.stats import (
     ego_ci_table,

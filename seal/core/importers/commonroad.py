@@ -433,10 +433,32 @@ def read_commonroad(path: str | Path) -> CommonRoadRecording:
     return CommonRoadRecording(path, version, benchmark, dt_s, road, log, tags, uncertain, dropped)
 
 
+HIGHWAY_TAGS = ("highway", "interstate")
+URBAN_TAGS = ("urban", "intersection")
+
+
+def recording_layout(benchmark_id: str) -> str:
+    """The location of a CommonRoad benchmark ID (``COUNTRY_SCENE-CONFIG_PREDICTION``): ``USA_US101-26_1_T-1`` ->
+    ``USA_US101``, ``USA_Lanker-1_1_T-1`` -> ``USA_Lanker``; so recordings of different roads keep apart."""
+    return benchmark_id.split("-", 1)[0] or "commonroad"
+
+
+def road_type(tags: tuple[str, ...]) -> str | None:
+    """``highway`` or ``urban`` from a recording's scenario tags, None when they name neither."""
+    if set(tags) & set(HIGHWAY_TAGS):
+        return "highway"
+    if set(tags) & set(URBAN_TAGS):
+        return "urban"
+    return None
+
+
 def describe(rec: CommonRoadRecording) -> dict[str, object]:
-    """Provenance of a recording for scenario metadata (JSON-serialisable)."""
+    """Provenance of a recording for scenario metadata (JSON-serialisable); ``layout`` is the recording's location
+    (`recording_layout`), ``source`` the format."""
     return {
-        "layout": "commonroad",
+        "layout": recording_layout(rec.benchmark_id),
+        "source": "commonroad",
+        "road_type": road_type(rec.tags),
         "source_file": rec.path.name,
         "benchmark_id": rec.benchmark_id,
         "commonroad_version": rec.version,

@@ -12,7 +12,7 @@ from __future__ import annotations
 import codecs
 import io
 import pickle
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -60,14 +60,18 @@ _PY2_NAMES = {("__builtin__", "long"): ("builtins", "int"), ("__builtin__", "uni
 
 
 class _RestrictedUnpickler(pickle.Unpickler):
-    def __init__(self, file: io.BufferedIOBase, path: Path) -> None:
+    def __init__(self, file: io.BufferedIOBase, path: Path,
+                 extra: Mapping[tuple[str, str], Callable[..., Any]] | None = None) -> None:
         super().__init__(file)
         self._path = path
+        self._extra = dict(extra or {})
 
     def find_class(self, module: str, name: str) -> Any:
         key = _PY2_NAMES.get((module, name), ("builtins" if module == "__builtin__" else module, name))
         if key in ALLOWED:
             return ALLOWED[key]
+        if key in self._extra:
+            return self._extra[key]
         raise UnsafePickleError(
             self._path, "pickle",
             f"refused to load {module}.{name}: only numpy arrays and plain containers (dict, list, tuple, set, str, "
@@ -78,8 +82,9 @@ class _RestrictedUnpickler(pickle.Unpickler):
         raise UnsafePickleError(self._path, "pickle", f"refused persistent id {pid!r}: not a plain data pickle")
 
 
-def safe_load(path: str | Path) -> Any:
-    """Unpickle ``path`` with only `ALLOWED` names resolvable.
+def safe_load(path: str | Path, extra: Mapping[tuple[str, str], Callable[..., Any]] | None = None) -> Any:
+    """Unpickle ``path`` with only `ALLOWED` names resolvable, plus ``extra`` ((module, name) -> the callable used
+    instead: a caller maps the classes of a known file format to inert stand-ins that only keep their state).
 
     Raises:
         UnsafePickleError: the pickle names anything else (nothing of it has been called).
@@ -88,7 +93,7 @@ def safe_load(path: str | Path) -> Any:
     path = Path(path)
     try:
         with path.open("rb") as f:
-            return _RestrictedUnpickler(f, path).load()
+            return _RestrictedUnpickler(f, path, extra).load()
     except ImportFormatError:
         raise
     except (pickle.UnpicklingError, EOFError, ValueError, TypeError, AttributeError, IndexError, KeyError,

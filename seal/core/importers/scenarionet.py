@@ -414,7 +414,9 @@ def parked_ego(rec: ScenarioNetRecording) -> str | None:
 def describe(rec: ScenarioNetRecording) -> dict[str, object]:
     """Provenance of a recording for scenario metadata (JSON-serialisable)."""
     return {
-        "layout": "scenarionet",
+        # the source dataset (waymo, nuplan, ...) keeps recordings of different origins apart
+        "layout": rec.dataset if rec.dataset not in ("", "unknown") else "scenarionet",
+        "source": "scenarionet",
         "source_file": rec.path.name,
         "dataset": rec.dataset,
         "source_scenario_id": rec.scenario_id,

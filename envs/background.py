@@ -1,0 +1,271 @@
+"""Background traffic: how the agents other than the ego and the adversary move in `ScenarioEnv`.
+
+``background: replay`` (the default) places every background agent at its logged row (`ScenarioEnv` does not
+call this module at all then, so replay is unchanged bit for bit). The other kinds are `BackgroundController`
+objects that move all background agents at once, one 10 Hz step at a time, from the box table of the current step
+(``cur [A, 8]``, track layout, the ego and the adversary included, so background traffic reacts to both):
+
+* `IDMBackground` (``idm``): each agent follows its logged route (`seal.envs.route.Route`) with highway-env's IDM
+  longitudinal control (its ``IDMVehicle`` constants), braking for whatever box is ahead of it, the ego included;
+* `ConstantVelocityBackground`: keeps each agent's velocity (the reference of `seal eval background`);
+* ``rapid``: `seal.models.rapid.RapidBackground`, the learned next-step acceleration model (a subclass of
+  `SimulatedBackground`, passed to the env as ``background_model``).
+
+Lifetime is the log's in every kind: a simulated agent is present at step ``t`` while its log is valid at ``t``;
+it enters at its logged row of the first valid step and is gone after its last one. Intent (`Intent`): a desired
+speed (m/s) and a destination (map frame, m) per agent, by default the agent's mean logged speed after
+`CURRENT_STEP` and the end of its logged track; `SimulatedBackground.set_intent` overrides them per agent.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from seal.core.scenario import CURRENT_STEP, DT_S, HEADING, LENGTH, N_STEPS, VALID, VX, VY, WIDTH, Scenario, X, Y
+from seal.envs.kinematics import MAX_SPEED_MPS
+from seal.envs.route import Route
+
+BACKGROUND_KINDS = ("replay", "idm", "rapid")
+"""Values of `ScenarioEnv`'s ``background`` option."""
+
+# highway-env's IDMVehicle constants (highway_env.vehicle.behavior.IDMVehicle), copied so the kinematic layer
+# does not import a vehicle class only for its numbers.
+IDM_ACC_MAX_MPS2 = 6.0
+IDM_COMFORT_ACC_MAX_MPS2 = 3.0
+IDM_COMFORT_ACC_MIN_MPS2 = -5.0
+IDM_DISTANCE_WANTED_M = 10.0
+IDM_TIME_WANTED_S = 1.5
+IDM_DELTA = 4.0
+LEADER_RANGE_M = 80.0
+"""How far ahead a leader is looked for (m)."""
+PATH_MARGIN_M = 0.6
+"""Lateral clearance (m) beyond the two half widths within which a box ahead counts as in the agent's path."""
+
+
+@dataclass
+class Intent:
+    """Per-agent intent of one episode (rows of the scenario's tracks).
+
+    Attributes:
+        desired_speed_mps: ``[A]`` desired speed (m/s); NaN where unknown.
+        destination_xy: ``[A, 2]`` destination in the map frame (m); NaN where unknown.
+    """
+
+    desired_speed_mps: np.ndarray
+    destination_xy: np.ndarray
+
+    @classmethod
+    def from_log(cls, scenario: Scenario) -> Intent:
+        """The logged intent: mean logged speed after `CURRENT_STEP` (all valid steps when none) and the last
+        valid position of each agent's track."""
+        tracks = scenario.tracks.astype(np.float64)
+        valid = tracks[:, :, VALID] > 0.5
+        speed = np.hypot(tracks[:, :, VX], tracks[:, :, VY])
+        future = valid.copy()
+        future[:, : CURRENT_STEP + 1] = False
+        use = np.where(future.any(axis=1, keepdims=True), future, valid)
+        n = np.maximum(use.sum(axis=1), 1)
+        desired = np.where(use.any(axis=1), (speed * use).sum(axis=1) / n, np.nan)
+        last = np.where(valid.any(axis=1), valid.shape[1] - 1 - np.argmax(valid[:, ::-1], axis=1), 0)
+        dest = tracks[np.arange(len(tracks)), last][:, [X, Y]]
+        dest[~valid.any(axis=1)] = np.nan
+        return cls(desired, dest)
+
+
+class BackgroundController(ABC):
+    """Moves the background agents of one episode. `reset` is called at every env reset."""
+
+    name: str = "background"
+
+    @abstractmethod
+    def reset(self, scenario: Scenario, rng: np.random.Generator, driven: np.ndarray) -> None:
+        """Prepare an episode of ``scenario``; ``driven`` ``[A]`` bool marks the rows this controller moves."""
+
+    @abstractmethod
+    def step(self, t: int, cur: np.ndarray) -> np.ndarray:
+        """Rows ``[A, 8]`` (track layout) of the driven agents at step ``t + 1``, from the box table ``cur``
+        ``[A, 8]`` at step ``t`` (every agent; absent rows have valid = 0). Rows of agents not driven are ignored."""
+
+
+class SimulatedBackground(BackgroundController):
+    """A controller that integrates a per-agent acceleration with the log's lifetime (module docstring).
+
+    Subclasses implement `accelerations`; the state update is the finite-difference one the logs satisfy:
+    ``v(t+1) = v(t) + a dt``, ``p(t+1) = p(t) + v(t+1) dt``, heading along the velocity (kept below 0.5 m/s).
+    """
+
+    def reset(self, scenario: Scenario, rng: np.random.Generator, driven: np.ndarray) -> None:
+        self.scenario = scenario
+        self.rng = rng
+        self.driven = np.asarray(driven, dtype=bool)
+        self.log = scenario.tracks.astype(np.float64)
+        self.intent = Intent.from_log(scenario)
+
+    def set_intent(self, row: int, desired_speed_mps: float | None = None,
+                   destination_xy: tuple[float, float] | None = None) -> None:
+        """Override the intent of the agent in row ``row`` for the rest of the episode (after `reset`)."""
+        if desired_speed_mps is not None:
+            self.intent.desired_speed_mps[row] = float(desired_speed_mps)
+        if destination_xy is not None:
+            self.intent.destination_xy[row] = destination_xy
+
+    @abstractmethod
+    def accelerations(self, t: int, cur: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """``[len(rows), 2]`` map-frame accelerations (m/s^2) of the agents ``rows`` (present at ``t`` in ``cur``)."""
+
+    def step(self, t: int, cur: np.ndarray) -> np.ndarray:
+        out = np.zeros_like(cur)
+        if t + 1 >= N_STEPS:
+            return out
+        alive = self.driven & (self.log[:, t + 1, VALID] > 0.5)
+        moving = np.flatnonzero(alive & (cur[:, VALID] > 0.5))
+        entering = alive & ~(cur[:, VALID] > 0.5)
+        out[entering] = self.log[entering, t + 1]
+        if moving.size:
+            out[moving] = integrate_rows(cur[moving], self.accelerations(t, cur, moving))
+        return out
+
+
+def integrate_rows(rows: np.ndarray, accel: np.ndarray) -> np.ndarray:
+    """Next rows ``[n, 8]`` after one step of map-frame acceleration ``accel [n, 2]`` (m/s^2): semi-implicit Euler,
+    speed capped at `MAX_SPEED_MPS`, heading along the new velocity above 0.5 m/s."""
+    new = rows.copy()
+    v = rows[:, [VX, VY]] + accel * DT_S
+    speed = np.hypot(v[:, 0], v[:, 1])
+    v *= (np.minimum(speed, MAX_SPEED_MPS) / np.maximum(speed, 1e-9))[:, None]
+    new[:, [VX, VY]] = v
+    new[:, X] += v[:, 0] * DT_S
+    new[:, Y] += v[:, 1] * DT_S
+    moving = speed > 0.5
+    new[moving, HEADING] = np.arctan2(v[moving, 1], v[moving, 0])
+    new[:, VALID] = 1.0
+    return new
+
+
+class ConstantVelocityBackground(SimulatedBackground):
+    """Every agent keeps its velocity (zero acceleration): the reference of `seal eval background`."""
+
+    name = "constant_velocity"
+
+    def accelerations(self, t: int, cur: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        return np.zeros((rows.size, 2))
+
+
+def leader_gaps(cur: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each agent of ``rows``: (bumper gap to the nearest box in its path ahead (m, inf when none within
+    `LEADER_RANGE_M`), that box's speed along the agent's heading (m/s)). A box is in the path when its centre is
+    ahead and within the two half widths plus `PATH_MARGIN_M` of the agent's heading line (the ego and the
+    adversary count like everyone else)."""
+    present = np.flatnonzero(cur[:, VALID] > 0.5)
+    me = cur[rows]
+    other = cur[present]
+    c, s = np.cos(me[:, HEADING])[:, None], np.sin(me[:, HEADING])[:, None]
+    dx = other[None, :, X] - me[:, X, None]
+    dy = other[None, :, Y] - me[:, Y, None]
+    ahead = c * dx + s * dy
+    side = -s * dx + c * dy
+    half_w = 0.5 * (me[:, WIDTH, None] + other[None, :, WIDTH])
+    in_path = (ahead > 0) & (ahead < LEADER_RANGE_M) & (np.abs(side) < half_w + PATH_MARGIN_M)
+    in_path &= present[None, :] != rows[:, None]
+    gap = np.where(in_path, ahead - 0.5 * (me[:, LENGTH, None] + other[None, :, LENGTH]), np.inf)
+    k = np.argmin(gap, axis=1)
+    best = gap[np.arange(rows.size), k]
+    lead_v = c[:, 0] * other[k, VX] + s[:, 0] * other[k, VY]
+    return best, np.where(np.isfinite(best), lead_v, 0.0)
+
+
+def idm_acceleration(speed: np.ndarray, desired: np.ndarray, gap: np.ndarray, lead_speed: np.ndarray) -> np.ndarray:
+    """highway-env's IDM acceleration (m/s^2) for speeds, desired speeds, bumper gaps (inf: free road) and the
+    leaders' speeds, all ``[n]``; clipped to +-`IDM_ACC_MAX_MPS2` as highway-env does."""
+    v0 = np.maximum(desired, 0.1)
+    free = IDM_COMFORT_ACC_MAX_MPS2 * (1.0 - np.power(np.maximum(speed, 0.0) / v0, IDM_DELTA))
+    dv = speed - lead_speed
+    s_star = (IDM_DISTANCE_WANTED_M + np.maximum(speed, 0.0) * IDM_TIME_WANTED_S
+              + speed * dv / (2.0 * math.sqrt(IDM_COMFORT_ACC_MAX_MPS2 * -IDM_COMFORT_ACC_MIN_MPS2)))
+    finite = np.isfinite(gap)
+    interact = np.zeros_like(speed)
+    g = np.maximum(gap[finite], 0.1)
+    interact[finite] = IDM_COMFORT_ACC_MAX_MPS2 * (np.maximum(s_star[finite], 0.0) / g) ** 2
+    return np.clip(free - interact, -IDM_ACC_MAX_MPS2, IDM_ACC_MAX_MPS2)
+
+
+class IDMBackground(BackgroundController):
+    """IDM along the logged route (module docstring): each agent's arc length on its route advances by its IDM
+    speed; its box is placed on the route, heading along it. Desired speed: the agent's `Intent`."""
+
+    name = "idm"
+
+    def reset(self, scenario: Scenario, rng: np.random.Generator, driven: np.ndarray) -> None:
+        self.driven = np.asarray(driven, dtype=bool)
+        self.log = scenario.tracks.astype(np.float64)
+        self.intent = Intent.from_log(scenario)
+        self._routes: dict[int, Route] = {}
+        self._s = np.zeros(scenario.n_agents)
+        self._hint: dict[int, int] = {}
+
+    def _route(self, row: int) -> Route:
+        route = self._routes.get(row)
+        if route is None:
+            route = self._routes[row] = Route.from_track(self.log[row], 0)
+        return route
+
+    def step(self, t: int, cur: np.ndarray) -> np.ndarray:
+        out = np.zeros_like(cur)
+        if t + 1 >= N_STEPS:
+            return out
+        alive = self.driven & (self.log[:, t + 1, VALID] > 0.5)
+        present = cur[:, VALID] > 0.5
+        entering = np.flatnonzero(alive & ~present)
+        for row in entering.tolist():
+            out[row] = self.log[row, t + 1]
+            route = self._route(row)
+            proj = route.project(out[row, X], out[row, Y])
+            self._s[row], self._hint[row] = proj.s, proj.segment
+        moving = np.flatnonzero(alive & present)
+        if not moving.size:
+            return out
+        speed = np.hypot(cur[moving, VX], cur[moving, VY])
+        gap, lead_v = leader_gaps(cur, moving)
+        desired = np.nan_to_num(self.intent.desired_speed_mps[moving], nan=speed)
+        new_speed = np.clip(speed + idm_acceleration(speed, desired, gap, lead_v) * DT_S, 0.0, MAX_SPEED_MPS)
+        for k, row in enumerate(moving.tolist()):
+            route = self._route(row)
+            if row not in self._hint:  # present at the first step: start on its route
+                proj = route.project(cur[row, X], cur[row, Y])
+                self._s[row], self._hint[row] = proj.s, proj.segment
+            self._s[row] += new_speed[k] * DT_S
+            x, y = route.point_at(self._s[row])
+            ax, ay = route.point_at(self._s[row] - 1.0)
+            heading = math.atan2(y - ay, x - ax)
+            v = new_speed[k]
+            out[row] = (x, y, heading, v * math.cos(heading), v * math.sin(heading),
+                        cur[row, LENGTH], cur[row, WIDTH], 1.0)
+        return out
+
+
+def roll_background(scenario: Scenario, controller: BackgroundController, rng: np.random.Generator,
+                    last_step: int = N_STEPS - 1, setup: Callable[[BackgroundController], None] | None = None
+                    ) -> np.ndarray:
+    """Tracks ``[A, last_step + 1, 8]`` where the background moves by ``controller`` from `CURRENT_STEP` on and
+    the ego and the adversary replay their logs (the open-loop roll-out of `seal eval background`); ``setup`` is
+    called with the controller after its reset (e.g. to set intents)."""
+    log = scenario.tracks.astype(np.float64)
+    driven = np.ones(scenario.n_agents, dtype=bool)
+    driven[[scenario.ego_index, scenario.adv_index]] = False
+    controller.reset(scenario, rng, driven)
+    if setup is not None:
+        setup(controller)
+    out = np.zeros((scenario.n_agents, last_step + 1, 8))
+    out[:, : CURRENT_STEP + 1] = log[:, : CURRENT_STEP + 1]
+    cur = log[:, CURRENT_STEP].copy()
+    for t in range(CURRENT_STEP, last_step):
+        rows = controller.step(t, cur)
+        cur = log[:, t + 1].copy()
+        cur[driven] = rows[driven]
+        out[:, t + 1] = cur
+    return out
