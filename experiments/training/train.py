@@ -202,10 +202,39 @@ def train_run(config: dict[str, Any], out: Path, resume: bool = False, progress:
     venv = build_vec_env(config, train_scenarios, n_envs)
     try:
         _learn(config, out, venv, checkpoint, restored, eval_scenarios, progress)
-    finally:
+    except BaseException:
+        close_vec_env(venv, abort=True)
+        raise
+    close_vec_env(venv, abort=False)
+    return out
+
+
+def close_vec_env(venv: Any, abort: bool, join_s: float = 10.0) -> None:
+    """Close ``venv`` and its worker processes. ``abort`` (training was interrupted: SIGTERM, an error) does not
+    wait for step results that may never come (SB3's ``close`` would read one reply per worker, and an interrupt
+    inside ``step_wait`` leaves some already read: it would block forever); a worker still alive ``join_s``
+    seconds after being told to close is killed."""
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    inner = venv
+    while not isinstance(inner, SubprocVecEnv) and hasattr(inner, "venv"):
+        inner = inner.venv
+    if not abort or not isinstance(inner, SubprocVecEnv) or inner.closed:
         with contextlib.suppress(OSError, EOFError):  # workers already gone (killed with the process group)
             venv.close()
-    return out
+        return
+    inner.waiting = False
+    for remote in inner.remotes:
+        with contextlib.suppress(OSError, ValueError):
+            remote.send(("close", None))
+    for process in inner.processes:
+        process.join(join_s)
+        if process.is_alive():
+            process.kill()
+            process.join()
+    for remote in inner.remotes:
+        remote.close()
+    inner.closed = True
 
 
 def run_torch_threads(config: Mapping[str, Any], out: Path, resume: bool) -> int:
