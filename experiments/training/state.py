@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from seal.core.atomic import atomic_write, atomic_write_bytes, atomic_write_json
+from seal.core.atomic import atomic_write, atomic_write_bytes, atomic_write_json, naming_the_file
 from seal.core.errors import SealError
 
 logger = logging.getLogger(__name__)
@@ -168,6 +168,29 @@ def write_checkpoint(out: Path, model: Any, worker_states: list[dict[str, np.nda
     for stale in root.glob(".tmp_step_*"):  # left by a kill during an earlier checkpoint
         shutil.rmtree(stale, ignore_errors=True)
     tmp.mkdir()
+    try:
+        _write_checkpoint_files(tmp, step, model, worker_states, extra, extra_models)
+    except BaseException as exc:
+        shutil.rmtree(tmp, ignore_errors=True)  # disk full, a kill: the previous checkpoint stays in force
+        named = naming_the_file(exc, final, "the previous checkpoint stays in force")
+        if named is exc:
+            raise
+        raise named from exc
+    shutil.rmtree(final, ignore_errors=True)
+    tmp.rename(final)
+    atomic_write_json(root / LATEST, {"step": step, "dir": final.name})
+    kept = sorted((p for p in root.glob("step_*") if p.is_dir()), key=lambda p: int(p.name.split("_")[1]))
+    for old in kept[:-KEEP_CHECKPOINTS]:
+        shutil.rmtree(old, ignore_errors=True)
+    for old in kept[-KEEP_CHECKPOINTS:-1]:
+        for buffer in old.glob("*replay_buffer.npz"):
+            buffer.unlink(missing_ok=True)
+    return final
+
+
+def _write_checkpoint_files(tmp: Path, step: int, model: Any, worker_states: list[dict[str, np.ndarray]],
+                            extra: dict[str, Any], extra_models: Mapping[str, Any] | None) -> None:
+    """Every file of checkpoint ``step`` into the folder ``tmp`` (`write_checkpoint`)."""
     model.save(tmp / "model.zip", exclude=SAVE_EXCLUDE)
     if getattr(model, "replay_buffer", None) is not None:
         save_replay_buffer(model.replay_buffer, tmp / "replay_buffer.npz")
@@ -186,16 +209,6 @@ def write_checkpoint(out: Path, model: Any, worker_states: list[dict[str, np.nda
         "rng": rng_json, **({"models": models} if models else {}), **extra,
     }
     atomic_write_json(tmp / "state.json", state)
-    shutil.rmtree(final, ignore_errors=True)
-    tmp.rename(final)
-    atomic_write_json(root / LATEST, {"step": step, "dir": final.name})
-    kept = sorted((p for p in root.glob("step_*") if p.is_dir()), key=lambda p: int(p.name.split("_")[1]))
-    for old in kept[:-KEEP_CHECKPOINTS]:
-        shutil.rmtree(old, ignore_errors=True)
-    for old in kept[-KEEP_CHECKPOINTS:-1]:
-        for buffer in old.glob("*replay_buffer.npz"):
-            buffer.unlink(missing_ok=True)
-    return final
 
 
 # ---------------------------------------------------------------------------------------------------- reads

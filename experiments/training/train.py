@@ -182,6 +182,10 @@ def train_run(config: dict[str, Any], out: Path, resume: bool = False, progress:
     train_scenarios = load_split(config["dataset"], config["train_split"], config["train_limit"], "train")
     eval_scenarios = (load_split(config["dataset"], config["eval_split"], int(config["eval_episodes"]), "eval")
                       if int(config["eval_every"]) else [])
+    if len(eval_scenarios) < int(config["eval_episodes"]) and eval_scenarios:
+        logger.warning(f"eval_episodes = {config['eval_episodes']}, but split {config['eval_split']!r} of "
+                       f"{config['dataset']} holds {len(eval_scenarios)} scenarios: each evaluation runs "
+                       f"{len(eval_scenarios)} episodes")
     if len(train_scenarios) < n_envs:
         raise ValueError(f"{len(train_scenarios)} train scenarios cannot feed {n_envs} env workers; lower train.n_envs")
     if config["generator"]["name"]:
@@ -286,7 +290,7 @@ def _learn(config: Mapping[str, Any], out: Path, venv: Any, checkpoint: Path | N
     ``done.json``."""
     from stable_baselines3.common.logger import Logger, TensorBoardOutputFormat
 
-    from seal.core.atomic import atomic_write_json
+    from seal.core.atomic import atomic_write_json, naming_the_file
     from seal.experiments.training.callbacks import ResumableCSVOutputFormat
     from seal.experiments.training.overlap import find_overlap_env
 
@@ -327,8 +331,15 @@ def _learn(config: Mapping[str, Any], out: Path, venv: Any, checkpoint: Path | N
     if model.num_timesteps < total or (reskill is None and model.num_timesteps != total):
         raise RuntimeError(f"training stopped at {model.num_timesteps} env steps, expected {total}")
     tmp_model = out / f".tmp_{ts.FINAL_MODEL}"
-    model.save(tmp_model, exclude=ts.SAVE_EXCLUDE)
-    os.replace(tmp_model, out / ts.FINAL_MODEL)
+    try:
+        model.save(tmp_model, exclude=ts.SAVE_EXCLUDE)
+        os.replace(tmp_model, out / ts.FINAL_MODEL)
+    except BaseException as exc:
+        tmp_model.unlink(missing_ok=True)  # disk full: no partial file; the last checkpoint still resumes
+        named = naming_the_file(exc, out / ts.FINAL_MODEL, f"resume with `seal train --resume {out}`")
+        if named is exc:
+            raise
+        raise named from exc
     if reskill is not None:
         reskill.save_final(out)
     wall = wall_before + time.perf_counter() - session_start
