@@ -145,11 +145,11 @@ def test_score_killed_leaves_no_worker_and_a_rerun_scores_as_usual(
 
 
 # ------------------------------------------------------------------------------------------------ seal train
-TRAIN = ["train", "--config", "quick", "--pipeline", "cat", "--seed", "1", "--steps", "1200", "--n-envs", "2",
+TRAIN = ["train", "--config", "quick", "--pipeline", "cat", "--seed", "1", "--steps", "600", "--n-envs", "2",
          "--set", "checkpoint_every=200", "--set", "eval_every=0", "--set", "pipelines.cat={name: rule, kwargs: {}}",
          "--set", "hyperparams.td3={learning_starts: 30, batch_size: 16, net_arch: [16, 16], buffer_size: 2000, "
          "train_freq: 1, gradient_steps: 1}", "--no-progress"]
-"""A tiny TD3 run in the closed loop (rule adversary) on 2 env workers: 1200 steps, a checkpoint every 200."""
+"""A tiny TD3 run in the closed loop (rule adversary) on 2 env workers: 600 steps, a checkpoint every 200."""
 
 
 def _policy(run: Path) -> dict:
@@ -183,10 +183,10 @@ def test_train_killed_by_either_signal_resumes_to_the_same_model(tmp_path: Path)
         resumed = subprocess.run([*SEAL, "train", "--resume", str(run), "--no-progress", "--json"], check=True,
                                  capture_output=True, text=True)
         done = json.loads(resumed.stdout)
-        assert (done["steps"], done["resumed_from"]) == (1200, checkpoint)
+        assert (done["steps"], done["resumed_from"]) == (600, checkpoint)
         steps = [int(r["time/total_timesteps"]) for r in csv.DictReader((run / "progress.csv").open())
                  if r["time/total_timesteps"]]
-        assert steps == sorted(set(steps)) and steps[-1] <= 1200  # rows after the checkpoint dropped, not doubled
+        assert steps == sorted(set(steps)) and steps[-1] <= 600  # rows after the checkpoint dropped, not doubled
         finals.append((checkpoint, _policy(run)))
     (from_kill, kill_policy), (from_term, term_policy) = finals
     assert from_kill == from_term == 200
