@@ -91,3 +91,14 @@ def test_a_short_roll_out_counts_only_its_own_steps() -> None:
     assert sel.first_hit.tolist() == [[-1], [-1]] and not sel.collided
     assert sel.min_distance_m[0] == pytest.approx(100.0) and sel.index == 1
     assert sel.predicted_step == 20  # the last sample the roll-out covers
+
+
+def test_a_colliding_candidate_whose_prior_underflows_still_wins() -> None:
+    """P1 of the colliding candidate is exactly 0 (its logit is 1000 below): every score is 0, and the colliding
+    candidate is chosen over the likelier one that never comes near, whatever the number of roll-outs."""
+    cand = np.zeros((2, N_FUTURE, 2))
+    cand[0, :, 0] = 500.0  # never near
+    ego = tuple(np.repeat(a, 2, axis=0) for a in _ego(CURRENT_STEP + N_FUTURE + 1))  # two identical roll-outs
+    sel = cat_select(cand, np.zeros((2, N_FUTURE)), np.ones(2), SIZE, *ego, SIZE, logits=np.array([0.0, -1000.0]))
+    assert sel.p1[1] == 0.0 and sel.scores.max() == 0.0
+    assert sel.index == 1 and sel.collided

@@ -4,6 +4,8 @@ learned-objective path (when `seal.models.objective` is importable)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -236,3 +238,18 @@ def test_close_call_gap_between_ego_and_adversary_boxes() -> None:
     assert min_box_gap(ego, adv) == pytest.approx(4.0)
     adv[:, VALID] = 0.0
     assert min_box_gap(ego, adv) == float("inf")
+
+
+@pytest.mark.parametrize("switch", ["adversarial", "benign"])
+def test_switch_names_from_a_config_load_that_prior_at_noise_1(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, switch: str,
+) -> None:
+    """A config names the switch as text; the skills folder is loaded with that prior and, by default, noise 1."""
+    from seal.adversaries.seal.generator import load_skill_policy
+
+    loaded: list[dict] = []
+    monkeypatch.setattr(SkillPolicy, "load", classmethod(lambda cls, folder, **kw: loaded.append(kw) or "policy"))
+    generator = SEALGenerator(candidate_source=_candidates, objective="cat", skills=tmp_path, switch=switch)
+    assert generator.switch == switch and generator.policy == "policy"
+    assert load_skill_policy(tmp_path, switch) == "policy"
+    assert loaded == [{"prior": switch, "noise_scale": 1.0, "horizon": None}] * 2
