@@ -253,3 +253,16 @@ def test_switch_names_from_a_config_load_that_prior_at_noise_1(
     assert generator.switch == switch and generator.policy == "policy"
     assert load_skill_policy(tmp_path, switch) == "policy"
     assert loaded == [{"prior": switch, "noise_scale": 1.0, "horizon": None}] * 2
+
+
+def test_option_bounds_are_inclusive() -> None:
+    """0 noise (the prior's mean skill), a 1-step skill horizon and a switch at the predicted contact itself are
+    valid; one below each is not."""
+    generator = _generator(noise_scale=0.0, skill_horizon=1, switch_offset_steps=0)
+    assert generator.switch_offset_steps == 0
+    assert _generator(noise_scale=0.5).switch == "adversarial"
+    for bad, message in (({"noise_scale": -0.1}, "noise_scale must be >= 0"),
+                         ({"skill_horizon": 0}, "skill_horizon must be >= 1"),
+                         ({"switch_offset_steps": -1}, "switch_offset_steps must be >= 0")):
+        with pytest.raises(ValueError, match=message):
+            _generator(**bad)
