@@ -266,3 +266,21 @@ def test_option_bounds_are_inclusive() -> None:
                          ({"switch_offset_steps": -1}, "switch_offset_steps must be >= 0")):
         with pytest.raises(ValueError, match=message):
             _generator(**bad)
+
+
+def test_generation_record_and_a_fresh_policy_per_generation(highway: list[Scenario]) -> None:
+    """What a generation records (the values the evaluation stores) and that each skill behaviour gets its own
+    copy of the policy (two adversaries driven at once must not share its state)."""
+    scenario = highway[0]
+    queue = RolloutHistory().queue(scenario)
+    generator = _generator()
+    first = generator.generate(scenario, queue, np.random.default_rng(0))
+    second = generator.generate(scenario, queue, np.random.default_rng(0))
+    chosen = first.chosen_candidate
+    assert first.extra["switch"] == "adversarial" and isinstance(first.extra["skill_seed"], int)
+    assert first.extra["score"] == pytest.approx(first.extra["scores"][chosen], abs=1e-6)
+    assert first.extra["prior_prob"] == pytest.approx(0.3) and chosen == 1
+    assert first.extra["min_distance_m"] >= 0.0
+    assert first.behavior.policy is not generator.policy and first.behavior.policy is not second.behavior.policy
+    trajectory_only = _generator(switch="none").generate(scenario, queue, np.random.default_rng(0))
+    assert trajectory_only.extra["switch"] == "none" and trajectory_only.extra["skill_seed"] is None
