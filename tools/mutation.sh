@@ -29,6 +29,7 @@ group adversaries/seal/generator.py tests/adversaries/test_generators_seal.py te
 group seal/core/importers/safe_pickle.py tests/core/test_import_scenarionet.py \
   tests/core/test_import_scenarionet_repairs.py tests/core/test_safe_pickle.py
 group experiments/training/state.py tests/experiments/test_train.py tests/experiments/test_train_checkpoints.py \
-  -k "'history_state or replay_buffer or truncate_progress or run_folder or checkpoint and not killed and not corrupt_latest and not damaged_checkpoint_file'"
+  tests/experiments/test_train_state.py -k "'history_state or replay_buffer or truncate_progress or run_folder \
+  or train_state or (checkpoint and not killed and not corrupt_latest and not damaged_checkpoint_file)'"
 $PY tools/mutation_runner.py stop
 $PY tools/mutation_score.py .mutmut-cache
