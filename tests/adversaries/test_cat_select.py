@@ -16,12 +16,14 @@ SIZE = (4.5, 2.0)
 def test_fill_invalid_takes_the_earlier_valid_row_else_the_next() -> None:
     valid = np.array([[False, True, False, False, True, False],
                       [True, False, False, False, False, True],
-                      [False, False, False, False, False, False]])
-    xy = np.stack([np.arange(6.0)[None].repeat(3, 0), 10 * np.arange(3.0)[:, None].repeat(6, 1)], axis=-1)
+                      [False, False, False, False, False, False],
+                      [False, False, False, False, True, False]])
+    xy = np.stack([np.arange(6.0)[None].repeat(4, 0), 10 * np.arange(4.0)[:, None].repeat(6, 1)], axis=-1)
     filled = _fill_invalid(xy, valid)
     assert filled[0, :, 0].tolist() == [1, 1, 1, 1, 4, 4]  # leading gap from the next, the rest from the earlier
     assert filled[1, :, 0].tolist() == [0, 0, 0, 0, 0, 5]
     assert filled[2, :, 0].tolist() == [5, 5, 5, 5, 5, 5]  # nothing valid: the last row
+    assert filled[3, :, 0].tolist() == [4, 4, 4, 4, 4, 4]  # a long leading gap: still the first valid row
     np.testing.assert_array_equal(filled[..., 1], xy[..., 1])  # rows stay rows
 
 
@@ -102,3 +104,14 @@ def test_a_colliding_candidate_whose_prior_underflows_still_wins() -> None:
     sel = cat_select(cand, np.zeros((2, N_FUTURE)), np.ones(2), SIZE, *ego, SIZE, logits=np.array([0.0, -1000.0]))
     assert sel.p1[1] == 0.0 and sel.scores.max() == 0.0
     assert sel.index == 1 and sel.collided
+
+
+def test_the_last_row_of_a_short_roll_out_is_its_own_position() -> None:
+    """A roll-out of 21 rows (steps 0..20) jumps 50 m on its last step: the sample at step 20 sees the ego where
+    it is at step 20, not one step earlier."""
+    xy, heading, valid = _ego(21)
+    xy[0, 20] = (50.0, 0.0)
+    cand = np.zeros((1, N_FUTURE, 2))
+    cand[0, :, 0] = 50.0  # waits where the ego arrives
+    sel = cat_select(cand, np.zeros((1, N_FUTURE)), np.ones(1), SIZE, xy, heading, valid, SIZE)
+    assert sel.collided and sel.first_hit.tolist() == [[1]] and sel.predicted_step == 20

@@ -125,3 +125,11 @@ def test_env_fns_build_each_worker_with_its_part_the_generator_and_the_config() 
         assert env.env.unwrapped.config["horizon_steps"] == 17
     logged = closed_loop_env_fns(scenarios, 1, None)[0]()
     assert logged.adversary.generator is None and logged.get_perturb_prob() == 1.0
+
+
+def test_warm_up_builds_every_queue() -> None:
+    scenarios = [sf.highway_scenario(i) for i in range(3)]
+    env = ClosedLoopEnv(ScenarioEnv(scenarios), None, k=2)
+    assert len(env.history) == 0
+    assert env.warm_up() == 3
+    assert sorted(env.history) == sorted(s.scenario_id for s in scenarios)
