@@ -15,7 +15,9 @@ Layout of a run folder ``RUN/``::
     done.json             {"steps": N, "wall_s": ...}, written last (atomically): the run is finished
 
 A checkpoint is written into a temporary folder, renamed to ``step_<N>`` and only then named in ``latest.json``
-(atomic write), so a kill at any moment leaves the previous complete checkpoint in force. Nothing here is
+(atomic write), so a kill at any moment leaves the previous complete checkpoint in force. A damaged
+``latest.json`` or checkpoint file (disk errors, a hand edit) is named and the run resumes from the newest
+checkpoint that reads back whole (`latest_checkpoint`). Nothing here is
 unpickled: arrays are loaded with ``allow_pickle=False`` and the model's parameters with SB3's
 ``torch.load(weights_only=True)``; the model's pickled settings are never read (the model is rebuilt from
 ``config.yaml``).
@@ -26,15 +28,20 @@ from __future__ import annotations
 import csv
 import io
 import json
+import logging
 import random
 import shutil
-from collections.abc import Mapping
+import zipfile
+from collections.abc import Collection, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from seal.core.atomic import atomic_write, atomic_write_bytes, atomic_write_json
+from seal.core.atomic import atomic_write, atomic_write_bytes, atomic_write_json, naming_the_file
+from seal.core.errors import SealError
+
+logger = logging.getLogger(__name__)
 
 CONFIG = "config.yaml"
 DONE = "done.json"
@@ -161,6 +168,29 @@ def write_checkpoint(out: Path, model: Any, worker_states: list[dict[str, np.nda
     for stale in root.glob(".tmp_step_*"):  # left by a kill during an earlier checkpoint
         shutil.rmtree(stale, ignore_errors=True)
     tmp.mkdir()
+    try:
+        _write_checkpoint_files(tmp, step, model, worker_states, extra, extra_models)
+    except BaseException as exc:
+        shutil.rmtree(tmp, ignore_errors=True)  # disk full, a kill: the previous checkpoint stays in force
+        named = naming_the_file(exc, final, "the previous checkpoint stays in force")
+        if named is exc:
+            raise
+        raise named from exc
+    shutil.rmtree(final, ignore_errors=True)
+    tmp.rename(final)
+    atomic_write_json(root / LATEST, {"step": step, "dir": final.name})
+    kept = sorted((p for p in root.glob("step_*") if p.is_dir()), key=lambda p: int(p.name.split("_")[1]))
+    for old in kept[:-KEEP_CHECKPOINTS]:
+        shutil.rmtree(old, ignore_errors=True)
+    for old in kept[-KEEP_CHECKPOINTS:-1]:
+        for buffer in old.glob("*replay_buffer.npz"):
+            buffer.unlink(missing_ok=True)
+    return final
+
+
+def _write_checkpoint_files(tmp: Path, step: int, model: Any, worker_states: list[dict[str, np.ndarray]],
+                            extra: dict[str, Any], extra_models: Mapping[str, Any] | None) -> None:
+    """Every file of checkpoint ``step`` into the folder ``tmp`` (`write_checkpoint`)."""
     model.save(tmp / "model.zip", exclude=SAVE_EXCLUDE)
     if getattr(model, "replay_buffer", None) is not None:
         save_replay_buffer(model.replay_buffer, tmp / "replay_buffer.npz")
@@ -179,29 +209,85 @@ def write_checkpoint(out: Path, model: Any, worker_states: list[dict[str, np.nda
         "rng": rng_json, **({"models": models} if models else {}), **extra,
     }
     atomic_write_json(tmp / "state.json", state)
-    shutil.rmtree(final, ignore_errors=True)
-    tmp.rename(final)
-    atomic_write_json(root / LATEST, {"step": step, "dir": final.name})
-    kept = sorted((p for p in root.glob("step_*") if p.is_dir()), key=lambda p: int(p.name.split("_")[1]))
-    for old in kept[:-KEEP_CHECKPOINTS]:
-        shutil.rmtree(old, ignore_errors=True)
-    for old in kept[-KEEP_CHECKPOINTS:-1]:
-        for buffer in old.glob("*replay_buffer.npz"):
-            buffer.unlink(missing_ok=True)
-    return final
 
 
 # ---------------------------------------------------------------------------------------------------- reads
+class CheckpointError(SealError, ValueError):
+    """No usable checkpoint: ``latest.json`` or a file of every candidate checkpoint is damaged."""
+
+
 def latest_checkpoint(out: Path) -> Path | None:
-    """The folder ``latest.json`` names, or None when the run has no checkpoint yet."""
-    pointer = Path(out) / CHECKPOINTS / LATEST
-    if not pointer.is_file():
+    """The newest complete checkpoint of the run at ``out``, or None when the run has none yet.
+
+    That is the folder ``latest.json`` names when it and every file of that folder read back; otherwise (a
+    damaged ``latest.json``, a truncated ``model.zip`` / ``replay_buffer.npz`` / ...) the newest earlier
+    ``step_<N>`` folder that reads back whole, with a warning naming the damaged file. Older checkpoints keep no
+    replay buffer (`write_checkpoint`), so an off-policy run whose newest buffer is damaged has no fallback:
+    `CheckpointError` names the file and says what to do.
+    """
+    root = Path(out) / CHECKPOINTS
+    pointer = root / LATEST
+    folders = sorted((p for p in root.glob("step_*") if p.is_dir() and p.name[5:].isdigit()),
+                     key=lambda p: int(p.name[5:]), reverse=True)
+    if not pointer.is_file() and not folders:
         return None
-    latest = json.loads(pointer.read_text())
-    folder = pointer.parent / str(latest["dir"])
-    if not (folder / "state.json").is_file():
-        raise ValueError(f"{pointer} names {folder}, which has no state.json; delete {pointer} to restart the run")
-    return folder
+    problems: list[str] = []
+    named = _pointer_target(pointer, problems)
+    candidates = ([named] if named is not None else []) + [f for f in folders if f != named]
+    buffers = {b.name for f in folders for b in f.glob("*replay_buffer.npz")}
+    for folder in candidates:
+        problem = checkpoint_problem(folder, buffers)
+        if problem is None:
+            if problems:
+                logger.warning(f"{'; '.join(problems)}: resuming from the previous complete checkpoint {folder}")
+            return folder
+        problems.append(f"{pointer} names {folder.name}, but {problem}" if folder == named else problem)
+    raise CheckpointError(
+        f"{'; '.join(problems) or f'{root}: no checkpoint'}; no complete checkpoint to fall back to: delete "
+        f"{root} to restart the run from step 0"
+    )
+
+
+def _pointer_target(pointer: Path, problems: list[str]) -> Path | None:
+    """The folder ``latest.json`` names, or None (its problem appended to ``problems``) when it is unreadable."""
+    if not pointer.is_file():
+        problems.append(f"{pointer} is missing")
+        return None
+    try:
+        latest = json.loads(pointer.read_text())
+        name = str(latest["dir"])
+    except (OSError, UnicodeDecodeError, ValueError, TypeError, KeyError) as exc:
+        problems.append(f"{pointer} is damaged ({type(exc).__name__}: {exc})")
+        return None
+    if not name.startswith("step_") or "/" in name:
+        problems.append(f"{pointer} names {name!r}, not a checkpoint folder")
+        return None
+    return pointer.parent / name
+
+
+def checkpoint_problem(folder: Path, buffers: Collection[str] = ()) -> str | None:
+    """Why the checkpoint ``folder`` cannot be resumed from (naming the file), or None when every file it needs
+    reads back: ``state.json``, ``rng.npz``, each ``worker_<i>.npz``, each ``*.zip`` (SB3 model files, with their
+    ``data`` entry) and the replay buffers named in ``buffers`` (zip members are read whole: a truncated or
+    bit-flipped file fails its CRC check)."""
+    path = folder / "state.json"
+    try:
+        state = json.loads(path.read_text())
+        files = ["rng.npz", "model.zip", *(f"worker_{i}.npz" for i in range(int(state["n_workers"])))]
+        files += sorted({p.name for p in folder.glob("*.zip")} | set(buffers))
+        for name in dict.fromkeys(files):
+            path = folder / name
+            with zipfile.ZipFile(path) as zf:
+                bad = zf.testzip()
+                # SB3's zips hold torch archives, zips themselves: a cut one can still open as its inner archive.
+                if name.endswith(".zip") and "data" not in zf.namelist():
+                    raise zipfile.BadZipFile("no 'data' entry (a truncated Stable-Baselines3 file)")
+            if bad is not None:
+                raise zipfile.BadZipFile(f"member {bad} fails its CRC check")
+    except (OSError, UnicodeDecodeError, ValueError, TypeError, KeyError, zipfile.BadZipFile, EOFError) as exc:
+        reason = "missing" if isinstance(exc, FileNotFoundError) else f"damaged ({type(exc).__name__}: {exc})"
+        return f"{path} is {reason}"
+    return None
 
 
 def read_checkpoint_state(folder: Path) -> tuple[dict[str, Any], dict[str, np.ndarray], list[dict[str, np.ndarray]]]:

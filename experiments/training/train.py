@@ -225,10 +225,39 @@ def train_run(config: dict[str, Any], out: Path, resume: bool = False, progress:
     venv = build_vec_env(config, train_scenarios, n_envs)
     try:
         _learn(config, out, venv, checkpoint, restored, eval_scenarios, progress)
-    finally:
+    except BaseException:
+        close_vec_env(venv, abort=True)
+        raise
+    close_vec_env(venv, abort=False)
+    return out
+
+
+def close_vec_env(venv: Any, abort: bool, join_s: float = 10.0) -> None:
+    """Close ``venv`` and its worker processes. ``abort`` (training was interrupted: SIGTERM, an error) does not
+    wait for step results that may never come (SB3's ``close`` would read one reply per worker, and an interrupt
+    inside ``step_wait`` leaves some already read: it would block forever); a worker still alive ``join_s``
+    seconds after being told to close is killed."""
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    inner = venv
+    while not isinstance(inner, SubprocVecEnv) and hasattr(inner, "venv"):
+        inner = inner.venv
+    if not abort or not isinstance(inner, SubprocVecEnv) or inner.closed:
         with contextlib.suppress(OSError, EOFError):  # workers already gone (killed with the process group)
             venv.close()
-    return out
+        return
+    inner.waiting = False
+    for remote in inner.remotes:
+        with contextlib.suppress(OSError, ValueError):
+            remote.send(("close", None))
+    for process in inner.processes:
+        process.join(join_s)
+        if process.is_alive():
+            process.kill()
+            process.join()
+    for remote in inner.remotes:
+        remote.close()
+    inner.closed = True
 
 
 def run_torch_threads(config: Mapping[str, Any], out: Path, resume: bool) -> int:
@@ -286,7 +315,7 @@ def _learn(config: Mapping[str, Any], out: Path, venv: Any, checkpoint: Path | N
     ``done.json``."""
     from stable_baselines3.common.logger import Logger, TensorBoardOutputFormat
 
-    from seal.core.atomic import atomic_write_json
+    from seal.core.atomic import atomic_write_json, naming_the_file
     from seal.experiments.training.callbacks import ResumableCSVOutputFormat
     from seal.experiments.training.overlap import find_overlap_env
 
@@ -327,8 +356,15 @@ def _learn(config: Mapping[str, Any], out: Path, venv: Any, checkpoint: Path | N
     if model.num_timesteps < total or (reskill is None and model.num_timesteps != total):
         raise RuntimeError(f"training stopped at {model.num_timesteps} env steps, expected {total}")
     tmp_model = out / f".tmp_{ts.FINAL_MODEL}"
-    model.save(tmp_model, exclude=ts.SAVE_EXCLUDE)
-    os.replace(tmp_model, out / ts.FINAL_MODEL)
+    try:
+        model.save(tmp_model, exclude=ts.SAVE_EXCLUDE)
+        os.replace(tmp_model, out / ts.FINAL_MODEL)
+    except BaseException as exc:
+        tmp_model.unlink(missing_ok=True)  # disk full: no partial file; the last checkpoint still resumes
+        named = naming_the_file(exc, out / ts.FINAL_MODEL, f"resume with `seal train --resume {out}`")
+        if named is exc:
+            raise
+        raise named from exc
     if reskill is not None:
         reskill.save_final(out)
     wall = wall_before + time.perf_counter() - session_start

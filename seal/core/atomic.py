@@ -30,10 +30,21 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[IO[bytes]], obje
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
-        raise
+        named = naming_the_file(exc, path, "nothing was changed")
+        if named is exc:
+            raise
+        raise named from exc
+
+
+def naming_the_file(exc: BaseException, target: str | os.PathLike[str], note: str) -> BaseException:
+    """``exc``, or, for an `OSError` that names no file (a failed ``write`` / ``fsync``: a full disk), an
+    `OSError` with the same errno whose message names ``target`` and adds ``note`` (what state the data is in)."""
+    if isinstance(exc, OSError) and exc.filename is None:
+        return OSError(exc.errno, f"{exc.strerror or exc} (writing {target}; {note})")
+    return exc
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:

@@ -4,6 +4,8 @@ learned-objective path (when `seal.models.objective` is importable)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -236,3 +238,49 @@ def test_close_call_gap_between_ego_and_adversary_boxes() -> None:
     assert min_box_gap(ego, adv) == pytest.approx(4.0)
     adv[:, VALID] = 0.0
     assert min_box_gap(ego, adv) == float("inf")
+
+
+@pytest.mark.parametrize("switch", ["adversarial", "benign"])
+def test_switch_names_from_a_config_load_that_prior_at_noise_1(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, switch: str,
+) -> None:
+    """A config names the switch as text; the skills folder is loaded with that prior and, by default, noise 1."""
+    from seal.adversaries.seal.generator import load_skill_policy
+
+    loaded: list[dict] = []
+    monkeypatch.setattr(SkillPolicy, "load", classmethod(lambda cls, folder, **kw: loaded.append(kw) or "policy"))
+    generator = SEALGenerator(candidate_source=_candidates, objective="cat", skills=tmp_path, switch=switch)
+    assert generator.switch == switch and generator.policy == "policy"
+    assert load_skill_policy(tmp_path, switch) == "policy"
+    assert loaded == [{"prior": switch, "noise_scale": 1.0, "horizon": None}] * 2
+
+
+def test_option_bounds_are_inclusive() -> None:
+    """0 noise (the prior's mean skill), a 1-step skill horizon and a switch at the predicted contact itself are
+    valid; one below each is not."""
+    generator = _generator(noise_scale=0.0, skill_horizon=1, switch_offset_steps=0)
+    assert generator.switch_offset_steps == 0
+    assert _generator(noise_scale=0.5).switch == "adversarial"
+    for bad, message in (({"noise_scale": -0.1}, "noise_scale must be >= 0"),
+                         ({"skill_horizon": 0}, "skill_horizon must be >= 1"),
+                         ({"switch_offset_steps": -1}, "switch_offset_steps must be >= 0")):
+        with pytest.raises(ValueError, match=message):
+            _generator(**bad)
+
+
+def test_generation_record_and_a_fresh_policy_per_generation(highway: list[Scenario]) -> None:
+    """What a generation records (the values the evaluation stores) and that each skill behaviour gets its own
+    copy of the policy (two adversaries driven at once must not share its state)."""
+    scenario = highway[0]
+    queue = RolloutHistory().queue(scenario)
+    generator = _generator()
+    first = generator.generate(scenario, queue, np.random.default_rng(0))
+    second = generator.generate(scenario, queue, np.random.default_rng(0))
+    chosen = first.chosen_candidate
+    assert first.extra["switch"] == "adversarial" and isinstance(first.extra["skill_seed"], int)
+    assert first.extra["score"] == pytest.approx(first.extra["scores"][chosen], abs=1e-6)
+    assert first.extra["prior_prob"] == pytest.approx(0.3) and chosen == 1
+    assert first.extra["min_distance_m"] >= 0.0
+    assert first.behavior.policy is not generator.policy and first.behavior.policy is not second.behavior.policy
+    trajectory_only = _generator(switch="none").generate(scenario, queue, np.random.default_rng(0))
+    assert trajectory_only.extra["switch"] == "none" and trajectory_only.extra["skill_seed"] is None

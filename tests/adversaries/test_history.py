@@ -110,3 +110,40 @@ def test_partition_is_disjoint_and_covering() -> None:
     assert [len(p) for p in parts] == [3, 2, 2]
     with pytest.raises(ValueError, match="workers"):
         partition_scenarios(items[:2], 3)
+
+
+# ------------------------------------------------------------- edges that mutation testing found untested
+def test_a_queue_of_one_and_membership() -> None:
+    scenario = sf.highway_scenario(0)
+    history = RolloutHistory(1)
+    assert scenario.scenario_id not in history
+    assert len(history.queue(scenario)) == 1 and scenario.scenario_id in history
+    history.append(scenario, fake_rollout(scenario, 1.0))
+    ego = scenario.ego_index
+    assert history.queue(scenario)[0].tracks[ego, -1, X] == scenario.tracks[ego, -1, X] + 1  # only the newest
+    with pytest.raises(ValueError, match="k must be >= 1, got 0"):
+        RolloutHistory(0)
+
+
+def test_a_contact_at_the_current_step_is_not_a_logged_crash() -> None:
+    """Only overlaps after `CURRENT_STEP` count (the episode starts there); one step later they do."""
+    scenario = sf.highway_scenario(0)
+    other = next(i for i in range(scenario.n_agents) if i not in (scenario.ego_index, scenario.adv_index))
+    for step, counted in ((CURRENT_STEP, False), (CURRENT_STEP + 1, True)):
+        tracks = scenario.tracks.copy()
+        tracks[other, step] = tracks[scenario.ego_index, step]  # the same box: a contact at that step only
+        crashes = logged_rollout(dataclasses.replace(scenario, tracks=tracks)).ego_crashes
+        assert ((step, int(scenario.agent_ids[other])) in crashes) == counted
+
+
+def test_state_round_trip_keeps_crashes_and_names_a_missing_array() -> None:
+    scenario = sf.highway_scenario(0)
+    history = RolloutHistory(2)
+    played = dataclasses.replace(fake_rollout(scenario, 2.0), ego_crashes=[(40, 3)], adv_crashes=[(55, 9), (56, 9)])
+    history.append(scenario, played)
+    back = RolloutHistory.from_state(history.get_state()).queue(scenario)[-1]
+    assert back.ego_crashes == [(40, 3)] and back.adv_crashes == [(55, 9), (56, 9)]
+    state = history.get_state()
+    del state["tracks_1"]
+    with pytest.raises(ValueError, match=r"w.npz: roll-out 1 has no 'tracks_1' array"):
+        RolloutHistory.from_state(state, "w.npz")

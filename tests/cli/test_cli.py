@@ -99,3 +99,38 @@ def test_train_refuses_bad_values_before_writing(tmp_path, capsys, setting: str,
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
     assert not out.exists()
+
+
+def test_a_closed_stdout_is_no_traceback(tmp_path: Path) -> None:
+    """`seal data info DIR | head -0`: the reader is gone before seal writes; seal stops quietly (exit 1)."""
+    import subprocess
+    import sys
+
+    import scenario_factory as sf
+
+    from seal.core.dataset import write_dataset
+
+    write_dataset(tmp_path / "ds", [sf.highway_scenario(i) for i in range(3)])
+    proc = subprocess.Popen([sys.executable, "-m", "seal", "data", "info", str(tmp_path / "ds")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert proc.stdout is not None and proc.stderr is not None
+    proc.stdout.close()  # as `head` does once it has what it wants
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 1
+    assert "Traceback" not in err and "BrokenPipe" not in err and "Exception ignored" not in err, err
+
+
+def test_fewer_eval_scenarios_than_eval_episodes_is_said(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture,
+) -> None:
+    from train_fixtures import tiny_dataset, tiny_train_config
+
+    from seal.experiments.training.train import train_run
+
+    config = tiny_train_config(tiny_dataset(tmp_path))  # 2 eval scenarios
+    config.update(n_envs=1, total_timesteps=40, checkpoint_every=0, eval_every=40, eval_episodes=20)
+    with caplog.at_level("WARNING", logger="seal.experiments.training.train"):
+        train_run(config, tmp_path / "run", progress=False)
+    assert "eval_episodes is 20 but the 'eval' split" in caplog.text and "has 2 scenarios" in caplog.text
+    evaluated = (tmp_path / "run" / "eval" / "evaluations.csv").read_text().splitlines()
+    assert len(evaluated) == 2  # header + the evaluation at step 40

@@ -207,6 +207,10 @@ def test_a_directory_import_reports_and_skips_bad_files(tmp_path: Path, capsys: 
     assert main(["data", "import", "commonroad", str(src / "broken.xml"), "--out", str(tmp_path / "x"),
                  "--no-progress"]) == 2
     assert "no scenario imported" in capsys.readouterr().err
+    from seal.core.importers.driver import staging_dir
+
+    # Nothing is left that `seal data info` would take for an interrupted build.
+    assert not (tmp_path / "x").exists() and not staging_dir(tmp_path / "x").exists()
     assert main(["data", "import", "commonroad", str(tmp_path / "nope"), "--out", str(tmp_path / "y")]) == 2
     assert "no such file or directory" in capsys.readouterr().err
 

@@ -43,11 +43,23 @@ def test_route_from_track_skips_invalid_steps(lane_change) -> None:
 
 
 def test_hint_keeps_projection_on_the_right_leg() -> None:
-    # A U-turn: both legs pass near (5, 1); the hint decides which one.
-    pts = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 2.0], [0.0, 2.0]])
-    route = Route(pts)
-    first = route.project(5.0, 0.9, hint=1)
-    assert first.s == pytest.approx(5.0)
+    """An out-and-back route: 60 m out along y = 0, back along y = 2 (1 m segments, so the legs lie more
+    segments apart than the hint's window). Near x = 5 both legs pass within ~1 m; the hint decides which leg the
+    projection stays on, even when the other leg is the closer one."""
+    out_leg = np.stack([np.arange(0.0, 61.0), np.zeros(61)], axis=1)
+    back_leg = np.stack([np.arange(60.0, -1.0, -1.0), np.full(61, 2.0)], axis=1)
+    route = Route(np.vstack([out_leg, back_leg]))
+    # Without a hint the closest leg wins: y = 1.1 is nearer the way back.
+    free = route.project(5.0, 1.1)
+    assert free.s == pytest.approx(60.0 + 2.0 + 55.0) and free.lateral == pytest.approx(0.9)  # left of the way back
+    out_hint = route.project(5.0, 0.1).segment  # plainly on the way out
+    kept = route.project(5.0, 1.1, hint=out_hint)
+    assert kept.s == pytest.approx(5.0) and kept.lateral == pytest.approx(1.1) and kept.heading == 0.0
+    back_hint = route.project(5.0, 1.9).segment  # plainly on the way back
+    assert back_hint - out_hint > 40
+    back = route.project(5.0, 0.9, hint=back_hint)  # nearer the way out, but the car is on its way back
+    assert back.s == pytest.approx(117.0) and back.lateral == pytest.approx(1.1)
+    assert back.heading == pytest.approx(np.pi)
 
 
 def test_box_segment_hits() -> None:

@@ -80,3 +80,37 @@ def test_callback_pushes_schedule_with_bounded_lag() -> None:
     assert env.calls[-1] == 0.9
     # At most cap / resolution updates (+1 for the start), not one per step.
     assert len(env.calls) <= 0.9 / 0.01 + 2
+
+
+# ------------------------------------------------------------- edges that mutation testing found untested
+def test_schedule_edges_and_warmup() -> None:
+    assert perturb_probability(1, 1, slope=1.0, cap=1.0) == 1.0  # a one-step run is a run
+    assert perturb_probability(5, 10, cap=0.0) == 0.0  # cap 0: never perturbed, and allowed
+    # Warm-up: nothing before warmup * T, then the ramp starts there.
+    assert perturb_probability(400, 1000, warmup=0.5) == 0.0
+    assert perturb_probability(600, 1000, warmup=0.5) == pytest.approx(1.8 * 0.1)
+    for bad in ({"warmup": 1.0}, {"warmup": -0.1}, {"slope": -1.0}, {"cap": -0.1}):
+        with pytest.raises(ValueError, match="curriculum: need slope >= 0"):
+            perturb_probability(1, 10, **bad)
+
+
+def test_callback_default_resolution_and_the_exact_step() -> None:
+    """The default resolution (0.005) pushes a change of 0.005; a change of exactly ``resolution`` is pushed; the
+    callback never stops training."""
+    env = _Env()
+    model = _Model(env)
+    cb = CurriculumCallback(total_steps=1800)  # p moves by 0.001 per step
+    cb.init_callback(model)
+    cb.on_training_start({}, {})
+    model.num_timesteps = 4
+    assert cb.on_step() is True and env.calls == [0.0]
+    model.num_timesteps = 5
+    cb.on_step()
+    assert env.calls == [0.0, pytest.approx(0.005)]
+    exact = CurriculumCallback(total_steps=4, slope=1.0, cap=1.0, resolution=0.25)
+    exact_env = _Env()
+    exact.init_callback(_Model(exact_env))
+    exact.on_training_start({}, {})
+    exact.model.num_timesteps = 1  # p = 0.25: exactly one resolution away
+    exact.on_step()
+    assert exact_env.calls == [0.0, 0.25]
