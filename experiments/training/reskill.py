@@ -80,11 +80,31 @@ def residual_spaces(skills: EgoSkills) -> tuple[gym.spaces.Box, gym.spaces.Box]:
 
 
 def build_residual_model(config: Mapping[str, Any], skills: EgoSkills, build: Callable[..., Any]) -> Any:
-    """The residual TD3 learner (``build``: `seal.experiments.training.train.build_model`)."""
+    """The residual TD3 learner (``build``: `seal.experiments.training.train.build_model`), its actor starting
+    as the zero correction (`zero_output_layer`)."""
     hyper = dict(config["hyperparams"]["residual"])
     hyper["action_noise_std"] = 0.0  # exploration noise is added in the workers
     sub = {**config, "algo": "td3", "hyperparams": hyper, "seed": int(config["seed"]) + 1}
-    return build(sub, _SpacesOnly(*residual_spaces(skills)))
+    model = build(sub, _SpacesOnly(*residual_spaces(skills)))
+    zero_output_layer(model)
+    return model
+
+
+def zero_output_layer(model: Any) -> None:
+    """Zero the last linear layer of a TD3 actor and its target, so the residual starts as no correction at all.
+
+    Residual policy learning (Silver et al. 2018; ReSkill follows it) starts the residual at zero: a randomly
+    initialised actor adds a fixed, state-dependent bias of up to ~0.3 x ``residual_bound`` the moment the gate
+    opens, which measured as the residual *hurting* the skill policy (issue 17). With zero output weights the
+    actor's gradient still reaches the last layer (its inputs are not zero), so it learns from the first update.
+    """
+    import torch
+
+    for actor in (model.actor, model.actor_target):
+        last = [m for m in actor.mu if isinstance(m, torch.nn.Linear)][-1]
+        with torch.no_grad():
+            last.weight.zero_()
+            last.bias.zero_()
 
 
 class EnvStepCounter(BaseCallback):

@@ -69,6 +69,37 @@ def test_high_level_action_decodes_through_the_prior(skills_dir: Path) -> None:
     np.testing.assert_allclose(skills.action(obs), a, rtol=1e-4, atol=1e-5)
 
 
+def test_residual_starts_as_no_correction_and_learns(tmp_path: Path, skills_dir: Path) -> None:
+    """The residual actor (and its target) outputs exactly 0 before any update, whatever the input, so opening the
+    gate does not change the skill policy; one gradient step on a batch whose reward favours a positive
+    correction moves it off zero (the zeroed layer still receives gradient)."""
+    from stable_baselines3.common.logger import Logger
+
+    from seal.experiments.training.reskill import build_residual_model
+    from seal.experiments.training.reskill_policy import actor_layers
+    from seal.experiments.training.train import build_model
+
+    config = _tiny_config(_dataset(tmp_path), skills_dir)
+    config["hyperparams"]["residual"]["learning_starts"] = 0
+    config["hyperparams"]["residual"]["policy_delay"] = 1
+    residual = build_residual_model(config, BenignSkills(skills_dir), build_model)
+    residual.set_logger(Logger(folder=None, output_formats=[]))
+    layers = actor_layers(residual)
+    rng = np.random.default_rng(0)
+    x = rng.normal(0, 3, (50, residual.observation_space.shape[0])).astype(np.float32)
+    for row in x:
+        assert np.array_equal(run_actor(layers, row), np.zeros(2, np.float32))
+    with torch.no_grad():
+        assert torch.count_nonzero(residual.actor_target(torch.as_tensor(x))) == 0
+    buffer = residual.replay_buffer
+    for row in x:  # reward = the first action component: the critic learns that more steering pays
+        a = rng.uniform(-1, 1, (1, 2)).astype(np.float32)
+        buffer.add(row[None], row[None], a, np.array([a[0, 0]]), np.array([1.0]), [{}])
+    residual.train(gradient_steps=20, batch_size=16)
+    moved = np.stack([run_actor(actor_layers(residual), row) for row in x[:10]])
+    assert np.abs(moved).max() > 1e-4
+
+
 def test_residual_is_bounded_by_gate_and_bound() -> None:
     rng = np.random.default_rng(0)
     for _ in range(200):
