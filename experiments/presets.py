@@ -11,6 +11,9 @@ from seal.core.config import ConfigError
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 
+SKILLS_PRESETS = ("quick", "standard", "ego")
+"""``seal fit skills --preset``: ``ego`` is the ReSkill ego's skills (a decoder blind to the previous action)."""
+
 
 def preset_file(prefix: str, name: str, presets: Sequence[str]) -> Path:
     """The preset ``experiments/configs/<prefix>_<name>.yaml``; ``name`` must be one of ``presets``."""

@@ -49,7 +49,7 @@ from seal.models.skills.vae import VAEConfig
 
 logger = logging.getLogger(__name__)
 
-PRESETS = ("quick", "standard")
+PRESETS = presets.SKILLS_PRESETS
 
 
 @dataclass(frozen=True)

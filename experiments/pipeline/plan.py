@@ -15,6 +15,7 @@ from typing import Any
 
 from seal.adversaries.base import NO_ADVERSARY, available_generators
 from seal.experiments.pipeline.references import (
+    fit_kind,
     fits_needed,
     generators_in_use,
     planned_runs,
@@ -138,13 +139,16 @@ def _check_fits(fit: Mapping[str, Any], models: Mapping[str, str]) -> None:
             if not Path(str(spec["path"])).expanduser().exists():
                 raise ValueError(f"fit.{name}.path: {spec['path']} does not exist")
             continue
-        if name not in OPTIONS or name in DATA_TASKS:
+        kind = fit_kind(name, spec)
+        spec.pop("model", None)
+        if kind not in OPTIONS or kind in DATA_TASKS:
             known = sorted(k for k in OPTIONS if k not in DATA_TASKS)
-            raise ValueError(f"fit: unknown model {name!r}; known: {', '.join(known)}")
-        unknown = sorted(set(spec) - set(OPTIONS[name]))
+            what = f"fit.{name}.model {kind!r}" if kind != name else f"model {name!r}"
+            raise ValueError(f"fit: unknown {what}; known: {', '.join(known)} (or give model: KIND)")
+        unknown = sorted(set(spec) - set(OPTIONS[kind]))
         if unknown:
-            raise ValueError(f"fit.{name}: unknown option(s) {unknown}; known: {list(OPTIONS[name])}")
-        options = {**FIT_DEFAULTS.get(name, {}), **spec}
+            raise ValueError(f"fit.{name}: unknown option(s) {unknown}; known: {['model', *OPTIONS[kind]]}")
+        options = {**FIT_DEFAULTS.get(kind, {}), **spec}
         for key in ("epochs", "steps", "limit", "threads", "workers", "seed", "eval_limit", "candidates"):
             value = options.get(key)
             if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 0):

@@ -69,6 +69,16 @@ def _refs(value: Any) -> list[str]:
     return [m.group(1)] if m else []
 
 
+def fit_kind(name: str, spec: Mapping[str, Any] | None) -> str:
+    """Which ``seal fit`` command a ``fit.NAME`` entry runs: its ``model:`` option, else the name itself. ``model``
+    lets a preset fit one kind twice with different options, e.g. ``ego_skills: {model: skills, preset: ego}``
+    beside ``skills``."""
+    kind = (spec or {}).get("model", name)
+    if not isinstance(kind, str):
+        raise ValueError(f"fit.{name}.model must be the name of a fitted model kind, got {kind!r}")
+    return kind
+
+
 def fits_needed(config: Mapping[str, Any]) -> list[str]:
     """Models referenced (``"${fit.NAME}"``) by the kwargs of the generators in use and by the train section,
     plus the models those fits' options reference in turn (e.g. ``objective: {prior: "${fit.prior}"}``); ordered

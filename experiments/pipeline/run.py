@@ -27,7 +27,8 @@ The preset's sections (all but ``train`` belong to this module; ``train`` is pas
   `seal.experiments.pipeline.tasks`).
 * ``fit``: per model (``prior``, ``goose``, ``skills``, ``objective``, ``behavior``, ``probes``) either
   ``{path: FILE}`` or command options (``{preset: quick, max_minutes: 1}``; ``"${fit.prior}"`` in them = another
-  fitted model, fitted first).
+  fitted model, fitted first). Any other name with ``model: KIND`` is a second fit of that kind under its own
+  name (``ego_skills: {model: skills, preset: ego}`` -> OUT/models/ego_skills).
 * ``generators``: generator name -> constructor kwargs for training and evaluation; a value ``"${fit.prior}"``
   becomes the fitted model's path.
 * ``train``: `seal.experiments.training.config.EgoTrainConfig` keys; ``"${fit.NAME}"`` in it = a fitted model
@@ -68,6 +69,7 @@ from seal.experiments.backends import Backend, InlineBackend, Job, JobResult, Lo
 from seal.experiments.pipeline.plan import check_plan
 from seal.experiments.pipeline.references import (
     dotted,
+    fit_kind,
     fits_needed,
     generator_of,
     generators_in_use,
@@ -343,9 +345,11 @@ def _fit_steps(run: _Run, dataset: str, data_params: Mapping[str, Any]) -> dict[
         if spec.get("path"):
             models[name] = str(Path(spec["path"]).expanduser().resolve())
             continue
+        kind = fit_kind(name, spec)
+        spec.pop("model", None)
         (run.out / "models").mkdir(exist_ok=True)
         models[name] = str(run.out / "models" / FIT_OUTPUTS.get(name, name))
-        job = {"name": f"fit-{name}", "task": "fit", "model": name, "dataset": dataset, "out": models[name],
+        job = {"name": f"fit-{name}", "task": "fit", "model": kind, "dataset": dataset, "out": models[name],
                "options": substitute(spec, models)}  # e.g. the objective's candidates: "${fit.prior}"
         run.steps.run(f"fit-{name}", [data_params, job], partial(run.task, job))
     return models

@@ -119,11 +119,11 @@ def add_set_option(p: argparse.ArgumentParser, example: str) -> None:
 
 
 def add_fit_job_options(p: argparse.ArgumentParser, job: str, config_keys: str, set_example: str,
-                        json_what: str) -> None:
-    """The options every preset-driven fitting job shares: DATASET, ``--preset`` (quick | standard, the YAML file
+                        json_what: str, presets: Sequence[str] = ("quick", "standard")) -> None:
+    """The options every preset-driven fitting job shares: DATASET, ``--preset`` (one of ``presets``, the YAML file
     ``experiments/configs/<job>_<preset>.yaml``), ``--config``, ``--seed``, ``--set``, ``--no-progress``, ``--json``."""
     p.add_argument("dataset", help="dataset directory with splits (seal data split)")
-    p.add_argument("--preset", choices=("quick", "standard"), default="standard",
+    p.add_argument("--preset", choices=tuple(presets), default="standard",
                    help=f"YAML preset experiments/configs/{job}_<preset>.yaml (default standard)")
     p.add_argument("--config", default=None, help=f"YAML config overriding the preset (keys: {config_keys})")
     p.add_argument("--seed", type=int, default=None, help="random seed (default 0)")

@@ -6,6 +6,7 @@ import argparse
 
 from seal.cli.args import add_fit_job_options, positive_int, set_torch_threads
 from seal.cli.tree import CommandTree
+from seal.experiments.presets import SKILLS_PRESETS
 
 
 def cmd_fit_skills(args: argparse.Namespace) -> int:
@@ -38,7 +39,7 @@ def register(tree: CommandTree) -> None:
         "--out.",
     )
     add_fit_job_options(p, "skills", "seal.experiments.fitting.skills.SkillsFitConfig", "vae_train.max_epochs=5",
-                        "metrics")
+                        "metrics", presets=SKILLS_PRESETS)
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--split", default=None, help="split to learn from (default train)")
     p.add_argument("--limit", type=positive_int("--limit"), default=None, help="use only the first N scenarios")

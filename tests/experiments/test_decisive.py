@@ -50,8 +50,11 @@ def test_decisive_plan_is_every_pipeline_times_two_algorithms_times_four_seeds(t
     assert set(pipeline_names()) - {"noadv"} <= set(ev["settings"])
     assert {"normal", "hard", "normal-reactive"} <= set(ev["settings"])
     assert any(s.startswith("real:") for s in ev["settings"])
-    assert set(fits_needed(config)) == {"prior", "goose", "skills", "objective", "behavior", "probes"}
-    assert "skills" in fits_needed({**config, "pipelines": ["noadv"], "eval": {}})  # the ReSkill ego needs them
+    assert set(fits_needed(config)) == {"prior", "goose", "skills", "ego_skills", "objective", "behavior", "probes"}
+    # the ReSkill ego needs its own skills, fitted on the SEAL skills' demonstrations (so those come first)
+    assert fits_needed({**config, "pipelines": ["noadv"], "eval": {}}) == ["skills", "ego_skills"]
+    assert config["fit"]["ego_skills"] == {"model": "skills", "preset": "ego", "demos": "${fit.skills}",
+                                           "no_progress": True}
     settings = [s for s in ev["settings"] if not s.startswith("real:")]
     plan = check_run(PRESET, tmp_path / "out", [_settings_with(real_dataset, settings)])
     assert len(plan["runs"]) == 56 and "seal-rcg-reskill-s3" in plan["runs"] and "noadv-td3-s0" in plan["runs"]
@@ -76,11 +79,11 @@ def test_each_run_gets_its_algorithm_and_the_reskill_runs_the_fitted_skills(real
     assert runs["cat-td3-s2"] == ("cat", 2, "td3") and runs["seal-reskill-s0"] == ("seal", 0, "reskill")
     from seal.experiments.pipeline.references import with_algo, with_models
 
-    resolved = with_models(config, {"skills": "/m/skills"})
+    resolved = with_models(config, {"skills": "/m/skills", "ego_skills": "/m/ego_skills"})
     gens = {"seal": {"prior": "/m/prior.pt", "objective": "/m/objective/objective.pt", "skills": "/m/skills"}}
     reskill = train_config(with_algo(resolved, "reskill"), PRESET, "seal", 0, "/d", gens)
     td3 = train_config(with_algo(resolved, "td3"), PRESET, "seal", 0, "/d", gens)
-    assert reskill["algo"] == "reskill" and reskill["hyperparams"]["skills"] == "/m/skills"
+    assert reskill["algo"] == "reskill" and reskill["hyperparams"]["skills"] == "/m/ego_skills"
     assert td3["algo"] == "td3" and td3["hyperparams"]["train_freq"] == 2
     assert reskill["generator"] == td3["generator"] == {"name": "seal", "kwargs": gens["seal"]}
 
@@ -114,12 +117,18 @@ def test_toy_decisive_runs_end_to_end_and_reports_the_algorithms_apart(tmp_path:
     tasks = FakeTasks()
     summary = run_pipeline(PRESET, out, backend=InlineBackend(), task_fn=tasks, train_fn=_train, eval_fn=_eval,
                            progress=False, sets=sets)
-    fitted = [c[0] for c in tasks.calls if c[0] not in ("generate", "score", "split")]
-    assert fitted.index("prior") < fitted.index("probes") and set(fitted) == {
-        "prior", "goose", "skills", "objective", "behavior", "probes"}
+    fits = {Path(c[2]).name: c for c in tasks.calls if c[0] not in ("generate", "score", "split")}
+    fitted = [c[0] for c in fits.values()]
+    assert fitted.index("prior") < fitted.index("probes") and sorted(fitted) == sorted([
+        "prior", "goose", "skills", "skills", "objective", "behavior", "probes"])
+    # the named fit: the skills command, into models/ego_skills, on the demonstrations of models/skills
+    kind, _, ego_out, options = fits["ego_skills"]
+    assert kind == "skills" and options == {"preset": "ego", "demos": str(out / "models" / "skills"),
+                                            "no_progress": True}
+    assert list(fits).index("skills") < list(fits).index("ego_skills")
     assert len(summary["runs"]) == 7 * 2 * 2 and not summary["errors"]
     reskill = yaml.safe_load((out / "runs" / "noadv-reskill-s1" / "config.yaml").read_text())
-    assert reskill["algo"] == "reskill" and reskill["hyperparams"]["skills"] == str(out / "models" / "skills")
+    assert reskill["algo"] == "reskill" and reskill["hyperparams"]["skills"] == str(out / "models" / "ego_skills")
     models = out / "models"
     assert yaml.safe_load((out / "runs" / "steered-td3-s0" / "config.yaml").read_text())["generator"] == {
         "name": "steered", "kwargs": {"prior": str(models / "prior.pt"), "steer": str(models / "probes")}}
