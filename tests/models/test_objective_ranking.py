@@ -72,6 +72,11 @@ def test_pearson_rank_loss_matches_a_hand_computation_and_spearman() -> None:
     # A scenario-wide shift or scale of the predictions does not change it; a constant prediction counts as 0.
     assert float(pearson_rank_loss(pred * 3 + 1, target, 4)) == pytest.approx(1.0 - corr, rel=1e-9)
     assert float(pearson_rank_loss(_pairs([0.5] * 4), target, 4)) == pytest.approx(1.0)
+    # ... and its gradient is finite (zero), next to a group that does learn.
+    pred2 = torch.cat([_pairs([0.5] * 4), pred]).requires_grad_(True)
+    pearson_rank_loss(pred2, torch.cat([target, target]), 4).backward()
+    assert pred2.grad is not None and torch.isfinite(pred2.grad).all()
+    assert float(pred2.grad[:4].abs().sum()) == 0.0 and float(pred2.grad[4:].abs().sum()) > 0.0
 
 
 def test_ego_features_of_a_braking_ego_turned_north() -> None:

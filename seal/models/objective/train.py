@@ -242,8 +242,12 @@ def pearson_rank_loss(pred: torch.Tensor, target: torch.Tensor, n_cand: int, tem
     r = group_ranks(target.sum(dim=-1).reshape(-1, n_cand))
     s = s - s.mean(dim=-1, keepdim=True)
     r = r - r.mean(dim=-1, keepdim=True)
-    den = torch.sqrt((s * s).sum(dim=-1) * (r * r).sum(dim=-1))
-    corr = torch.where(den > 1e-12, (s * r).sum(dim=-1) / den.clamp(min=1e-12), torch.zeros_like(den))
+    ss, rr = (s * s).sum(dim=-1), (r * r).sum(dim=-1)
+    # A (near-)constant group is left out of the gradient: sqrt and 1 / norm are not differentiable at 0, and a
+    # NaN there would poison every weight (e.g. a scenario whose candidates all stay far from the ego).
+    ok = (ss > 1e-8) & (rr > 0)
+    den = torch.sqrt(torch.where(ok, ss * rr, torch.ones_like(ss)))
+    corr = torch.where(ok, (s * r).sum(dim=-1) / den, torch.zeros_like(ss))
     return 1.0 - corr.mean()
 
 
