@@ -162,8 +162,10 @@ class ObjectiveNet(nn.Module):
         self.head = nn.Sequential(nn.Dropout(config.dropout), nn.Linear(2 * h + 2 * N_FEATURES, h), nn.ReLU(),
                                   nn.Dropout(config.dropout), nn.Linear(h, N_OUTPUTS))
         if config.zero_init:
-            nn.init.zeros_(self.head[-1].weight)
-            nn.init.zeros_(self.head[-1].bias)
+            last = self.head[-1]
+            assert isinstance(last, nn.Linear)
+            nn.init.zeros_(last.weight)
+            nn.init.zeros_(last.bias)
         self.ego_branch = EgoBranch(h) if config.ego_branch else None
         # Learned weight of the closeness logit in each output (starts at 1 = "no reaction" for f_coll).
         self.close_gain = nn.Parameter(torch.tensor([1.0, 1.0 if config.diff_on_closeness else 0.0]))
