@@ -93,6 +93,10 @@ class ObjectiveFitConfig:
     """``seal`` behaviour: steps between the skill switch and the predicted contact (as the generator)."""
     noise_scale: float = 1.0
     """``seal`` behaviour: skill noise scale (as the generator)."""
+    labels_from: Path | None = None
+    """Reuse the label chunks in ``labels_from/<split>`` (and ``/<eval_split>``) as they are, e.g. an earlier run's
+    ``OUT/labels``: nothing is simulated and the folder is only read (`load_label_folder`); None simulates (or
+    resumes) the labels in ``OUT/labels``."""
     model: dict[str, Any] = overrides_field(ObjectiveConfig)
     """`seal.models.objective.ObjectiveConfig` overrides."""
     train: dict[str, Any] = overrides_field(ObjectiveTrainConfig)
@@ -142,12 +146,18 @@ def resolve_config(preset: str | None = "standard", config_file: str | Path | No
 def labels_for_split(
     dataset: str | Path, split: str, limit: int | None, folder: Path, config: ObjectiveFitConfig, progress: bool,
 ) -> tuple[LabelSet, float]:
-    """Build (or resume / reuse) the labels of ``split``'s first ``limit`` scenarios in ``folder``; returns the
-    labels and the seconds it took."""
+    """Build (or resume / reuse) the labels of ``split``'s first ``limit`` scenarios in ``folder`` (with
+    ``config.labels_from``: read them from ``labels_from/<split>`` instead); returns the labels and the seconds it
+    took."""
     from seal.core.dataset import load_split
-    from seal.experiments.fitting.objective_labels import build_labels, source_spec
+    from seal.experiments.fitting.objective_labels import build_labels, load_label_folder, source_spec
 
     scenarios = load_split(dataset, split, limit)
+    if config.labels_from is not None:
+        start = time.perf_counter()
+        labels = load_label_folder(Path(config.labels_from) / split, [s.scenario_id for s in scenarios],
+                                   len(config.egos))
+        return labels, round(time.perf_counter() - start, 1)
     spec = source_spec(None if config.prior is None else str(config.prior), config.candidates)
     start = time.perf_counter()
     labels = build_labels(scenarios, folder, spec, n_candidates=config.n_candidates,

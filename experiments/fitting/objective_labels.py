@@ -332,3 +332,27 @@ def build_labels(
     if list(merged.scenario_ids) != [i for i in ids for _ in egos]:
         raise ValueError(f"{desc}: chunk files in {out} do not match the scenarios; delete the folder and re-run")
     return merged
+
+
+def load_label_folder(folder: str | Path, scenario_ids: Sequence[str], n_egos: int = 1) -> LabelSet:
+    """The finished label chunks ``folder/part_*.npz`` of an earlier `build_labels` run, as they are: nothing is
+    simulated and no settings fingerprint is compared (the folder is only read, never emptied), so labels that
+    took many minutes to simulate can be trained on again with other training settings.
+
+    Args:
+        folder: a label folder (e.g. ``OUT/labels/train`` of `seal fit objective`).
+        scenario_ids: the scenarios the labels must be of, in order (each repeated ``n_egos`` times, as
+            `build_labels` writes them).
+        n_egos: label rows per scenario.
+    """
+    folder = Path(folder)
+    parts = sorted(folder.glob("part_*.npz"))
+    if not parts:
+        raise FileNotFoundError(f"label folder {folder} has no part_*.npz chunks (build them with seal fit objective)")
+    labels = LabelSet.concat([LabelSet.load(p) for p in parts])
+    expected = [i for i in scenario_ids for _ in range(n_egos)]
+    got = [str(i) for i in labels.scenario_ids]
+    if got != expected:
+        raise ValueError(f"label folder {folder}: its {len(got)} label rows are not the {len(expected)} expected rows "
+                         "of this split (other scenarios, limit or egos); point --labels-from at the right folder")
+    return labels

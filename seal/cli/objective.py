@@ -18,7 +18,7 @@ def _config(args: argparse.Namespace) -> ObjectiveFitConfig:
 
     return resolve_config(preset=args.preset, config_file=args.config, sets=args.set, prior=args.prior,
                           candidates=args.candidates, skills=args.skills, behavior=args.behavior,
-                          egos=tuple(args.ego) or None,
+                          egos=tuple(args.ego) or None, labels_from=args.labels_from,
                           eval_split=args.eval_split, eval_limit=args.eval_limit, workers=args.workers, seed=args.seed,
                           **({"split": args.split, "limit": args.limit} if hasattr(args, "split") else {}))
 
@@ -68,6 +68,9 @@ def _common(p: argparse.ArgumentParser) -> None:
                    help="use only the first N held-out scenarios")
     p.add_argument("--workers", type=positive_int("--workers"), default=None,
                    help="processes simulating the labels (default 2)")
+    p.add_argument("--labels-from", default=None,
+                   help="reuse finished label chunks from DIR/<split> as they are (e.g. an earlier run's OUT/labels): "
+                   "no simulation, the folder is only read")
 
 
 def register(tree: CommandTree) -> None:

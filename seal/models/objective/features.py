@@ -88,6 +88,44 @@ def pair_features(
     return out
 
 
+EGO_FEATURE_NAMES = ("x_in_start", "y_in_start", "cos_heading_change", "sin_heading_change", "speed", "accel",
+                     "valid", "time")
+N_EGO_FEATURES = len(EGO_FEATURE_NAMES)
+ACCEL_SCALE_MPS2 = 5.0
+"""Accelerations are divided by this (m/s^2)."""
+
+
+def ego_features(ego_xy: torch.Tensor, ego_heading: torch.Tensor, ego_valid: torch.Tensor) -> torch.Tensor:
+    """Features ``[..., T, N_EGO_FEATURES]`` (order: `EGO_FEATURE_NAMES`) of previous ego roll-outs on their own,
+    without any candidate: how the ego drove (position and heading change in the frame of its first valid step,
+    speed, acceleration). They describe the scenario and the roll-out, not a candidate, so anything computed from
+    them shifts all candidates of one (scenario, roll-out) group alike. Invalid steps are zeroed except the valid
+    flag and the time (as in `pair_features`).
+
+    Args:
+        ego_xy: ``[..., T, 2]`` ego positions (m, world frame).
+        ego_heading: ``[..., T]`` ego headings (rad).
+        ego_valid: ``[..., T]`` bool.
+    """
+    valid = ego_valid.to(ego_xy.dtype)
+    xy = _hold_last(ego_xy, ego_valid)
+    first = ego_valid.int().argmax(dim=-1, keepdim=True)
+    x0 = torch.gather(xy, -2, first[..., None].expand(*first.shape, 2))
+    h0 = torch.gather(ego_heading, -1, first)
+    x, y = to_frame(xy[..., 0] - x0[..., 0], xy[..., 1] - x0[..., 1], h0)
+    rel = ego_heading - h0
+    pair_valid = torch.cat([valid[..., :1], valid[..., 1:] * valid[..., :-1]], dim=-1)
+    speed = torch.linalg.vector_norm(_velocity(xy), dim=-1) * pair_valid
+    accel = torch.cat([torch.zeros_like(speed[..., :1]), torch.diff(speed, dim=-1) / DT_S], dim=-1)
+    accel = accel * torch.cat([valid[..., :1] * 0, pair_valid[..., 1:] * pair_valid[..., :-1]], dim=-1)
+    n_steps = ego_xy.shape[-2]
+    time = torch.arange(n_steps, dtype=ego_xy.dtype, device=ego_xy.device) / max(n_steps - 1, 1)
+    feats = [(x / POS_SCALE_M).clamp(-POS_CLIP, POS_CLIP), (y / POS_SCALE_M).clamp(-POS_CLIP, POS_CLIP),
+             torch.cos(rel), torch.sin(rel), speed / SPEED_SCALE_MPS,
+             (accel / ACCEL_SCALE_MPS2).clamp(-POS_CLIP, POS_CLIP)]
+    return torch.stack([f * valid for f in feats] + [valid, time.expand_as(valid)], dim=-1)
+
+
 def _hold_last(xy: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
     """``xy`` with every invalid step replaced by the last valid position before it (steps before the first
     valid one take the first valid position; all-invalid rows take row 0, masked anyway)."""

@@ -20,13 +20,21 @@ from torch import nn
 
 from seal.core.config import check_keys
 from seal.core.scenario import N_FUTURE
-from seal.models.objective.features import FEATURE_NAMES, N_FEATURES, pair_features
+from seal.models.objective.features import (
+    EGO_FEATURE_NAMES,
+    FEATURE_NAMES,
+    N_EGO_FEATURES,
+    N_FEATURES,
+    ego_features,
+    pair_features,
+)
 
 N_OUTPUTS = 2
 """Heads: f_coll, f_diff."""
 VALID_FEATURE = FEATURE_NAMES.index("valid")
 DISTANCE_FEATURE = FEATURE_NAMES.index("distance")
 CLOSENESS_FEATURE = FEATURE_NAMES.index("closeness")
+EGO_VALID_FEATURE = EGO_FEATURE_NAMES.index("valid")
 
 
 @dataclass(frozen=True)
@@ -41,6 +49,12 @@ class ObjectiveConfig:
         dropout: dropout probability before the head's layers (training only).
         diff_on_closeness: f_diff starts as a logit correction of closeness too (its learned weight starts at 1,
             else at 0).
+        zero_init: the head's last layer starts at zero, so the untrained network's logits are exactly the
+            weighted closeness logits (its ranking is closeness's) and training moves away from that only as far as
+            the labels pull it.
+        ego_branch: add a per-roll-out logit offset from the previous ego roll-out alone (`EgoBranch`): the level
+            of f_diff / f_coll of a scenario, which does not depend on the candidate and so leaves the ranking of
+            one roll-out's candidates to the pair network.
     """
 
     n_steps: int = N_FUTURE
@@ -49,6 +63,8 @@ class ObjectiveConfig:
     kernel: int = 5
     dropout: float = 0.1
     diff_on_closeness: bool = True
+    zero_init: bool = False
+    ego_branch: bool = False
 
     def __post_init__(self) -> None:
         for name in ("n_steps", "stride", "hidden", "kernel"):
@@ -112,6 +128,24 @@ def _masked_pool(h: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, tor
     return mx, mean
 
 
+class EgoBranch(nn.Module):
+    """Ego roll-out features ``[B, T, N_EGO_FEATURES]`` (`seal.models.objective.features.ego_features`) -> logit
+    offsets ``[B, 2]``: per-step MLP, masked max + mean pooling over the valid steps, a linear layer (zero at the
+    start, so the branch starts as no offset)."""
+
+    def __init__(self, hidden: int) -> None:
+        super().__init__()
+        self.step = nn.Sequential(nn.Linear(N_EGO_FEATURES, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU())
+        self.out = nn.Linear(2 * hidden, N_OUTPUTS)
+        nn.init.zeros_(self.out.weight)
+        nn.init.zeros_(self.out.bias)
+
+    def forward(self, feats: torch.Tensor) -> torch.Tensor:
+        valid = feats[..., EGO_VALID_FEATURE] > 0.5
+        mx, mean = _masked_pool(self.step(feats), valid)
+        return self.out(torch.cat([mx, mean], dim=-1))
+
+
 class ObjectiveNet(nn.Module):
     """Pairs' per-step features ``[B, T, N_FEATURES]`` + validity ``[B, T]`` + features at the closest approach
     ``[B, N_FEATURES]`` -> logits ``[B, 2]`` (both relative to the logit of the largest closeness feature)."""
@@ -127,6 +161,12 @@ class ObjectiveNet(nn.Module):
         # approach): a direct path for what f_coll is made of, which the deep path then corrects.
         self.head = nn.Sequential(nn.Dropout(config.dropout), nn.Linear(2 * h + 2 * N_FEATURES, h), nn.ReLU(),
                                   nn.Dropout(config.dropout), nn.Linear(h, N_OUTPUTS))
+        if config.zero_init:
+            last = self.head[-1]
+            assert isinstance(last, nn.Linear)
+            nn.init.zeros_(last.weight)
+            nn.init.zeros_(last.bias)
+        self.ego_branch = EgoBranch(h) if config.ego_branch else None
         # Learned weight of the closeness logit in each output (starts at 1 = "no reaction" for f_coll).
         self.close_gain = nn.Parameter(torch.tensor([1.0, 1.0 if config.diff_on_closeness else 0.0]))
 
@@ -176,5 +216,18 @@ class ObjectiveNet(nn.Module):
         feats = stride_pool(feats, self.config.stride)
         valid = feats[..., VALID_FEATURE] > 0.5
         correction, prior = self.parts(feats, valid, closest)
-        pred = torch.sigmoid(correction + prior).reshape(*lead, N_OUTPUTS)
-        return (pred, correction.reshape(*lead, N_OUTPUTS)) if with_correction else pred
+        correction = correction.reshape(*lead, N_OUTPUTS)
+        if self.ego_branch is not None:
+            correction = correction + self._ego_offset(ego_xy, ego_heading, ego_valid).expand_as(correction)
+        pred = torch.sigmoid(correction + prior.reshape(*lead, N_OUTPUTS))
+        return (pred, correction) if with_correction else pred
+
+    def _ego_offset(self, ego_xy: torch.Tensor, ego_heading: torch.Tensor, ego_valid: torch.Tensor) -> torch.Tensor:
+        """`EgoBranch` offsets ``[..., 2]`` of the ego roll-outs (their own leading axes, e.g. ``[K, 1]``: computed
+        once per roll-out, not once per pair)."""
+        assert self.ego_branch is not None
+        lead = torch.broadcast_shapes(ego_xy.shape[:-1], ego_heading.shape, ego_valid.shape)
+        feats = ego_features(ego_xy.expand(*lead, 2), ego_heading.expand(lead), ego_valid.expand(lead))
+        feats = feats[..., :: self.config.stride, :]
+        out = self.ego_branch(feats.reshape(-1, *feats.shape[-2:]))
+        return out.reshape(*lead[:-1], N_OUTPUTS)
