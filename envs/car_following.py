@@ -52,6 +52,8 @@ SAFE_REACTION_S = 0.3
 """Reaction time of the Gipps bound (s): braking starts one control step late plus a margin."""
 SAFE_MIN_GAP_M = 2.0
 """Bumper gap (m) the Gipps bound keeps when both have stopped."""
+EMERGENCY_DECEL_MPS2 = 8.0
+"""Hardest braking (m/s^2) a safety bound asks of a learned background agent (a car's emergency stop, 0.8 g)."""
 
 
 def _frames(cur: np.ndarray, rows: np.ndarray, present: np.ndarray) -> dict[str, np.ndarray]:
@@ -101,16 +103,13 @@ def _interval(x0: np.ndarray, u: np.ndarray, half: np.ndarray) -> tuple[np.ndarr
     return lo, hi
 
 
-def obstacle_gaps(cur: np.ndarray, rows: np.ndarray, horizon_s: float = CONTACT_HORIZON_S
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """For each agent of ``rows``: (bumper gap (m, inf: none) to the nearest obstacle, its speed along the
-    agent's heading (m/s)). Obstacles: the boxes of `leader_gaps` and every box that, both keeping their velocity,
-    overlaps the agent (boxes as rectangles in the agent's frame, ``CONTACT_MARGIN_M`` of lateral clearance)
-    within ``horizon_s`` while ahead of it at first contact (module docstring); the gap is the current one along
-    the agent's heading (<= 0 for a box already beside it: brake as hard as allowed)."""
-    present = np.flatnonzero(cur[:, VALID] > 0.5)
-    f = _frames(cur, rows, present)
-    me, other = cur[rows], cur[present]
+def predicted_contacts(boxes: np.ndarray, rows: np.ndarray, horizon_s: float = CONTACT_HORIZON_S) -> np.ndarray:
+    """``[n, A]`` bool: whether box ``j`` of ``boxes [A, 8]`` (valid ones only), both keeping their velocity,
+    overlaps agent ``rows[i]`` within ``horizon_s`` while in front of it at first contact (rectangles in the
+    agent's frame, ``CONTACT_MARGIN_M`` of lateral clearance; boxes up to `LEADER_RANGE_M` ahead)."""
+    allrows = np.arange(len(boxes))
+    f = _frames(boxes, rows, allrows)
+    me, other = boxes[rows], boxes
     cd, sd = np.abs(np.cos(f["dh"])), np.abs(np.sin(f["dh"]))
     ext_lon = 0.5 * me[:, LENGTH, None] + 0.5 * (cd * other[None, :, LENGTH] + sd * other[None, :, WIDTH])
     ext_lat = 0.5 * me[:, WIDTH, None] + 0.5 * (sd * other[None, :, LENGTH] + cd * other[None, :, WIDTH])
@@ -121,10 +120,31 @@ def obstacle_gaps(cur: np.ndarray, rows: np.ndarray, horizon_s: float = CONTACT_
     contact = (first < np.minimum(np.minimum(hi_a, hi_b), horizon_s)) & (first <= horizon_s)
     ahead_then = f["lon"] + rel_u * np.where(np.isfinite(first), first, 0.0) > 0.0
     contact &= ahead_then & (f["lon"] > -ext_lon) & (f["lon"] < LEADER_RANGE_M)
+    contact &= (other[None, :, VALID] > 0.5) & (me[:, VALID, None] > 0.5) & (allrows[None, :] != rows[:, None])
+    return contact
+
+
+def obstacle_gaps(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray | None = None,
+                  horizon_s: float = CONTACT_HORIZON_S) -> tuple[np.ndarray, np.ndarray]:
+    """For each agent of ``rows``: (bumper gap (m, inf: none) to the nearest obstacle, its speed along the
+    agent's heading (m/s)). Obstacles: the boxes of `leader_gaps` and the `predicted_contacts` (a car cutting
+    in, one crossing first) that the log did not have: with ``logged [A, 8]`` (the logged boxes of the same step),
+    a pair that is a predicted contact there too is left out: the logged drivers resolved that encounter
+    themselves (right of way, signals, a turn) in ways constant velocity cannot see, and braking for it (e.g. for
+    a car turning away at a junction) stops the agent in the path of traffic that the log lets pass. The gap is
+    the current one along the agent's heading (<= 0 for a box already beside it: brake as hard as allowed)."""
+    allrows = np.arange(len(cur))
+    f = _frames(cur, rows, allrows)
+    me, other = cur[rows], cur
+    contact = predicted_contacts(cur, rows, horizon_s)
+    if logged is not None:
+        contact &= ~predicted_contacts(logged, rows, horizon_s)
+    cd, sd = np.abs(np.cos(f["dh"])), np.abs(np.sin(f["dh"]))
+    ext_lon = 0.5 * me[:, LENGTH, None] + 0.5 * (cd * other[None, :, LENGTH] + sd * other[None, :, WIDTH])
     half_w = 0.5 * (me[:, WIDTH, None] + other[None, :, WIDTH])
     in_path = (f["lon"] > 0) & (f["lon"] < LEADER_RANGE_M) & (np.abs(f["lat"]) < half_w + PATH_MARGIN_M)
-    hit = (in_path | contact) & (present[None, :] != rows[:, None])
-    gap = np.where(hit, f["lon"] - ext_lon, np.inf)
+    in_path &= (other[None, :, VALID] > 0.5) & (allrows[None, :] != rows[:, None])
+    gap = np.where(in_path | contact, f["lon"] - ext_lon, np.inf)
     return _nearest(gap, f["v_lon"])
 
 

@@ -85,10 +85,10 @@ class RapidBackground(SimulatedBackground):
         prev_ok = np.zeros(rows.size, dtype=bool) if prev is None else prev[rows, VALID] > 0.5
         prev_vel = cur[rows][:, [VX, VY]] if prev is None else np.where(
             prev_ok[:, None], prev[rows][:, [VX, VY]], cur[rows][:, [VX, VY]])
-        desired = self.intent.desired_speed_mps[rows]
+        desired = self.intent.desired_at(t, rows)
         dest = self.intent.destination_xy[rows]
         inp = agent_inputs(self._geo, cur, rows, prev_vel, prev_ok, desired, dest)
-        targets = physics_targets(self._geo, cur, rows, desired, dest, self.guidance)
+        targets = physics_targets(self._geo, cur, rows, desired, dest, self.guidance, self.log[:, t])
         with torch.inference_mode():
             ctx = self.net.agent(inputs_to_torch(inp), self._z.expand(rows.size, -1, -1))
             acc = ddim_sample(self.net.denoiser, ctx, self.alpha_bar, self.ddim_steps, self._gen,

@@ -25,6 +25,12 @@ Targets ``a_i`` (agent frame, m/s^2; `physics_targets`):
   from 2.3 to 6.0 m and the heuristic ego's crash rate from 0.10 to 0.125 for a small drop in background
   collisions (0.040 -> 0.031).
 
+* safety (vehicles; ``w_safety``, one-sided): the gradient of ``max(x0_lon - a_safe, 0)^2`` with ``a_safe`` the
+  Gipps safe-speed bound behind the agent's nearest obstacle (`safety_bound`): zero while the model's own
+  acceleration leaves room to stop behind it, so it leaves ordinary driving alone and only caps closing in on a
+  slower ego or a car cutting in (the learned model brakes too late for an ego slower than its log); with weight
+  0.5 the step is the projection onto the bound. Unlike ``w_leader`` it never pulls an agent toward a headway.
+
 Deliberate difference from the paper: its social and map targets are the repulsive forces alone, which for
 vehicles would pull every acceleration toward zero wherever nothing is near; here they are the model's own
 estimate plus the repulsion, so the term is zero when nothing repels (the destination term is the paper's).
@@ -40,6 +46,7 @@ import torch
 from seal.core.errors import SealError
 from seal.core.scenario import HEADING, LENGTH, VALID, VX, VY, WIDTH, X, Y
 from seal.envs.background import idm_acceleration, leader_gaps
+from seal.envs.car_following import EMERGENCY_DECEL_MPS2, obstacle_gaps, safe_acceleration
 from seal.models.rapid.features import ACC_SCALE_MPS2, MapGeometry
 
 N_DIFFUSION = 50
@@ -61,6 +68,8 @@ class Guidance:
 
     Attributes:
         w_destination, w_social, w_map, w_leader: weights w_i of eq. 7 (0 = off).
+        w_safety: weight of the one-sided safety term (`safety_bound`; 0.5, the default, projects the
+            longitudinal acceleration onto the bound, 0 = off).
         tau_s: relaxation time of the destination term (s).
         a_social_mps2, b_social_m: strength and range of the repulsion between agents.
         a_map_mps2, b_map_m: strength and range of the repulsion from the road's edges.
@@ -74,6 +83,7 @@ class Guidance:
     w_social: float = 0.3
     w_map: float = 0.1
     w_leader: float = 0.0
+    w_safety: float = 0.5
     tau_s: float = 1.0
     a_social_mps2: float = 6.0
     b_social_m: float = 2.0
@@ -138,9 +148,10 @@ def map_force(geo: MapGeometry, cur: np.ndarray, rows: np.ndarray, g: Guidance) 
 
 
 def physics_targets(geo: MapGeometry, cur: np.ndarray, rows: np.ndarray, desired: np.ndarray, dest: np.ndarray,
-                    g: Guidance) -> dict[str, np.ndarray]:
+                    g: Guidance, logged: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Per term, the agent-frame force ``[n, 2]`` / `ACC_SCALE_MPS2` (model units); the repulsive ones are added
-    to the model's estimate in `ddim_sample` (module docstring)."""
+    to the model's estimate in `ddim_sample` (module docstring); ``logged [A, 8]``: the logged boxes of the step
+    (`safety_bound`)."""
     c, s = np.cos(cur[rows, HEADING]), np.sin(cur[rows, HEADING])
 
     def local(f: np.ndarray) -> np.ndarray:
@@ -155,7 +166,24 @@ def physics_targets(geo: MapGeometry, cur: np.ndarray, rows: np.ndarray, desired
         out["map"] = local(map_force(geo, cur, rows, g))
     if g.w_leader:
         out["leader"] = leader_target(cur, rows, desired)
+    if g.w_safety:
+        out["safety"] = safety_bound(cur, rows, logged)
     return out
+
+
+NO_BOUND = 1e6
+"""`safety_bound`'s value (model units) for an agent with no obstacle."""
+
+
+def safety_bound(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray | None = None) -> np.ndarray:
+    """``[n, 1]``: the largest longitudinal acceleration (model units) each agent may take, the Gipps bound
+    (`seal.envs.car_following.safe_acceleration`) behind its nearest obstacle (`obstacle_gaps`: the box ahead,
+    a car cutting in or crossing first, the ego included), no harder than `EMERGENCY_DECEL_MPS2`; `NO_BOUND`
+    without an obstacle. ``logged``: the logged boxes of the step (encounters the log had are its own)."""
+    gap, lead_v = obstacle_gaps(cur, rows, logged)
+    speed = np.hypot(cur[rows, VX], cur[rows, VY])
+    bound = np.maximum(safe_acceleration(speed, gap, lead_v), -EMERGENCY_DECEL_MPS2) / ACC_SCALE_MPS2
+    return np.where(np.isfinite(bound), bound, NO_BOUND)[:, None]
 
 
 def leader_target(cur: np.ndarray, rows: np.ndarray, desired: np.ndarray) -> np.ndarray:
@@ -182,6 +210,9 @@ def guide(x0: torch.Tensor, targets: dict[str, torch.Tensor], g: Guidance) -> to
         lead = targets["leader"]
         lon = out[:, 0] - 2.0 * g.w_leader * lead[:, 1] * (x0[:, 0] - lead[:, 0])
         out = torch.stack([lon, out[:, 1]], dim=1)
+    if "safety" in targets:
+        excess = torch.clamp(out[:, 0] - targets["safety"][:, 0], min=0.0)
+        out = torch.stack([out[:, 0] - 2.0 * g.w_safety * excess, out[:, 1]], dim=1)
     return out
 
 
