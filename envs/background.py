@@ -234,7 +234,8 @@ class IDMBackground(BackgroundController):
         speed = np.hypot(cur[moving, VX], cur[moving, VY])
         gap, lead_v = obstacle_gaps(cur, moving, self.log[:, t])
         desired = np.nan_to_num(self.intent.desired_at(t, moving), nan=speed)
-        new_speed = np.clip(speed + idm_plus_acceleration(speed, desired, gap, lead_v, self._headway[moving]) * DT_S, 0.0, MAX_SPEED_MPS)
+        acc = idm_plus_acceleration(speed, desired, gap, lead_v, self._headway[moving])
+        new_speed = np.clip(speed + acc * DT_S, 0.0, MAX_SPEED_MPS)
         for k, row in enumerate(moving.tolist()):
             route = self._route(row)
             if row not in self._hint:  # present at the first step: start on its route

@@ -21,9 +21,9 @@ from seal.core.errors import SealError
 from seal.core.road import RoadDescription
 from seal.core.scenario import HEADING, VALID, VX, VY, Scenario
 from seal.envs.background import SimulatedBackground
-from seal.models.rapid.features import ACC_SCALE_MPS2, MapGeometry, agent_inputs, build_map_geometry
+from seal.models.rapid.features import ACC_SCALE_MPS2, MapGeometry, agent_inputs, build_map_geometry, scan_pairs
 from seal.models.rapid.network import RapidNet, anchor_encoding, inputs_to_torch
-from seal.models.rapid.sampler import Guidance, ddim_sample, physics_targets, schedule
+from seal.models.rapid.sampler import Guidance, ddim_sample, physics_targets, schedule, social_constants
 from seal.models.rapid.train import load_rapid_net
 
 MAP_CACHE_SIZE = 256
@@ -87,8 +87,10 @@ class RapidBackground(SimulatedBackground):
             prev_ok[:, None], prev[rows][:, [VX, VY]], cur[rows][:, [VX, VY]])
         desired = self.intent.desired_at(t, rows)
         dest = self.intent.destination_xy[rows]
-        inp = agent_inputs(self._geo, cur, rows, prev_vel, prev_ok, desired, dest)
-        targets = physics_targets(self._geo, cur, rows, desired, dest, self.guidance, self.log[:, t])
+        logged = self.log[:, t]
+        scan = scan_pairs(cur, rows, logged, social_constants(self.guidance))
+        inp = agent_inputs(self._geo, cur, rows, prev_vel, prev_ok, desired, dest, scan)
+        targets = physics_targets(self._geo, cur, rows, desired, dest, self.guidance, logged, scan)
         with torch.inference_mode():
             ctx = self.net.agent(inputs_to_torch(inp), self._z.expand(rows.size, -1, -1))
             acc = ddim_sample(self.net.denoiser, ctx, self.alpha_bar, self.ddim_steps, self._gen,

@@ -1,4 +1,5 @@
-"""Compiled (numba) kernel of the RAPID inputs: the closest point of a set of segments for many points at once.
+"""Compiled (numba) kernels of the RAPID step: the closest point of a set of segments for many points at once
+(`closest_points`) and every pairwise quantity in one pass (`pair_scan`).
 
 Why compiled: the local map read-out and the map force ask it for every background agent (two points each) on
 every env step; a numpy ``[points, segments]`` table or one kernel call per point made it the largest per-agent
@@ -8,6 +9,8 @@ numba's on-disk cache) at import.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import float64, int64, njit, types
@@ -40,3 +43,122 @@ def closest_points(cols: np.ndarray, len2: np.ndarray, pts: np.ndarray) -> tuple
                 out[i, 0] = cols[0, k] + t * cols[2, k]
                 out[i, 1] = cols[1, k] + t * cols[3, k]
     return out, idx
+
+
+# Track columns (`seal.core.scenario`), repeated here because numba freezes globals into its on-disk cache,
+# which checks only this file for changes (a test holds them equal to the data model's).
+_X, _Y, _H, _VX, _VY, _L, _W, _VALID = 0, 1, 2, 3, 4, 5, 6, 7
+
+N_PAIR_PARAMS = 11
+"""Length of `pair_scan`'s ``params`` (see there)."""
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _interval(x0: float, u: float, half: float) -> tuple[float, float]:
+    """Times ``(lo, hi)`` (s) during which ``|x0 + u t| < half``: `seal.envs.car_following._interval`."""
+    if abs(u) > 1e-9:
+        a = (-half - x0) / u
+        b = (half - x0) / u
+        return min(a, b), max(a, b)
+    if abs(x0) < half:
+        return -np.inf, np.inf
+    return np.inf, -np.inf
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _contact(b: np.ndarray, i: int, j: int, horizon: float, margin: float, reach: float) -> bool:
+    """`seal.envs.car_following.predicted_contacts` for one pair (agent ``i``, box ``j``) of the boxes ``b``."""
+    if i == j or b[i, _VALID] <= 0.5 or b[j, _VALID] <= 0.5:
+        return False
+    c, s = math.cos(b[i, _H]), math.sin(b[i, _H])
+    dx, dy = b[j, _X] - b[i, _X], b[j, _Y] - b[i, _Y]
+    lon, lat = c * dx + s * dy, -s * dx + c * dy
+    v_lon, v_lat = c * b[j, _VX] + s * b[j, _VY], -s * b[j, _VX] + c * b[j, _VY]
+    rel_u = v_lon - (c * b[i, _VX] + s * b[i, _VY])
+    dh = b[j, _H] - b[i, _H]
+    cd, sd = abs(math.cos(dh)), abs(math.sin(dh))
+    ext_lon = 0.5 * b[i, _L] + 0.5 * (cd * b[j, _L] + sd * b[j, _W])
+    ext_lat = 0.5 * b[i, _W] + 0.5 * (sd * b[j, _L] + cd * b[j, _W])
+    lo_a, hi_a = _interval(lon, rel_u, ext_lon)
+    lo_b, hi_b = _interval(lat, v_lat, ext_lat + margin)
+    first = max(max(lo_a, lo_b), 0.0)
+    if not (first < min(min(hi_a, hi_b), horizon) and first <= horizon):
+        return False
+    at = first if math.isfinite(first) else 0.0
+    return lon + rel_u * at > 0.0 and lon > -ext_lon and lon < reach
+
+
+@njit(types.Tuple((float64[:, ::1], int64[:, ::1], float64[:, ::1]))(
+    float64[:, ::1], int64[::1], float64[:, ::1], float64[::1], int64), cache=True, nogil=True, error_model="numpy")
+def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.ndarray, k: int
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every pairwise quantity of the RAPID step in one pass over (agent, box) pairs, float64, the numpy
+    functions' operations (`seal.envs.car_following.leader_gaps` / `obstacle_gaps`, the eq. 9 social force, the
+    ``k`` nearest neighbours of `seal.models.rapid.features`): one compiled loop instead of a dozen ``[n, A]``
+    numpy tables per term, which made these terms the largest per-agent cost at 120 agents.
+
+    Args:
+        cur: ``[A, 8]`` boxes of the step; rows: ``[n]`` the agents; logged: ``[A, 8]`` the logged boxes of the
+            step (all valid = 0: no log to compare with).
+        params: leader reach (m), path margin (m), contact horizon (s), contact margin (m), social strength
+            (m/s^2), social range (m), social headway (s), weight behind, neighbour range (m), 0, 0.
+        k: neighbours kept.
+
+    Returns:
+        ``[n, 6]`` leader gap (m, inf: none), leader speed along the heading (m/s), obstacle gap, obstacle speed,
+        social force x, y (map frame, m/s^2); ``[n, k]`` neighbour rows nearest first (-1: none); ``[n, k]``
+        their centre distances (m, inf: none).
+    """
+    n = rows.shape[0]
+    m = cur.shape[0]
+    reach, margin_p, horizon, margin_c = params[0], params[1], params[2], params[3]
+    a_soc, b_soc, t_head, behind, nb_range = params[4], params[5], params[6], params[7], params[8]
+    use_log = logged[:, _VALID].max() > 0.5 if m else False
+    out = np.empty((n, 6))
+    nb = np.full((n, k), -1, dtype=np.int64)
+    nbd = np.full((n, k), np.inf)
+    for r in range(n):
+        i = rows[r]
+        c, s = math.cos(cur[i, _H]), math.sin(cur[i, _H])
+        lead, lead_v, obs, obs_v, fx, fy = np.inf, 0.0, np.inf, 0.0, 0.0, 0.0
+        for j in range(m):
+            if j == i or cur[j, _VALID] <= 0.5:
+                continue
+            dx, dy = cur[j, _X] - cur[i, _X], cur[j, _Y] - cur[i, _Y]
+            lon, lat = c * dx + s * dy, -s * dx + c * dy
+            v_lon = c * cur[j, _VX] + s * cur[j, _VY]
+            in_path = lon > 0.0 and lon < reach and abs(lat) < 0.5 * (cur[i, _W] + cur[j, _W]) + margin_p
+            if in_path:
+                g = lon - 0.5 * (cur[i, _L] + cur[j, _L])
+                if g < lead:
+                    lead, lead_v = g, v_lon
+            hit = in_path
+            if not hit and _contact(cur, i, j, horizon, margin_c, reach):
+                hit = not (use_log and _contact(logged, i, j, horizon, margin_c, reach))
+            if hit:
+                dh = cur[j, _H] - cur[i, _H]
+                g = lon - (0.5 * cur[i, _L] + 0.5 * (abs(math.cos(dh)) * cur[j, _L] + abs(math.sin(dh)) * cur[j, _W]))
+                if g < obs:
+                    obs, obs_v = g, v_lon
+            dist = math.hypot(dx, dy)
+            d = max(dist, 1e-6)
+            closing = max(((cur[i, _VX] - cur[j, _VX]) * dx + (cur[i, _VY] - cur[j, _VY]) * dy) / d, 0.0)
+            gap_lon = abs(lon) - 0.5 * (cur[i, _L] + cur[j, _L])
+            gap_lat = abs(lat) - 0.5 * (cur[i, _W] + cur[j, _W])
+            gap = max(max(gap_lon, gap_lat) - t_head * closing, 0.0)
+            fov = behind + (1.0 - behind) * 0.5 * (1.0 + lon / d)
+            mag = a_soc * math.exp(-gap / b_soc) * fov
+            fx -= mag * dx / d
+            fy -= mag * dy / d
+            if dist <= nb_range and k > 0 and dist < nbd[r, k - 1]:
+                q = k - 1
+                while q > 0 and nbd[r, q - 1] > dist:
+                    nbd[r, q] = nbd[r, q - 1]
+                    nb[r, q] = nb[r, q - 1]
+                    q -= 1
+                nbd[r, q] = dist
+                nb[r, q] = j
+        out[r, 0], out[r, 1] = lead, (lead_v if math.isfinite(lead) else 0.0)
+        out[r, 2], out[r, 3] = obs, (obs_v if math.isfinite(obs) else 0.0)
+        out[r, 4], out[r, 5] = fx, fy
+    return out, nb, nbd

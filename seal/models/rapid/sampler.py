@@ -44,10 +44,10 @@ import numpy as np
 import torch
 
 from seal.core.errors import SealError
-from seal.core.scenario import HEADING, LENGTH, VALID, VX, VY, WIDTH, X, Y
+from seal.core.scenario import HEADING, VX, VY, WIDTH, X, Y
 from seal.envs.background import idm_acceleration, leader_gaps
-from seal.envs.car_following import EMERGENCY_DECEL_MPS2, obstacle_gaps, safe_acceleration
-from seal.models.rapid.features import ACC_SCALE_MPS2, MapGeometry
+from seal.envs.car_following import EMERGENCY_DECEL_MPS2, safe_acceleration
+from seal.models.rapid.features import ACC_SCALE_MPS2, MapGeometry, PairScan, scan_pairs
 
 N_DIFFUSION = 50
 SOCIAL_BEHIND = 0.1
@@ -115,24 +115,9 @@ def destination_force(cur: np.ndarray, rows: np.ndarray, desired: np.ndarray, de
 
 
 def social_force(cur: np.ndarray, rows: np.ndarray, g: Guidance) -> np.ndarray:
-    """Eq. 9 ``[n, 2]`` in the map frame (m/s^2): box-gap repulsion from every other present agent."""
-    present = np.flatnonzero(cur[:, VALID] > 0.5)
-    me, other = cur[rows], cur[present]
-    c, s = np.cos(me[:, HEADING])[:, None], np.sin(me[:, HEADING])[:, None]
-    d = other[None, :, :2] - me[:, None, :2]
-    lon = c * d[..., 0] + s * d[..., 1]
-    lat = -s * d[..., 0] + c * d[..., 1]
-    gap_lon = np.abs(lon) - 0.5 * (me[:, LENGTH, None] + other[None, :, LENGTH])
-    gap_lat = np.abs(lat) - 0.5 * (me[:, WIDTH, None] + other[None, :, WIDTH])
-    dist = np.maximum(np.hypot(d[..., 0], d[..., 1]), 1e-6)
-    rel_v = me[:, None, [VX, VY]] - other[None, :, [VX, VY]]
-    closing = np.maximum((rel_v * d).sum(-1) / dist, 0.0)
-    gap = np.maximum(np.maximum(gap_lon, gap_lat) - g.t_headway_s * closing, 0.0)
-    cos_phi = lon / dist
-    fov = SOCIAL_BEHIND + (1.0 - SOCIAL_BEHIND) * 0.5 * (1.0 + cos_phi)
-    mag = g.a_social_mps2 * np.exp(-gap / g.b_social_m) * fov
-    mag[present[None, :] == rows[:, None]] = 0.0
-    return -(mag[..., None] * d / dist[..., None]).sum(axis=1)
+    """Eq. 9 ``[n, 2]`` in the map frame (m/s^2): box-gap repulsion from every other present agent (module
+    docstring), computed by the compiled `scan_pairs`."""
+    return scan_pairs(cur, rows, None, social_constants(g)).social
 
 
 def map_force(geo: MapGeometry, cur: np.ndarray, rows: np.ndarray, g: Guidance) -> np.ndarray:
@@ -148,10 +133,14 @@ def map_force(geo: MapGeometry, cur: np.ndarray, rows: np.ndarray, g: Guidance) 
 
 
 def physics_targets(geo: MapGeometry, cur: np.ndarray, rows: np.ndarray, desired: np.ndarray, dest: np.ndarray,
-                    g: Guidance, logged: np.ndarray | None = None) -> dict[str, np.ndarray]:
+                    g: Guidance, logged: np.ndarray | None = None, scan: PairScan | None = None
+                    ) -> dict[str, np.ndarray]:
     """Per term, the agent-frame force ``[n, 2]`` / `ACC_SCALE_MPS2` (model units); the repulsive ones are added
     to the model's estimate in `ddim_sample` (module docstring); ``logged [A, 8]``: the logged boxes of the step
-    (`safety_bound`)."""
+    (`safety_bound`); ``scan``: `scan_pairs` of ``rows`` with ``logged`` and ``g``'s social constants (computed
+    here when not given): the social force and the obstacles come from it, one compiled pass."""
+    if scan is None and (g.w_social or g.w_safety):
+        scan = scan_pairs(cur, rows, logged, social_constants(g))
     c, s = np.cos(cur[rows, HEADING]), np.sin(cur[rows, HEADING])
 
     def local(f: np.ndarray) -> np.ndarray:
@@ -161,13 +150,15 @@ def physics_targets(geo: MapGeometry, cur: np.ndarray, rows: np.ndarray, desired
     if g.w_destination:
         out["destination"] = local(destination_force(cur, rows, desired, dest, g.tau_s))
     if g.w_social:
-        out["social"] = local(social_force(cur, rows, g))
+        assert scan is not None
+        out["social"] = local(scan.social)
     if g.w_map:
         out["map"] = local(map_force(geo, cur, rows, g))
     if g.w_leader:
         out["leader"] = leader_target(cur, rows, desired)
     if g.w_safety:
-        out["safety"] = safety_bound(cur, rows, logged)
+        assert scan is not None
+        out["safety"] = safety_bound(cur, rows, scan.obstacle_gap, scan.obstacle_v)
     return out
 
 
@@ -175,12 +166,17 @@ NO_BOUND = 1e6
 """`safety_bound`'s value (model units) for an agent with no obstacle."""
 
 
-def safety_bound(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray | None = None) -> np.ndarray:
+def social_constants(g: Guidance) -> tuple[float, float, float, float]:
+    """The eq. 9 constants `scan_pairs` takes: strength, range, headway, weight behind."""
+    return (g.a_social_mps2, g.b_social_m, g.t_headway_s, SOCIAL_BEHIND)
+
+
+def safety_bound(cur: np.ndarray, rows: np.ndarray, gap: np.ndarray, lead_v: np.ndarray) -> np.ndarray:
     """``[n, 1]``: the largest longitudinal acceleration (model units) each agent may take, the Gipps bound
-    (`seal.envs.car_following.safe_acceleration`) behind its nearest obstacle (`obstacle_gaps`: the box ahead,
-    a car cutting in or crossing first, the ego included), no harder than `EMERGENCY_DECEL_MPS2`; `NO_BOUND`
-    without an obstacle. ``logged``: the logged boxes of the step (encounters the log had are its own)."""
-    gap, lead_v = obstacle_gaps(cur, rows, logged)
+    (`seal.envs.car_following.safe_acceleration`) behind its nearest obstacle (``gap`` (m, inf: none) and
+    ``lead_v`` (m/s) of `seal.envs.car_following.obstacle_gaps`: the box ahead, a car cutting in or crossing
+    first that the log did not have, the ego included), no harder than `EMERGENCY_DECEL_MPS2`; `NO_BOUND`
+    without an obstacle."""
     speed = np.hypot(cur[rows, VX], cur[rows, VY])
     bound = np.maximum(safe_acceleration(speed, gap, lead_v), -EMERGENCY_DECEL_MPS2) / ACC_SCALE_MPS2
     return np.where(np.isfinite(bound), bound, NO_BOUND)[:, None]
