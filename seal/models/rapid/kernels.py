@@ -66,17 +66,21 @@ def _interval(x0: float, u: float, half: float) -> tuple[float, float]:
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _contact(b: np.ndarray, i: int, j: int, horizon: float, margin: float, reach: float) -> bool:
-    """`seal.envs.car_following.predicted_contacts` for one pair (agent ``i``, box ``j``) of the boxes ``b``."""
+def _contact(b: np.ndarray, cs: np.ndarray, i: int, j: int, horizon: float, margin: float, reach: float) -> bool:
+    """`seal.envs.car_following.predicted_contacts` for one pair (agent ``i``, box ``j``) of the boxes ``b``
+    (``cs [A, 2]``: cos / sin of their headings)."""
     if i == j or b[i, _VALID] <= 0.5 or b[j, _VALID] <= 0.5:
         return False
-    c, s = math.cos(b[i, _H]), math.sin(b[i, _H])
+    c, s = cs[i, 0], cs[i, 1]
     dx, dy = b[j, _X] - b[i, _X], b[j, _Y] - b[i, _Y]
-    lon, lat = c * dx + s * dy, -s * dx + c * dy
+    lon = c * dx + s * dy
+    if lon >= reach:
+        return False
+    lat = -s * dx + c * dy
     v_lon, v_lat = c * b[j, _VX] + s * b[j, _VY], -s * b[j, _VX] + c * b[j, _VY]
     rel_u = v_lon - (c * b[i, _VX] + s * b[i, _VY])
-    dh = b[j, _H] - b[i, _H]
-    cd, sd = abs(math.cos(dh)), abs(math.sin(dh))
+    cd = abs(cs[j, 0] * c + cs[j, 1] * s)
+    sd = abs(cs[j, 1] * c - cs[j, 0] * s)
     ext_lon = 0.5 * b[i, _L] + 0.5 * (cd * b[j, _L] + sd * b[j, _W])
     ext_lat = 0.5 * b[i, _W] + 0.5 * (sd * b[j, _L] + cd * b[j, _W])
     lo_a, hi_a = _interval(lon, rel_u, ext_lon)
@@ -85,7 +89,16 @@ def _contact(b: np.ndarray, i: int, j: int, horizon: float, margin: float, reach
     if not (first < min(min(hi_a, hi_b), horizon) and first <= horizon):
         return False
     at = first if math.isfinite(first) else 0.0
-    return lon + rel_u * at > 0.0 and lon > -ext_lon and lon < reach
+    return lon + rel_u * at > 0.0 and lon > -ext_lon
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _cos_sin(b: np.ndarray) -> np.ndarray:
+    out = np.empty((b.shape[0], 2))
+    for i in range(b.shape[0]):
+        out[i, 0] = math.cos(b[i, _H])
+        out[i, 1] = math.sin(b[i, _H])
+    return out
 
 
 @njit(types.Tuple((float64[:, ::1], int64[:, ::1], float64[:, ::1]))(
@@ -114,12 +127,13 @@ def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.
     reach, margin_p, horizon, margin_c = params[0], params[1], params[2], params[3]
     a_soc, b_soc, t_head, behind, nb_range = params[4], params[5], params[6], params[7], params[8]
     use_log = logged[:, _VALID].max() > 0.5 if m else False
+    cs, cs_log = _cos_sin(cur), _cos_sin(logged)
     out = np.empty((n, 6))
     nb = np.full((n, k), -1, dtype=np.int64)
     nbd = np.full((n, k), np.inf)
     for r in range(n):
         i = rows[r]
-        c, s = math.cos(cur[i, _H]), math.sin(cur[i, _H])
+        c, s = cs[i, 0], cs[i, 1]
         lead, lead_v, obs, obs_v, fx, fy = np.inf, 0.0, np.inf, 0.0, 0.0, 0.0
         for j in range(m):
             if j == i or cur[j, _VALID] <= 0.5:
@@ -133,11 +147,12 @@ def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.
                 if g < lead:
                     lead, lead_v = g, v_lon
             hit = in_path
-            if not hit and _contact(cur, i, j, horizon, margin_c, reach):
-                hit = not (use_log and _contact(logged, i, j, horizon, margin_c, reach))
+            if not hit and _contact(cur, cs, i, j, horizon, margin_c, reach):
+                hit = not (use_log and _contact(logged, cs_log, i, j, horizon, margin_c, reach))
             if hit:
-                dh = cur[j, _H] - cur[i, _H]
-                g = lon - (0.5 * cur[i, _L] + 0.5 * (abs(math.cos(dh)) * cur[j, _L] + abs(math.sin(dh)) * cur[j, _W]))
+                cd = abs(cs[j, 0] * c + cs[j, 1] * s)
+                sd = abs(cs[j, 1] * c - cs[j, 0] * s)
+                g = lon - (0.5 * cur[i, _L] + 0.5 * (cd * cur[j, _L] + sd * cur[j, _W]))
                 if g < obs:
                     obs, obs_v = g, v_lon
             dist = math.hypot(dx, dy)

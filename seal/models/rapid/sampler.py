@@ -48,6 +48,7 @@ from seal.core.scenario import HEADING, VX, VY, WIDTH, X, Y
 from seal.envs.background import idm_acceleration, leader_gaps
 from seal.envs.car_following import EMERGENCY_DECEL_MPS2, safe_acceleration
 from seal.models.rapid.features import ACC_SCALE_MPS2, MapGeometry, PairScan, scan_pairs
+from seal.models.rapid.network import Denoiser
 
 N_DIFFUSION = 50
 SOCIAL_BEHIND = 0.1
@@ -221,13 +222,17 @@ def ddim_steps(n_steps: int, n_train: int = N_DIFFUSION) -> list[int]:
 def ddim_sample(denoise: torch.nn.Module, ctx: torch.Tensor, alpha_bar: torch.Tensor, n_steps: int,
                 generator: torch.Generator, targets: dict[str, torch.Tensor], g: Guidance,
                 temperature: float = 1.0) -> torch.Tensor:
-    """Clean accelerations ``[n, 2]`` (model units) for contexts ``ctx [n, D]`` (module docstring)."""
+    """Clean accelerations ``[n, 2]`` (model units) for contexts ``ctx [n, D]`` (module docstring); a
+    `Denoiser` multiplies the contexts once per call (`Denoiser.context_part`), any other module is called as
+    ``denoise(x, k, ctx)`` at every step."""
     n = ctx.shape[0]
     x = torch.randn(n, 2, generator=generator) * temperature
     steps = ddim_steps(n_steps, len(alpha_bar))
+    fast = isinstance(denoise, Denoiser)
+    ctx_part = denoise.context_part(ctx) if isinstance(denoise, Denoiser) else ctx
     for i, k in enumerate(steps):
         ab = alpha_bar[k]
-        x0 = denoise(x, torch.full((n,), k), ctx)
+        x0 = denoise.forward_from(x, k, ctx_part) if fast else denoise(x, torch.full((n,), k), ctx)
         if targets:
             x0 = guide(x0, targets, g)
         eps = (x - ab.sqrt() * x0) / (1.0 - ab).sqrt()
