@@ -25,7 +25,7 @@ from seal.core.road import RoadDescription
 from seal.core.scenario import DT_S, HEADING, LENGTH, VX, VY, WIDTH, X, Y
 from seal.envs.car_following import CONTACT_HORIZON_S, CONTACT_MARGIN_M, LEADER_RANGE_M, PATH_MARGIN_M
 from seal.envs.road_geometry import get_road_geometry
-from seal.models.rapid.kernels import closest_points, pair_scan
+from seal.models.rapid.kernels import closest_points_grid, pair_scan, segment_grid
 
 N_FREQ = 8
 """Fourier frequencies per axis, linearly spaced from 2 pi / 1 km to 2 pi / 0.5 m (paper 3.2)."""
@@ -48,15 +48,21 @@ def fourier(xy: np.ndarray) -> np.ndarray:
     return np.concatenate([np.sin(ang).reshape(len(xy), -1), np.cos(ang).reshape(len(xy), -1)], axis=1)
 
 
+GRID_CELL_M = 10.0
+"""Cell size (m) of the segment grid `Segments.nearest` searches."""
+
+
 @dataclass(frozen=True)
 class Segments:
-    """Polyline segments as arrays: starts ``a [S, 2]``, vectors ``e [S, 2]`` (m), squared lengths ``[S]`` and
-    the ``[4, S]`` rows (a x, a y, e x, e y) the compiled `closest_points` reads."""
+    """Polyline segments as arrays: starts ``a [S, 2]``, vectors ``e [S, 2]`` (m), squared lengths ``[S]``, the
+    ``[4, S]`` rows (a x, a y, e x, e y) the compiled kernels read and their `segment_grid` (``grid``: meta,
+    start, items), built once per road."""
 
     a: np.ndarray
     e: np.ndarray
     len2: np.ndarray
     cols: np.ndarray
+    grid: tuple[np.ndarray, np.ndarray, np.ndarray]
 
     @classmethod
     def of(cls, polylines: list[np.ndarray]) -> Segments:
@@ -67,12 +73,15 @@ class Segments:
         len2 = (e**2).sum(axis=1)
         keep = len2 > 1e-6
         a, e, len2 = a[keep], e[keep], np.ascontiguousarray(len2[keep])
-        return cls(a, e, len2, np.ascontiguousarray(np.vstack([a.T, e.T])))
+        cols = np.ascontiguousarray(np.vstack([a.T, e.T]))
+        return cls(a, e, len2, cols, segment_grid(cols, GRID_CELL_M))
 
     def nearest(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For points ``p [n, 2]``: (closest point on any segment ``[n, 2]``, that segment's direction (unit));
-        one compiled call (`seal.models.rapid.kernels.closest_points`)."""
-        q, ks = closest_points(self.cols, self.len2, np.ascontiguousarray(p, dtype=np.float64))
+        one compiled call through the grid (`seal.models.rapid.kernels.closest_points_grid`: the segments near
+        each point only, the answer of the brute-force `closest_points`)."""
+        pts = np.ascontiguousarray(p, dtype=np.float64)
+        q, ks = closest_points_grid(self.cols, self.len2, pts, *self.grid, GRID_CELL_M)
         return q, self.e[ks] / np.sqrt(self.len2[ks])[:, None]
 
 

@@ -177,3 +177,85 @@ def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.
         out[r, 2], out[r, 3] = obs, (obs_v if math.isfinite(obs) else 0.0)
         out[r, 4], out[r, 5] = fx, fy
     return out, nb, nbd
+
+
+@njit(types.Tuple((float64[::1], int64[::1], int64[::1]))(float64[:, ::1], float64), cache=True, nogil=True,
+      error_model="numpy")
+def segment_grid(cols: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A uniform grid over the segments ``cols [4, n]`` (`closest_points`' layout) with ``cell``-metre cells:
+    ``meta [4]`` (x, y of the lower-left corner, cells along x, along y), ``start [cells + 1]`` and ``items``:
+    the segments whose bounding box touches cell ``c`` are ``items[start[c]:start[c + 1]]`` (row-major, y
+    outer)."""
+    n = cols.shape[1]
+    meta = np.zeros(4)
+    if n == 0:
+        return meta, np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    x0 = min(np.min(cols[0]), np.min(cols[0] + cols[2]))
+    y0 = min(np.min(cols[1]), np.min(cols[1] + cols[3]))
+    x1 = max(np.max(cols[0]), np.max(cols[0] + cols[2]))
+    y1 = max(np.max(cols[1]), np.max(cols[1] + cols[3]))
+    nx = int((x1 - x0) // cell) + 1
+    ny = int((y1 - y0) // cell) + 1
+    meta[0], meta[1], meta[2], meta[3] = x0, y0, nx, ny
+    counts = np.zeros(nx * ny + 1, dtype=np.int64)
+    for pass_ in range(2):
+        if pass_ == 1:
+            for c in range(nx * ny):
+                counts[c + 1] += counts[c]
+            items = np.empty(counts[nx * ny], dtype=np.int64)
+            fill = counts[:-1].copy()
+        for k in range(n):
+            ax, ay, bx, by = cols[0, k], cols[1, k], cols[0, k] + cols[2, k], cols[1, k] + cols[3, k]
+            i0, i1 = int((min(ax, bx) - x0) // cell), int((max(ax, bx) - x0) // cell)
+            j0, j1 = int((min(ay, by) - y0) // cell), int((max(ay, by) - y0) // cell)
+            for j in range(j0, j1 + 1):
+                for i in range(i0, i1 + 1):
+                    if pass_ == 0:
+                        counts[j * nx + i + 1] += 1
+                    else:
+                        items[fill[j * nx + i]] = k
+                        fill[j * nx + i] += 1
+    return meta, counts, items
+
+
+@njit(types.Tuple((float64[:, ::1], int64[::1]))(float64[:, ::1], float64[::1], float64[:, ::1], float64[::1],
+                                                  int64[::1], int64[::1], float64),
+      cache=True, nogil=True, error_model="numpy")
+def closest_points_grid(cols: np.ndarray, len2: np.ndarray, pts: np.ndarray, meta: np.ndarray, start: np.ndarray,
+                        items: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """`closest_points` through a `segment_grid`: rings of cells around each point, nearest first, until no
+    farther cell can hold a closer segment; ties go to the lowest segment index, so the answer is
+    `closest_points`' own. The cost per point depends on the segments near it, not on the map's size."""
+    m = pts.shape[0]
+    out = np.empty((m, 2))
+    idx = np.zeros(m, dtype=np.int64)
+    x0, y0, nx, ny = meta[0], meta[1], int(meta[2]), int(meta[3])
+    for p in range(m):
+        x, y = pts[p, 0], pts[p, 1]
+        ci, cj = int((x - x0) // cell), int((y - y0) // cell)
+        r_max = max(max(abs(ci), abs(ci - nx + 1)), max(abs(cj), abs(cj - ny + 1)))
+        best, best_k = np.inf, -1
+        for r in range(r_max + 1):
+            if best_k >= 0 and math.sqrt(best) < (r - 1) * cell:
+                break
+            for j in range(cj - r, cj + r + 1):
+                if j < 0 or j >= ny:
+                    continue
+                step = 1 if (j == cj - r or j == cj + r) else 2 * r
+                i = ci - r
+                while i <= ci + r:
+                    if 0 <= i < nx:
+                        c = j * nx + i
+                        for q in range(start[c], start[c + 1]):
+                            k = items[q]
+                            px, py = x - cols[0, k], y - cols[1, k]
+                            t = min(max((px * cols[2, k] + py * cols[3, k]) / len2[k], 0.0), 1.0)
+                            dx, dy = px - t * cols[2, k], py - t * cols[3, k]
+                            d2 = dx * dx + dy * dy
+                            if d2 < best or (d2 == best and k < best_k):
+                                best, best_k = d2, k
+                                out[p, 0] = cols[0, k] + t * cols[2, k]
+                                out[p, 1] = cols[1, k] + t * cols[3, k]
+                    i += max(step, 1)
+        idx[p] = max(best_k, 0)
+    return out, idx
