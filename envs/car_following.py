@@ -44,6 +44,9 @@ HEADWAY_MIN_SPEED_MPS = 2.0
 """Logged steps slower than this (m/s) say nothing about a time headway (queues)."""
 CONTACT_HORIZON_S = 2.0
 """How far ahead (s) a constant-velocity contact makes a box an obstacle (`obstacle_gaps`)."""
+SAME_DIRECTION_DEG = 30.0
+"""Heading difference (deg) below which a box entering the agent's corridor is a car cutting in."""
+COS_SAME_DIRECTION = math.cos(math.radians(SAME_DIRECTION_DEG))
 CONTACT_MARGIN_M = 0.3
 """Lateral clearance (m) added to the two half extents in the predicted-contact test."""
 SAFE_DECEL_MPS2 = 6.0
@@ -106,7 +109,10 @@ def _interval(x0: np.ndarray, u: np.ndarray, half: np.ndarray) -> tuple[np.ndarr
 def predicted_contacts(boxes: np.ndarray, rows: np.ndarray, horizon_s: float = CONTACT_HORIZON_S) -> np.ndarray:
     """``[n, A]`` bool: whether box ``j`` of ``boxes [A, 8]`` (valid ones only), both keeping their velocity,
     overlaps agent ``rows[i]`` within ``horizon_s`` while in front of it at first contact (rectangles in the
-    agent's frame, ``CONTACT_MARGIN_M`` of lateral clearance; boxes up to `LEADER_RANGE_M` ahead)."""
+    agent's frame, ``CONTACT_MARGIN_M`` of lateral clearance; boxes up to `LEADER_RANGE_M` ahead), or, driving
+    the same way (within `SAME_DIRECTION_DEG`), enters the agent's heading corridor (`leader_gaps`' test)
+    within ``horizon_s`` ahead of it: a car cutting in at the agent's own speed never touches it but becomes
+    its leader."""
     allrows = np.arange(len(boxes))
     f = _frames(boxes, rows, allrows)
     me, other = boxes[rows], boxes
@@ -120,6 +126,12 @@ def predicted_contacts(boxes: np.ndarray, rows: np.ndarray, horizon_s: float = C
     contact = (first < np.minimum(np.minimum(hi_a, hi_b), horizon_s)) & (first <= horizon_s)
     ahead_then = f["lon"] + rel_u * np.where(np.isfinite(first), first, 0.0) > 0.0
     contact &= ahead_then & (f["lon"] > -ext_lon) & (f["lon"] < LEADER_RANGE_M)
+    lo_c, hi_c = _interval(f["lat"], f["v_lat"], 0.5 * (me[:, WIDTH, None] + other[None, :, WIDTH]) + PATH_MARGIN_M)
+    enter = np.maximum(lo_c, 0.0)
+    at = np.where(np.isfinite(enter), enter, 0.0)
+    cut_in = (np.cos(f["dh"]) > COS_SAME_DIRECTION) & (enter <= horizon_s) & (enter < hi_c)
+    cut_in &= (f["lon"] + rel_u * at > 0.0) & (f["lon"] < LEADER_RANGE_M)
+    contact |= cut_in
     contact &= (other[None, :, VALID] > 0.5) & (me[:, VALID, None] > 0.5) & (allrows[None, :] != rows[:, None])
     return contact
 

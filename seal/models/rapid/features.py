@@ -23,7 +23,13 @@ import numpy as np
 
 from seal.core.road import RoadDescription
 from seal.core.scenario import DT_S, HEADING, LENGTH, VX, VY, WIDTH, X, Y
-from seal.envs.car_following import CONTACT_HORIZON_S, CONTACT_MARGIN_M, LEADER_RANGE_M, PATH_MARGIN_M
+from seal.envs.car_following import (
+    CONTACT_HORIZON_S,
+    CONTACT_MARGIN_M,
+    COS_SAME_DIRECTION,
+    LEADER_RANGE_M,
+    PATH_MARGIN_M,
+)
 from seal.envs.road_geometry import get_road_geometry
 from seal.models.rapid.kernels import closest_points_grid, pair_scan, segment_grid
 
@@ -201,7 +207,7 @@ def scan_pairs(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray | None = No
     cur = np.ascontiguousarray(cur, dtype=np.float64)
     log = np.zeros_like(cur) if logged is None else np.ascontiguousarray(logged, dtype=np.float64)
     params = np.array([LEADER_RANGE_M, PATH_MARGIN_M, CONTACT_HORIZON_S, CONTACT_MARGIN_M, *social,
-                       NEIGHBOR_RANGE_M, 0.0, 0.0])
+                       NEIGHBOR_RANGE_M, COS_SAME_DIRECTION, 0.0])
     out, nb, nbd = pair_scan(cur, np.ascontiguousarray(rows, dtype=np.int64), log, params, N_NEIGHBORS)
     return PairScan(out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4:6], nb, nbd)
 

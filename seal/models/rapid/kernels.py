@@ -66,7 +66,8 @@ def _interval(x0: float, u: float, half: float) -> tuple[float, float]:
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _contact(b: np.ndarray, cs: np.ndarray, i: int, j: int, horizon: float, margin: float, reach: float) -> bool:
+def _contact(b: np.ndarray, cs: np.ndarray, i: int, j: int, horizon: float, margin: float, reach: float,
+             path_margin: float, cos_same: float) -> bool:
     """`seal.envs.car_following.predicted_contacts` for one pair (agent ``i``, box ``j``) of the boxes ``b``
     (``cs [A, 2]``: cos / sin of their headings)."""
     if i == j or b[i, _VALID] <= 0.5 or b[j, _VALID] <= 0.5:
@@ -83,6 +84,12 @@ def _contact(b: np.ndarray, cs: np.ndarray, i: int, j: int, horizon: float, marg
     sd = abs(cs[j, 1] * c - cs[j, 0] * s)
     ext_lon = 0.5 * b[i, _L] + 0.5 * (cd * b[j, _L] + sd * b[j, _W])
     ext_lat = 0.5 * b[i, _W] + 0.5 * (sd * b[j, _L] + cd * b[j, _W])
+    if cs[j, 0] * c + cs[j, 1] * s > cos_same:  # same direction: entering the corridor ahead (a cut-in)
+        lo_c, hi_c = _interval(lat, v_lat, 0.5 * (b[i, _W] + b[j, _W]) + path_margin)
+        enter = max(lo_c, 0.0)
+        at = enter if math.isfinite(enter) else 0.0
+        if enter <= horizon and enter < hi_c and lon + rel_u * at > 0.0:
+            return True
     lo_a, hi_a = _interval(lon, rel_u, ext_lon)
     lo_b, hi_b = _interval(lat, v_lat, ext_lat + margin)
     first = max(max(lo_a, lo_b), 0.0)
@@ -114,7 +121,8 @@ def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.
         cur: ``[A, 8]`` boxes of the step; rows: ``[n]`` the agents; logged: ``[A, 8]`` the logged boxes of the
             step (all valid = 0: no log to compare with).
         params: leader reach (m), path margin (m), contact horizon (s), contact margin (m), social strength
-            (m/s^2), social range (m), social headway (s), weight behind, neighbour range (m), 0, 0.
+            (m/s^2), social range (m), social headway (s), weight behind, neighbour range (m), cosine of the
+            same-direction angle, 0.
         k: neighbours kept.
 
     Returns:
@@ -126,6 +134,7 @@ def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.
     m = cur.shape[0]
     reach, margin_p, horizon, margin_c = params[0], params[1], params[2], params[3]
     a_soc, b_soc, t_head, behind, nb_range = params[4], params[5], params[6], params[7], params[8]
+    cos_same = params[9]
     use_log = logged[:, _VALID].max() > 0.5 if m else False
     cs, cs_log = _cos_sin(cur), _cos_sin(logged)
     out = np.empty((n, 6))
@@ -147,8 +156,8 @@ def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.
                 if g < lead:
                     lead, lead_v = g, v_lon
             hit = in_path
-            if not hit and _contact(cur, cs, i, j, horizon, margin_c, reach):
-                hit = not (use_log and _contact(logged, cs_log, i, j, horizon, margin_c, reach))
+            if not hit and _contact(cur, cs, i, j, horizon, margin_c, reach, margin_p, cos_same):
+                hit = not (use_log and _contact(logged, cs_log, i, j, horizon, margin_c, reach, margin_p, cos_same))
             if hit:
                 cd = abs(cs[j, 0] * c + cs[j, 1] * s)
                 sd = abs(cs[j, 1] * c - cs[j, 0] * s)

@@ -157,7 +157,8 @@ class Denoiser(nn.Module):
         first = self.net[0]
         emb = step_embedding(torch.tensor([k]))
         h = ctx_part + x @ first.weight[:, :2].T + emb @ first.weight[:, 2:18].T
-        return self.net[2:](self.net[1](h))
+        net = self.net
+        return net[4](net[3](net[2](net[1](h))))
 
 
 class RapidNet(nn.Module):
