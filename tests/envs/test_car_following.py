@@ -142,8 +142,7 @@ def test_idm_follows_a_logged_slow_down_with_nothing_ahead() -> None:
 
 def test_idm_background_yields_to_an_ego_cutting_in() -> None:
     """The (logged) ego changes into the background car's lane 12 m ahead of it, 6 m/s slower: replayed, the car
-    runs into it; with IDM it brakes as the ego comes over (before the ego's centre is in its lane) and does
-    not touch it."""
+    runs into it; with IDM it brakes for the ego and does not touch it."""
     road = sf.straight_road(2)
     lane0, lane1 = road.lanes[0].centerline, road.lanes[1].centerline
     ego = sf.simulate_track(lane1, 100.0, 14.0, offset_fn=sf._smoothstep(1.2, 1.5, -road.lanes[1].centerline[0, 1]))
