@@ -70,7 +70,9 @@ class Guidance:
     Attributes:
         w_destination, w_social, w_map, w_leader: weights w_i of eq. 7 (0 = off).
         w_safety: weight of the one-sided safety term (`safety_bound`; 0.5, the default, projects the
-            longitudinal acceleration onto the bound, 0 = off).
+            longitudinal acceleration onto the bound, 0 = off). On the validation scenarios (pool2500 train split
+            300-399, closed loop) 0.5 against 0 lowered the heuristic ego's crash rate from 0.13 to 0.09 and the
+            Replay ego's from 0.14 to 0.10 (replayed background: 0.09 and 0.07).
         tau_s: relaxation time of the destination term (s).
         a_social_mps2, b_social_m: strength and range of the repulsion between agents.
         a_map_mps2, b_map_m: strength and range of the repulsion from the road's edges.
