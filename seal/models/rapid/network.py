@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import math
+from typing import cast
 
 import numpy as np
 import torch
@@ -148,13 +149,13 @@ class Denoiser(nn.Module):
 
     def context_part(self, ctx: torch.Tensor) -> torch.Tensor:
         """``[n, 2D]``: the first layer's context term and bias, the same at every DDIM step of an env step."""
-        first = self.net[0]
+        first = cast(nn.Linear, self.net[0])
         return ctx @ first.weight[:, 18:].T + first.bias
 
     def forward_from(self, x: torch.Tensor, k: int, ctx_part: torch.Tensor) -> torch.Tensor:
         """`forward` for one diffusion step ``k`` shared by all rows, given `context_part`: the step embedding
         is one row and the context is not multiplied again (the per-agent cost of the sampler)."""
-        first = self.net[0]
+        first = cast(nn.Linear, self.net[0])
         emb = step_embedding(torch.tensor([k]))
         h = ctx_part + x @ first.weight[:, :2].T + emb @ first.weight[:, 2:18].T
         net = self.net

@@ -230,11 +230,17 @@ def ddim_sample(denoise: torch.nn.Module, ctx: torch.Tensor, alpha_bar: torch.Te
     n = ctx.shape[0]
     x = torch.randn(n, 2, generator=generator) * temperature
     steps = ddim_steps(n_steps, len(alpha_bar))
-    fast = isinstance(denoise, Denoiser)
-    ctx_part = denoise.context_part(ctx) if isinstance(denoise, Denoiser) else ctx
+    if isinstance(denoise, Denoiser):
+        ctx_part = denoise.context_part(ctx)
+
+        def predict(x: torch.Tensor, k: int) -> torch.Tensor:
+            return denoise.forward_from(x, k, ctx_part)
+    else:
+        def predict(x: torch.Tensor, k: int) -> torch.Tensor:
+            return denoise(x, torch.full((n,), k), ctx)
     for i, k in enumerate(steps):
         ab = alpha_bar[k]
-        x0 = denoise.forward_from(x, k, ctx_part) if fast else denoise(x, torch.full((n,), k), ctx)
+        x0 = predict(x, k)
         if targets:
             x0 = guide(x0, targets, g)
         eps = (x - ab.sqrt() * x0) / (1.0 - ab).sqrt()
