@@ -165,3 +165,41 @@ def reference_projection(route: Route, x: float, y: float, hint: int | None = No
     lateral = (float(ex[k]) * float(py[k]) - float(ey[k]) * float(px[k])) / float(seg_len[k])
     s0 = float(route._cum[lo + k])
     return lo + k, s0 + float(t[k]) * float(seg_len[k]), lateral
+
+
+# RAPID's pairwise terms (issue 22): the numpy code `seal.models.rapid.kernels.pair_scan` replaced.
+def rapid_social_force(cur: np.ndarray, rows: np.ndarray, a: float, b: float, t_headway: float, behind: float
+                       ) -> np.ndarray:
+    """Eq. 9 ``[n, 2]`` (map frame, m/s^2): box-gap repulsion from every other present agent."""
+    present = np.flatnonzero(cur[:, 7] > 0.5)
+    me, other = cur[rows], cur[present]
+    c, s = np.cos(me[:, 2])[:, None], np.sin(me[:, 2])[:, None]
+    d = other[None, :, :2] - me[:, None, :2]
+    lon = c * d[..., 0] + s * d[..., 1]
+    lat = -s * d[..., 0] + c * d[..., 1]
+    gap_lon = np.abs(lon) - 0.5 * (me[:, 5, None] + other[None, :, 5])
+    gap_lat = np.abs(lat) - 0.5 * (me[:, 6, None] + other[None, :, 6])
+    dist = np.maximum(np.hypot(d[..., 0], d[..., 1]), 1e-6)
+    rel_v = me[:, None, 3:5] - other[None, :, 3:5]
+    closing = np.maximum((rel_v * d).sum(-1) / dist, 0.0)
+    gap = np.maximum(np.maximum(gap_lon, gap_lat) - t_headway * closing, 0.0)
+    fov = behind + (1.0 - behind) * 0.5 * (1.0 + lon / dist)
+    mag = a * np.exp(-gap / b) * fov
+    mag[present[None, :] == rows[:, None]] = 0.0
+    return -(mag[..., None] * d / dist[..., None]).sum(axis=1)
+
+
+def rapid_neighbors(cur: np.ndarray, rows: np.ndarray, k: int, max_range: float) -> tuple[np.ndarray, np.ndarray]:
+    """Rows ``[n, k]`` (-1: none) and centre distances (inf: none) of the ``k`` nearest present agents within
+    ``max_range``, nearest first."""
+    present = np.flatnonzero(cur[:, 7] > 0.5)
+    rel = cur[present][None, :, :2] - cur[rows][:, None, :2]
+    dist = np.hypot(rel[..., 0], rel[..., 1])
+    dist[present[None, :] == rows[:, None]] = np.inf
+    dist[dist > max_range] = np.inf
+    order = np.argsort(dist, axis=1, kind="stable")[:, :k]
+    d_sel = np.take_along_axis(dist, order, axis=1)
+    idx = np.where(np.isfinite(d_sel), present[order], -1)
+    pad = k - idx.shape[1]
+    return (np.pad(idx, ((0, 0), (0, pad)), constant_values=-1),
+            np.pad(d_sel, ((0, 0), (0, pad)), constant_values=np.inf))

@@ -175,7 +175,7 @@ def intent_metrics(scenarios: Sequence[Scenario], ctrl: Any, seed: int) -> dict[
 
 def unguided(ctrl: Any) -> Any:
     """The same RAPID controller with every guidance weight 0."""
-    g = replace(ctrl.guidance, w_destination=0.0, w_social=0.0, w_map=0.0, w_leader=0.0)
+    g = replace(ctrl.guidance, **{k: 0.0 for k in vars(ctrl.guidance) if k.startswith("w_")})
     return ctrl.with_guidance(g)
 
 

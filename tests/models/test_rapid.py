@@ -19,7 +19,7 @@ from seal.models.rapid.network import RapidNet
 from seal.models.rapid.sampler import ddim_sample, guide, map_force, schedule, social_force
 from seal.models.rapid.train import RapidFileError, RapidTrainConfig, save_rapid, train_rapid
 
-UNGUIDED = Guidance(w_destination=0.0, w_social=0.0, w_map=0.0)
+UNGUIDED = Guidance(w_destination=0.0, w_social=0.0, w_map=0.0, w_safety=0.0)
 
 
 @pytest.fixture(scope="module")

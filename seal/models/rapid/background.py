@@ -21,11 +21,13 @@ from seal.core.errors import SealError
 from seal.core.road import RoadDescription
 from seal.core.scenario import HEADING, VALID, VX, VY, Scenario
 from seal.envs.background import SimulatedBackground
-from seal.models.rapid.features import ACC_SCALE_MPS2, MapGeometry, agent_inputs, build_map_geometry
+from seal.models.rapid.features import ACC_SCALE_MPS2, MapGeometry, agent_inputs, build_map_geometry, scan_pairs
 from seal.models.rapid.network import RapidNet, anchor_encoding, inputs_to_torch
-from seal.models.rapid.sampler import Guidance, ddim_sample, physics_targets, schedule
+from seal.models.rapid.sampler import Guidance, ddim_sample, physics_targets, schedule, social_constants
 from seal.models.rapid.train import load_rapid_net
 
+MapEntry = tuple[RoadDescription, MapGeometry, torch.Tensor, tuple[torch.Tensor, torch.Tensor]]
+"""A map cache entry: the road, its `MapGeometry`, ``z_global`` and the read-out keys / values."""
 MAP_CACHE_SIZE = 256
 """Roads whose map context is kept (least recently built dropped first)."""
 
@@ -49,7 +51,7 @@ class RapidBackground(SimulatedBackground):
         self.ddim_steps = int(ddim_steps)
         self.temperature = float(temperature)
         self.alpha_bar = schedule()
-        self._maps: dict[int, tuple[RoadDescription, MapGeometry, torch.Tensor]] = {}
+        self._maps: dict[int, MapEntry] = {}
         self.map_builds = 0
         """How many map contexts were built (one per road seen, while cached)."""
 
@@ -61,6 +63,11 @@ class RapidBackground(SimulatedBackground):
 
     def map_context(self, road: RoadDescription) -> tuple[MapGeometry, torch.Tensor]:
         """(`MapGeometry`, ``z_global [1, N_LATENTS, D]``) of ``road``, built on first use and cached."""
+        entry = self._map_entry(road)
+        return entry[1], entry[2]
+
+    def _map_entry(self, road: RoadDescription) -> MapEntry:
+        """The cached (road, `MapGeometry`, ``z_global``, read-out keys and values) of ``road``."""
         hit = self._maps.get(id(road))
         if hit is None or hit[0] is not road:
             if len(self._maps) >= MAP_CACHE_SIZE:
@@ -69,14 +76,15 @@ class RapidBackground(SimulatedBackground):
             with torch.inference_mode():
                 tokens = torch.from_numpy(geo.tokens)[None]
                 z = self.net.map(tokens, torch.from_numpy(anchor_encoding(geo.tokens))[None])
-            hit = (road, geo, z)
+                kv = self.net.agent.latent_kv(z)
+            hit = (road, geo, z, kv)
             self._maps[id(road)] = hit
             self.map_builds += 1
-        return hit[1], hit[2]
+        return hit
 
     def reset(self, scenario: Scenario, rng: np.random.Generator, driven: np.ndarray) -> None:
         super().reset(scenario, rng, driven)
-        self._geo, self._z = self.map_context(scenario.road)
+        _, self._geo, self._z, self._kv = self._map_entry(scenario.road)
         self._gen = torch.Generator().manual_seed(int(rng.integers(2**31)))
         self._prev: np.ndarray | None = None
 
@@ -85,12 +93,14 @@ class RapidBackground(SimulatedBackground):
         prev_ok = np.zeros(rows.size, dtype=bool) if prev is None else prev[rows, VALID] > 0.5
         prev_vel = cur[rows][:, [VX, VY]] if prev is None else np.where(
             prev_ok[:, None], prev[rows][:, [VX, VY]], cur[rows][:, [VX, VY]])
-        desired = self.intent.desired_speed_mps[rows]
+        desired = self.intent.desired_at(t, rows)
         dest = self.intent.destination_xy[rows]
-        inp = agent_inputs(self._geo, cur, rows, prev_vel, prev_ok, desired, dest)
-        targets = physics_targets(self._geo, cur, rows, desired, dest, self.guidance)
+        logged = self.log[:, t]
+        scan = scan_pairs(cur, rows, logged, social_constants(self.guidance))
+        inp = agent_inputs(self._geo, cur, rows, prev_vel, prev_ok, desired, dest, scan)
+        targets = physics_targets(self._geo, cur, rows, desired, dest, self.guidance, logged, scan)
         with torch.inference_mode():
-            ctx = self.net.agent(inputs_to_torch(inp), self._z.expand(rows.size, -1, -1))
+            ctx = self.net.agent(inputs_to_torch(inp), self._z, self._kv)
             acc = ddim_sample(self.net.denoiser, ctx, self.alpha_bar, self.ddim_steps, self._gen,
                               {k: torch.from_numpy(v.astype(np.float32)) for k, v in targets.items()},
                               self.guidance, self.temperature).numpy().astype(np.float64) * ACC_SCALE_MPS2

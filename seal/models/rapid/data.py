@@ -17,11 +17,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from seal.core.scenario import DT_S, HEADING, N_STEPS, VALID, VX, VY, Scenario, X, Y
+from seal.envs.background import INTENT_SPEED_WINDOW, logged_desired_speed
 from seal.models.rapid.features import ACC_SCALE_MPS2, MAX_TOKENS, MapGeometry, agent_inputs, build_map_geometry
 from seal.models.rapid.network import anchor_encoding
 
-SPEED_WINDOW = 30
-"""Steps over which the training desired speed is averaged (3 s)."""
+SPEED_WINDOW = INTENT_SPEED_WINDOW
+"""Steps over which the training desired speed is averaged (3 s; `seal.envs.background.logged_desired_speed`,
+the same intent `RapidBackground` reads from the log at run time)."""
 
 
 @dataclass
@@ -41,14 +43,6 @@ class RapidSamples:
         return len(self.target)
 
 
-def _desired_speed(log: np.ndarray, valid: np.ndarray, t: int, rows: np.ndarray) -> np.ndarray:
-    window = slice(t + 1, min(t + 1 + SPEED_WINDOW, N_STEPS))
-    spd = np.hypot(log[rows, window, VX], log[rows, window, VY])
-    ok = valid[rows, window]
-    n = ok.sum(axis=1)
-    return np.where(n >= 5, (spd * ok).sum(axis=1) / np.maximum(n, 1), np.nan)
-
-
 def scenario_samples(scenario: Scenario, geo: MapGeometry, rng: np.random.Generator, drop_intent: float,
                      stride: int) -> tuple[dict[str, np.ndarray], np.ndarray] | None:
     """Inputs and targets of one scenario on its map ``geo`` (module docstring); None when it has no sample."""
@@ -63,7 +57,7 @@ def scenario_samples(scenario: Scenario, geo: MapGeometry, rng: np.random.Genera
         if not rows.size:
             continue
         cur = np.where(valid[:, t, None], log[:, t], 0.0)
-        desired = _desired_speed(log, valid, t, rows)
+        desired = logged_desired_speed(log, valid, t, rows)
         desired[rng.random(rows.size) < drop_intent] = np.nan
         dest = dest_all[rows].copy()
         dest[rng.random(rows.size) < drop_intent] = np.nan

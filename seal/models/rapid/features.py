@@ -22,10 +22,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from seal.core.road import RoadDescription
-from seal.core.scenario import DT_S, HEADING, LENGTH, VALID, VX, VY, WIDTH, X, Y
-from seal.envs.background import leader_gaps
+from seal.core.scenario import DT_S, HEADING, LENGTH, VX, VY, WIDTH, X, Y
+from seal.envs.car_following import (
+    CONTACT_HORIZON_S,
+    CONTACT_MARGIN_M,
+    COS_SAME_DIRECTION,
+    LEADER_RANGE_M,
+    PATH_MARGIN_M,
+)
 from seal.envs.road_geometry import get_road_geometry
-from seal.models.rapid.kernels import closest_points
+from seal.models.rapid.kernels import closest_points_grid, pair_scan, segment_grid
 
 N_FREQ = 8
 """Fourier frequencies per axis, linearly spaced from 2 pi / 1 km to 2 pi / 0.5 m (paper 3.2)."""
@@ -48,15 +54,21 @@ def fourier(xy: np.ndarray) -> np.ndarray:
     return np.concatenate([np.sin(ang).reshape(len(xy), -1), np.cos(ang).reshape(len(xy), -1)], axis=1)
 
 
+GRID_CELL_M = 10.0
+"""Cell size (m) of the segment grid `Segments.nearest` searches."""
+
+
 @dataclass(frozen=True)
 class Segments:
-    """Polyline segments as arrays: starts ``a [S, 2]``, vectors ``e [S, 2]`` (m), squared lengths ``[S]`` and
-    the ``[4, S]`` rows (a x, a y, e x, e y) the compiled `closest_points` reads."""
+    """Polyline segments as arrays: starts ``a [S, 2]``, vectors ``e [S, 2]`` (m), squared lengths ``[S]``, the
+    ``[4, S]`` rows (a x, a y, e x, e y) the compiled kernels read and their `segment_grid` (``grid``: meta,
+    start, items), built once per road."""
 
     a: np.ndarray
     e: np.ndarray
     len2: np.ndarray
     cols: np.ndarray
+    grid: tuple[np.ndarray, np.ndarray, np.ndarray]
 
     @classmethod
     def of(cls, polylines: list[np.ndarray]) -> Segments:
@@ -67,12 +79,15 @@ class Segments:
         len2 = (e**2).sum(axis=1)
         keep = len2 > 1e-6
         a, e, len2 = a[keep], e[keep], np.ascontiguousarray(len2[keep])
-        return cls(a, e, len2, np.ascontiguousarray(np.vstack([a.T, e.T])))
+        cols = np.ascontiguousarray(np.vstack([a.T, e.T]))
+        return cls(a, e, len2, cols, segment_grid(cols, GRID_CELL_M))
 
     def nearest(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For points ``p [n, 2]``: (closest point on any segment ``[n, 2]``, that segment's direction (unit));
-        one compiled call (`seal.models.rapid.kernels.closest_points`)."""
-        q, ks = closest_points(self.cols, self.len2, np.ascontiguousarray(p, dtype=np.float64))
+        one compiled call through the grid (`seal.models.rapid.kernels.closest_points_grid`: the segments near
+        each point only, the answer of the brute-force `closest_points`)."""
+        pts = np.ascontiguousarray(p, dtype=np.float64)
+        q, ks = closest_points_grid(self.cols, self.len2, pts, *self.grid, GRID_CELL_M)
         return q, self.e[ks] / np.sqrt(self.len2[ks])[:, None]
 
 
@@ -163,21 +178,46 @@ class AgentInputs:
     neighbor_mask: np.ndarray
 
 
-def _neighbors(cur: np.ndarray, rows: np.ndarray, c: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    present = np.flatnonzero(cur[:, VALID] > 0.5)
-    rel = cur[present][None, :, [X, Y]] - cur[rows][:, None, [X, Y]]
-    dist = np.hypot(rel[..., 0], rel[..., 1])
-    dist[present[None, :] == rows[:, None]] = np.inf
-    dist[dist > NEIGHBOR_RANGE_M] = np.inf
-    k = min(N_NEIGHBORS, len(present))
-    order = np.argsort(dist, axis=1)[:, :k]
+@dataclass(frozen=True)
+class PairScan:
+    """The pairwise quantities of one step (`seal.models.rapid.kernels.pair_scan`), for ``n`` agents.
+
+    Attributes:
+        leader_gap, leader_v: ``[n]`` `seal.envs.car_following.leader_gaps` (m, inf: none; m/s).
+        obstacle_gap, obstacle_v: ``[n]`` `seal.envs.car_following.obstacle_gaps` (m, inf: none; m/s).
+        social: ``[n, 2]`` eq. 9 social force in the map frame (m/s^2) for the constants scanned with.
+        neighbor_rows: ``[n, N_NEIGHBORS]`` the nearest agents within `NEIGHBOR_RANGE_M`, nearest first (-1:
+            none); neighbor_dist: their centre distances (m, inf: none).
+    """
+
+    leader_gap: np.ndarray
+    leader_v: np.ndarray
+    obstacle_gap: np.ndarray
+    obstacle_v: np.ndarray
+    social: np.ndarray
+    neighbor_rows: np.ndarray
+    neighbor_dist: np.ndarray
+
+
+def scan_pairs(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray | None = None,
+               social: tuple[float, float, float, float] = (6.0, 2.0, 0.0, 0.1)) -> PairScan:
+    """`PairScan` of the agents ``rows`` of the box table ``cur [A, 8]`` in one compiled call; ``logged``: the
+    logged boxes of the step (`obstacle_gaps`); ``social``: strength (m/s^2), range (m), headway (s) and weight
+    behind of the social force."""
+    cur = np.ascontiguousarray(cur, dtype=np.float64)
+    log = np.zeros_like(cur) if logged is None else np.ascontiguousarray(logged, dtype=np.float64)
+    params = np.array([LEADER_RANGE_M, PATH_MARGIN_M, CONTACT_HORIZON_S, CONTACT_MARGIN_M, *social,
+                       NEIGHBOR_RANGE_M, COS_SAME_DIRECTION, 0.0])
+    out, nb, nbd = pair_scan(cur, np.ascontiguousarray(rows, dtype=np.int64), log, params, N_NEIGHBORS)
+    return PairScan(out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4:6], nb, nbd)
+
+
+def _neighbors(cur: np.ndarray, rows: np.ndarray, c: np.ndarray, s: np.ndarray, scan: PairScan
+               ) -> tuple[np.ndarray, np.ndarray]:
     n = len(rows)
-    feats = np.zeros((n, N_NEIGHBORS, NEIGHBOR_DIM), dtype=np.float32)
-    mask = np.zeros((n, N_NEIGHBORS), dtype=np.float32)
-    idx = np.arange(n)[:, None]
-    d_sel = dist[idx, order]
-    other = cur[present[order]]
-    rxy = rel[idx, order]
+    ok = scan.neighbor_rows >= 0
+    other = cur[np.where(ok, scan.neighbor_rows, 0)]
+    rxy = other[..., [X, Y]] - cur[rows][:, None, [X, Y]]
     rv = other[..., [VX, VY]] - cur[rows][:, None, [VX, VY]]
     cc, ss = c[:, None], s[:, None]
     dh = other[..., HEADING] - cur[rows][:, None, HEADING]
@@ -186,17 +226,16 @@ def _neighbors(cur: np.ndarray, rows: np.ndarray, c: np.ndarray, s: np.ndarray) 
         (cc * rv[..., 0] + ss * rv[..., 1]) / 10.0, (-ss * rv[..., 0] + cc * rv[..., 1]) / 10.0,
         np.cos(dh), np.sin(dh), other[..., LENGTH] / 5.0, other[..., WIDTH] / 2.0,
     ], axis=-1)
-    ok = np.isfinite(d_sel)
-    feats[:, :k] = np.where(ok[..., None], f, 0.0)
-    mask[:, :k] = ok
-    return feats, mask
+    feats = np.where(ok[..., None], f, 0.0).astype(np.float32).reshape(n, N_NEIGHBORS, NEIGHBOR_DIM)
+    return feats, ok.astype(np.float32)
 
 
 def agent_inputs(
     geo: MapGeometry, cur: np.ndarray, rows: np.ndarray, prev_vel: np.ndarray, prev_ok: np.ndarray,
-    desired_speed: np.ndarray, destination: np.ndarray,
+    desired_speed: np.ndarray, destination: np.ndarray, scan: PairScan | None = None,
 ) -> AgentInputs:
-    """`AgentInputs` of the agents ``rows`` of the box table ``cur [A, 8]``.
+    """`AgentInputs` of the agents ``rows`` of the box table ``cur [A, 8]`` (``scan``: their `scan_pairs`,
+    computed here when not given).
 
     Args:
         prev_vel: ``[n, 2]`` map-frame velocity of each agent one step before (m/s), read where ``prev_ok [n]``.
@@ -218,11 +257,13 @@ def agent_inputs(
     dist = np.hypot(rel[:, 0], rel[:, 1])
     dest = np.column_stack([rel / 100.0, np.log1p(dist) / 5.0])
     dest[~dest_mask] = 0.0
-    gap, lead_v = leader_gaps(cur, rows)
+    if scan is None:
+        scan = scan_pairs(cur, rows)
+    gap, lead_v = scan.leader_gap, scan.leader_v
     leader_mask = np.isfinite(gap)
     closing = np.where(leader_mask, speed - lead_v, 0.0)
     leader = np.column_stack([np.where(leader_mask, gap, 0.0) / 50.0, closing / 10.0])
-    neighbors, neighbor_mask = _neighbors(cur, rows, c, s)
+    neighbors, neighbor_mask = _neighbors(cur, rows, c, s, scan)
     f32 = np.float32
     return AgentInputs(
         own.astype(f32), np.where(prev_ok[:, None], prev_acc, 0.0).astype(f32), prev_mask,

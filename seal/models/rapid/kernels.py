@@ -1,4 +1,5 @@
-"""Compiled (numba) kernel of the RAPID inputs: the closest point of a set of segments for many points at once.
+"""Compiled (numba) kernels of the RAPID step: the closest point of a set of segments for many points at once
+(`closest_points`) and every pairwise quantity in one pass (`pair_scan`).
 
 Why compiled: the local map read-out and the map force ask it for every background agent (two points each) on
 every env step; a numpy ``[points, segments]`` table or one kernel call per point made it the largest per-agent
@@ -8,6 +9,8 @@ numba's on-disk cache) at import.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import float64, int64, njit, types
@@ -39,4 +42,229 @@ def closest_points(cols: np.ndarray, len2: np.ndarray, pts: np.ndarray) -> tuple
                 idx[i] = k
                 out[i, 0] = cols[0, k] + t * cols[2, k]
                 out[i, 1] = cols[1, k] + t * cols[3, k]
+    return out, idx
+
+
+# Track columns (`seal.core.scenario`), repeated here because numba freezes globals into its on-disk cache,
+# which checks only this file for changes (a test holds them equal to the data model's).
+_X, _Y, _H, _VX, _VY, _L, _W, _VALID = 0, 1, 2, 3, 4, 5, 6, 7
+
+N_PAIR_PARAMS = 11
+"""Length of `pair_scan`'s ``params`` (see there)."""
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _interval(x0: float, u: float, half: float) -> tuple[float, float]:
+    """Times ``(lo, hi)`` (s) during which ``|x0 + u t| < half``: `seal.envs.car_following._interval`."""
+    if abs(u) > 1e-9:
+        a = (-half - x0) / u
+        b = (half - x0) / u
+        return min(a, b), max(a, b)
+    if abs(x0) < half:
+        return -np.inf, np.inf
+    return np.inf, -np.inf
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _contact(b: np.ndarray, cs: np.ndarray, i: int, j: int, horizon: float, margin: float, reach: float,
+             path_margin: float, cos_same: float) -> bool:
+    """`seal.envs.car_following.predicted_contacts` for one pair (agent ``i``, box ``j``) of the boxes ``b``
+    (``cs [A, 2]``: cos / sin of their headings)."""
+    if i == j or b[i, _VALID] <= 0.5 or b[j, _VALID] <= 0.5:
+        return False
+    c, s = cs[i, 0], cs[i, 1]
+    dx, dy = b[j, _X] - b[i, _X], b[j, _Y] - b[i, _Y]
+    lon = c * dx + s * dy
+    if lon >= reach:
+        return False
+    lat = -s * dx + c * dy
+    v_lon, v_lat = c * b[j, _VX] + s * b[j, _VY], -s * b[j, _VX] + c * b[j, _VY]
+    rel_u = v_lon - (c * b[i, _VX] + s * b[i, _VY])
+    cd = abs(cs[j, 0] * c + cs[j, 1] * s)
+    sd = abs(cs[j, 1] * c - cs[j, 0] * s)
+    ext_lon = 0.5 * b[i, _L] + 0.5 * (cd * b[j, _L] + sd * b[j, _W])
+    ext_lat = 0.5 * b[i, _W] + 0.5 * (sd * b[j, _L] + cd * b[j, _W])
+    if cs[j, 0] * c + cs[j, 1] * s > cos_same:  # same direction: entering the corridor ahead (a cut-in)
+        lo_c, hi_c = _interval(lat, v_lat, 0.5 * (b[i, _W] + b[j, _W]) + path_margin)
+        enter = max(lo_c, 0.0)
+        at = enter if math.isfinite(enter) else 0.0
+        if enter <= horizon and enter < hi_c and lon + rel_u * at > 0.0:
+            return True
+    lo_a, hi_a = _interval(lon, rel_u, ext_lon)
+    lo_b, hi_b = _interval(lat, v_lat, ext_lat + margin)
+    first = max(max(lo_a, lo_b), 0.0)
+    if not (first < min(min(hi_a, hi_b), horizon) and first <= horizon):
+        return False
+    at = first if math.isfinite(first) else 0.0
+    return lon + rel_u * at > 0.0 and lon > -ext_lon
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _cos_sin(b: np.ndarray) -> np.ndarray:
+    out = np.empty((b.shape[0], 2))
+    for i in range(b.shape[0]):
+        out[i, 0] = math.cos(b[i, _H])
+        out[i, 1] = math.sin(b[i, _H])
+    return out
+
+
+@njit(types.Tuple((float64[:, ::1], int64[:, ::1], float64[:, ::1]))(
+    float64[:, ::1], int64[::1], float64[:, ::1], float64[::1], int64), cache=True, nogil=True, error_model="numpy")
+def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.ndarray, k: int
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every pairwise quantity of the RAPID step in one pass over (agent, box) pairs, float64, the numpy
+    functions' operations (`seal.envs.car_following.leader_gaps` / `obstacle_gaps`, the eq. 9 social force, the
+    ``k`` nearest neighbours of `seal.models.rapid.features`): one compiled loop instead of a dozen ``[n, A]``
+    numpy tables per term, which made these terms the largest per-agent cost at 120 agents.
+
+    Args:
+        cur: ``[A, 8]`` boxes of the step; rows: ``[n]`` the agents; logged: ``[A, 8]`` the logged boxes of the
+            step (all valid = 0: no log to compare with).
+        params: leader reach (m), path margin (m), contact horizon (s), contact margin (m), social strength
+            (m/s^2), social range (m), social headway (s), weight behind, neighbour range (m), cosine of the
+            same-direction angle, 0.
+        k: neighbours kept.
+
+    Returns:
+        ``[n, 6]`` leader gap (m, inf: none), leader speed along the heading (m/s), obstacle gap, obstacle speed,
+        social force x, y (map frame, m/s^2); ``[n, k]`` neighbour rows nearest first (-1: none); ``[n, k]``
+        their centre distances (m, inf: none).
+    """
+    n = rows.shape[0]
+    m = cur.shape[0]
+    reach, margin_p, horizon, margin_c = params[0], params[1], params[2], params[3]
+    a_soc, b_soc, t_head, behind, nb_range = params[4], params[5], params[6], params[7], params[8]
+    cos_same = params[9]
+    use_log = logged[:, _VALID].max() > 0.5 if m else False
+    cs, cs_log = _cos_sin(cur), _cos_sin(logged)
+    out = np.empty((n, 6))
+    nb = np.full((n, k), -1, dtype=np.int64)
+    nbd = np.full((n, k), np.inf)
+    for r in range(n):
+        i = rows[r]
+        c, s = cs[i, 0], cs[i, 1]
+        lead, lead_v, obs, obs_v, fx, fy = np.inf, 0.0, np.inf, 0.0, 0.0, 0.0
+        for j in range(m):
+            if j == i or cur[j, _VALID] <= 0.5:
+                continue
+            dx, dy = cur[j, _X] - cur[i, _X], cur[j, _Y] - cur[i, _Y]
+            lon, lat = c * dx + s * dy, -s * dx + c * dy
+            v_lon = c * cur[j, _VX] + s * cur[j, _VY]
+            in_path = lon > 0.0 and lon < reach and abs(lat) < 0.5 * (cur[i, _W] + cur[j, _W]) + margin_p
+            if in_path:
+                g = lon - 0.5 * (cur[i, _L] + cur[j, _L])
+                if g < lead:
+                    lead, lead_v = g, v_lon
+            hit = in_path
+            if not hit and _contact(cur, cs, i, j, horizon, margin_c, reach, margin_p, cos_same):
+                hit = not (use_log and _contact(logged, cs_log, i, j, horizon, margin_c, reach, margin_p, cos_same))
+            if hit:
+                cd = abs(cs[j, 0] * c + cs[j, 1] * s)
+                sd = abs(cs[j, 1] * c - cs[j, 0] * s)
+                g = lon - (0.5 * cur[i, _L] + 0.5 * (cd * cur[j, _L] + sd * cur[j, _W]))
+                if g < obs:
+                    obs, obs_v = g, v_lon
+            dist = math.hypot(dx, dy)
+            d = max(dist, 1e-6)
+            closing = max(((cur[i, _VX] - cur[j, _VX]) * dx + (cur[i, _VY] - cur[j, _VY]) * dy) / d, 0.0)
+            gap_lon = abs(lon) - 0.5 * (cur[i, _L] + cur[j, _L])
+            gap_lat = abs(lat) - 0.5 * (cur[i, _W] + cur[j, _W])
+            gap = max(max(gap_lon, gap_lat) - t_head * closing, 0.0)
+            fov = behind + (1.0 - behind) * 0.5 * (1.0 + lon / d)
+            mag = a_soc * math.exp(-gap / b_soc) * fov
+            fx -= mag * dx / d
+            fy -= mag * dy / d
+            if dist <= nb_range and k > 0 and dist < nbd[r, k - 1]:
+                q = k - 1
+                while q > 0 and nbd[r, q - 1] > dist:
+                    nbd[r, q] = nbd[r, q - 1]
+                    nb[r, q] = nb[r, q - 1]
+                    q -= 1
+                nbd[r, q] = dist
+                nb[r, q] = j
+        out[r, 0], out[r, 1] = lead, (lead_v if math.isfinite(lead) else 0.0)
+        out[r, 2], out[r, 3] = obs, (obs_v if math.isfinite(obs) else 0.0)
+        out[r, 4], out[r, 5] = fx, fy
+    return out, nb, nbd
+
+
+@njit(types.Tuple((float64[::1], int64[::1], int64[::1]))(float64[:, ::1], float64), cache=True, nogil=True,
+      error_model="numpy")
+def segment_grid(cols: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A uniform grid over the segments ``cols [4, n]`` (`closest_points`' layout) with ``cell``-metre cells:
+    ``meta [4]`` (x, y of the lower-left corner, cells along x, along y), ``start [cells + 1]`` and ``items``:
+    the segments whose bounding box touches cell ``c`` are ``items[start[c]:start[c + 1]]`` (row-major, y
+    outer)."""
+    n = cols.shape[1]
+    meta = np.zeros(4)
+    if n == 0:
+        return meta, np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    x0 = min(np.min(cols[0]), np.min(cols[0] + cols[2]))
+    y0 = min(np.min(cols[1]), np.min(cols[1] + cols[3]))
+    x1 = max(np.max(cols[0]), np.max(cols[0] + cols[2]))
+    y1 = max(np.max(cols[1]), np.max(cols[1] + cols[3]))
+    nx = int((x1 - x0) // cell) + 1
+    ny = int((y1 - y0) // cell) + 1
+    meta[0], meta[1], meta[2], meta[3] = x0, y0, nx, ny
+    counts = np.zeros(nx * ny + 1, dtype=np.int64)
+    for pass_ in range(2):
+        if pass_ == 1:
+            for c in range(nx * ny):
+                counts[c + 1] += counts[c]
+            items = np.empty(counts[nx * ny], dtype=np.int64)
+            fill = counts[:-1].copy()
+        for k in range(n):
+            ax, ay, bx, by = cols[0, k], cols[1, k], cols[0, k] + cols[2, k], cols[1, k] + cols[3, k]
+            i0, i1 = int((min(ax, bx) - x0) // cell), int((max(ax, bx) - x0) // cell)
+            j0, j1 = int((min(ay, by) - y0) // cell), int((max(ay, by) - y0) // cell)
+            for j in range(j0, j1 + 1):
+                for i in range(i0, i1 + 1):
+                    if pass_ == 0:
+                        counts[j * nx + i + 1] += 1
+                    else:
+                        items[fill[j * nx + i]] = k
+                        fill[j * nx + i] += 1
+    return meta, counts, items
+
+
+@njit(types.Tuple((float64[:, ::1], int64[::1]))(float64[:, ::1], float64[::1], float64[:, ::1], float64[::1],
+                                                  int64[::1], int64[::1], float64),
+      cache=True, nogil=True, error_model="numpy")
+def closest_points_grid(cols: np.ndarray, len2: np.ndarray, pts: np.ndarray, meta: np.ndarray, start: np.ndarray,
+                        items: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """`closest_points` through a `segment_grid`: rings of cells around each point, nearest first, until no
+    farther cell can hold a closer segment; ties go to the lowest segment index, so the answer is
+    `closest_points`' own. The cost per point depends on the segments near it, not on the map's size."""
+    m = pts.shape[0]
+    out = np.empty((m, 2))
+    idx = np.zeros(m, dtype=np.int64)
+    x0, y0, nx, ny = meta[0], meta[1], int(meta[2]), int(meta[3])
+    for p in range(m):
+        x, y = pts[p, 0], pts[p, 1]
+        ci, cj = int((x - x0) // cell), int((y - y0) // cell)
+        r_max = max(max(abs(ci), abs(ci - nx + 1)), max(abs(cj), abs(cj - ny + 1)))
+        best, best_k = np.inf, -1
+        for r in range(r_max + 1):
+            if best_k >= 0 and math.sqrt(best) < (r - 1) * cell:
+                break
+            for j in range(cj - r, cj + r + 1):
+                if j < 0 or j >= ny:
+                    continue
+                step = 1 if (j == cj - r or j == cj + r) else 2 * r
+                i = ci - r
+                while i <= ci + r:
+                    if 0 <= i < nx:
+                        c = j * nx + i
+                        for q in range(start[c], start[c + 1]):
+                            k = items[q]
+                            px, py = x - cols[0, k], y - cols[1, k]
+                            t = min(max((px * cols[2, k] + py * cols[3, k]) / len2[k], 0.0), 1.0)
+                            dx, dy = px - t * cols[2, k], py - t * cols[3, k]
+                            d2 = dx * dx + dy * dy
+                            if d2 < best or (d2 == best and k < best_k):
+                                best, best_k = d2, k
+                                out[p, 0] = cols[0, k] + t * cols[2, k]
+                                out[p, 1] = cols[1, k] + t * cols[3, k]
+                    i += max(step, 1)
+        idx[p] = max(best_k, 0)
     return out, idx

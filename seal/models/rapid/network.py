@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import math
+from typing import cast
 
 import numpy as np
 import torch
@@ -81,8 +82,31 @@ class AgentEncoder(nn.Module):
     def _opt(self, name: str, x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         return torch.where(mask[:, None] > 0.5, self.optional[name](x), self.missing[name])
 
-    def forward(self, inp: dict[str, torch.Tensor], z_global: torch.Tensor) -> torch.Tensor:
-        """``inp``: `AgentInputs` fields as tensors; ``z_global [n, N_LATENTS, D]`` (each agent's scenario's)."""
+    def latent_kv(self, z_global: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Keys and values ``[N_LATENTS, D]`` of one scenario's global latents ``z_global [1 or N_LATENTS, ...]``
+        in the read-out attention: they depend on the map only, so a caller caches them with the latents
+        instead of projecting the same 16 latents again for every agent on every step."""
+        z = z_global.reshape(-1, self.attn.embed_dim)
+        w, b = self.attn.in_proj_weight, self.attn.in_proj_bias
+        e = self.attn.embed_dim
+        return z @ w[e: 2 * e].T + b[e: 2 * e], z @ w[2 * e:].T + b[2 * e:]
+
+    def _read(self, h: torch.Tensor, kv: tuple[torch.Tensor, torch.Tensor]) -> torch.Tensor:
+        """The read-out attention of ``h [n, D]`` against cached ``kv`` (`latent_kv`): the operations of
+        ``self.attn`` with one query per agent and the same keys for all."""
+        e, heads = self.attn.embed_dim, self.attn.num_heads
+        d = e // heads
+        w, b = self.attn.in_proj_weight, self.attn.in_proj_bias
+        q = (h @ w[:e].T + b[:e]).reshape(-1, heads, d)
+        k, v = kv[0].reshape(-1, heads, d), kv[1].reshape(-1, heads, d)
+        att = torch.softmax(torch.einsum("nhd,lhd->nhl", q, k) / math.sqrt(d), dim=-1)
+        read = torch.einsum("nhl,lhd->nhd", att, v).reshape(-1, e)
+        return self.attn.out_proj(read)
+
+    def forward(self, inp: dict[str, torch.Tensor], z_global: torch.Tensor,
+                kv: tuple[torch.Tensor, torch.Tensor] | None = None) -> torch.Tensor:
+        """``inp``: `AgentInputs` fields as tensors; ``z_global [n, N_LATENTS, D]`` (each agent's scenario's);
+        ``kv``: `latent_kv` of a single scenario's latents (then ``z_global`` is not read: the per-step path)."""
         h = self.own(inp["own"])
         h = h + self._opt("prev", inp["prev_acc"], inp["prev_mask"])
         h = h + self._opt("speed", inp["speed_cmd"], inp["speed_mask"])
@@ -94,8 +118,11 @@ class AgentEncoder(nn.Module):
         any_nb = nmask.any(dim=1)
         h = h + torch.where(any_nb, pooled, self.missing["neighbors"])
         h = self.norm(h)
-        read, _ = self.attn(h[:, None], z_global, z_global, need_weights=False)
-        h = h + read[:, 0]
+        if kv is not None:
+            h = h + self._read(h, kv)
+        else:
+            read, _ = self.attn(h[:, None], z_global, z_global, need_weights=False)
+            h = h + read[:, 0]
         return h + self.out(h)
 
 
@@ -119,6 +146,20 @@ class Denoiser(nn.Module):
 
     def forward(self, x: torch.Tensor, k: torch.Tensor, ctx: torch.Tensor) -> torch.Tensor:
         return self.net(torch.cat([x, step_embedding(k), ctx], dim=1))
+
+    def context_part(self, ctx: torch.Tensor) -> torch.Tensor:
+        """``[n, 2D]``: the first layer's context term and bias, the same at every DDIM step of an env step."""
+        first = cast(nn.Linear, self.net[0])
+        return ctx @ first.weight[:, 18:].T + first.bias
+
+    def forward_from(self, x: torch.Tensor, k: int, ctx_part: torch.Tensor) -> torch.Tensor:
+        """`forward` for one diffusion step ``k`` shared by all rows, given `context_part`: the step embedding
+        is one row and the context is not multiplied again (the per-agent cost of the sampler)."""
+        first = cast(nn.Linear, self.net[0])
+        emb = step_embedding(torch.tensor([k]))
+        h = ctx_part + x @ first.weight[:, :2].T + emb @ first.weight[:, 2:18].T
+        net = self.net
+        return net[4](net[3](net[2](net[1](h))))
 
 
 class RapidNet(nn.Module):
