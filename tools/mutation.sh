@@ -1,6 +1,7 @@
 #!/bin/bash
-# Mutation testing of the curriculum, the closed-loop queue, CAT / SEAL selection, resume and the restricted
-# unpickler (issue 24). A dev tool, not run in CI: pip install -e ".[test,mutation]" (mutmut 2.5.1).
+# Mutation testing of the curriculum, the closed-loop queue, CAT / SEAL selection, resume, the restricted
+# unpickler and the safe SB3 model loader (issue 24). A dev tool, not run in CI:
+# pip install -e ".[test,mutation]" (mutmut 2.5.1).
 #
 # mutmut rewrites the source files in place, one mutant at a time: run this in a copy of the checkout with its own
 # editable install, never in a working tree you are editing (README.md, "Mutation testing"). Results accumulate in
@@ -29,7 +30,11 @@ group adversaries/seal/generator.py tests/adversaries/test_generators_seal.py te
 group seal/core/importers/safe_pickle.py tests/core/test_import_scenarionet.py \
   tests/core/test_import_scenarionet_repairs.py tests/core/test_safe_pickle.py
 group experiments/training/state.py tests/experiments/test_train.py tests/experiments/test_train_checkpoints.py \
-  tests/experiments/test_train_state.py -k "'history_state or replay_buffer or truncate_progress or run_folder \
+  tests/experiments/test_train_state.py tests/experiments/test_train_state_restore.py \
+  tests/experiments/test_train_state_files.py -k "'history_state or replay_buffer or truncate_progress or run_folder \
   or train_state or (checkpoint and not killed and not corrupt_latest and not damaged_checkpoint_file)'"
+group experiments/training/sb3_load.py tests/experiments/test_sb3_load_files.py tests/experiments/test_sb3_load_checks.py \
+  tests/experiments/test_sb3_vecnormalize.py tests/experiments/test_byo_ego.py tests/experiments/test_train_faults.py \
+  tests/adversaries/test_generators_eval.py -k "'sb3 or byo or safe_loader'"
 $PY tools/mutation_runner.py stop
 $PY tools/mutation_score.py .mutmut-cache

@@ -6,7 +6,8 @@ there, which would run arbitrary code on load. `load_sb3_model` replaces every p
 
 * spaces: the ego's observation (100 floats) and action (``[steering, acceleration]``) spaces, after checking the
   shapes the file records in plain JSON beside the pickle;
-* the policy class: the algorithm's ``MlpPolicy``; buffer classes: SB3's own; schedules: a constant (inference);
+* the policy class: the algorithm's ``MlpPolicy``; buffer classes: SB3's plain ones, with a 1-transition replay
+  buffer and none of the training buffer's settings (n-step returns); schedules: a constant (inference);
 * ``policy_kwargs``: rebuilt from the JSON copy SB3 writes beside the pickle; classes are accepted by name from
   `SAFE_CLASSES` (``torch.nn`` activations, ``torch.optim`` optimisers) and nothing else;
 * training-only state (`TRAINING_STATE`: last observation, episode buffers, action noise): dropped;
@@ -41,7 +42,7 @@ ALGOS = ("TD3", "SAC", "DDPG", "PPO", "A2C")
 """SB3 algorithms with continuous actions that seal can evaluate."""
 TRAINING_STATE = (
     "_last_obs", "_last_original_obs", "_last_episode_starts", "ep_info_buffer", "ep_success_buffer",
-    "action_noise", "_episode_storage", "replay_buffer_kwargs",
+    "action_noise", "_episode_storage",
 )
 """Pickled entries that only training uses: dropped for inference."""
 SCHEDULES = ("learning_rate", "lr_schedule", "clip_range", "clip_range_vf", "exploration_schedule")
@@ -187,13 +188,18 @@ def load_sb3_model(path: Path, algo_name: str | None = None, observation_space: 
         "policy_class": algo.policy_aliases["MlpPolicy"],
         "rollout_buffer_class": RolloutBuffer, "replay_buffer_class": ReplayBuffer, "train_freq": (1, "step"),
     }
-    # Inference only: a 1-transition replay buffer instead of allocating the training-size one.
-    custom: dict[str, Any] = {"buffer_size": 1} if "buffer_size" in data else {}
+    # Inference only: a 1-transition plain replay buffer instead of allocating the training-size one. Its
+    # settings go too: an n-step buffer's (n_steps, gamma) do not fit SB3's plain ReplayBuffer, and pickled ones
+    # would become None, which SB3 cannot copy.
+    custom: dict[str, Any] = {key: value for key, value in (("buffer_size", 1), ("replay_buffer_kwargs", {}))
+                              if key in data}
     for key, value in data.items():
         if not (isinstance(value, dict) and ":serialized:" in value):
             continue
         if key in ("observation_space", "action_space"):
             _check_shape(model_path, key, value, tuple(safe[key].shape))
+        if key in custom:
+            continue
         if key in safe:
             custom[key] = safe[key]
         elif key == "policy_kwargs":
@@ -263,10 +269,10 @@ _VECNORMALIZE_NAMES = (
     ("numpy.random._pickle", "__randomstate_ctor"), ("numpy.random._pcg64", "PCG64"),
     ("numpy.random.bit_generator", "__pyx_unpickle_SeedSequence"), ("numpy.random.bit_generator", "SeedSequence"),
     ("numpy.random._mt19937", "MT19937"), ("numpy.random._philox", "Philox"), ("numpy.random._sfc64", "SFC64"),
-    ("numpy.random._generator", "Generator"), ("numpy.random.mtrand", "RandomState"),
 )
 """What a VecNormalize pickle names besides numpy arrays (its class, the running statistics, the spaces and their
-random generators): each becomes an inert `_Record`."""
+random generators: numpy pickles a ``Generator`` or ``RandomState`` through its ``_pickle`` constructors, never by
+class name): each becomes an inert `_Record`."""
 
 
 def find_vecnormalize(model: Path) -> Path | None:

@@ -98,8 +98,10 @@ def save_replay_buffer(buffer: Any, path: Path) -> None:
     """The filled part of an SB3 ``ReplayBuffer`` as an ``.npz`` (arrays only; ``pos``, ``full`` and the buffer
     size recorded for the checks of `load_replay_buffer`)."""
     n = buffer.buffer_size if buffer.full else buffer.pos
-    arrays: dict[str, Any] = {name: np.asarray(getattr(buffer, name))[:n] for name in _BUFFER_FIELDS
-                              if getattr(buffer, name, None) is not None}
+    # A memory-optimised buffer keeps no next_observations: the last transition's is the observation row after it.
+    n_obs = n + 1 if getattr(buffer, "optimize_memory_usage", False) and not buffer.full else n
+    arrays: dict[str, Any] = {name: np.asarray(getattr(buffer, name))[: n_obs if name == "observations" else n]
+                              for name in _BUFFER_FIELDS if getattr(buffer, name, None) is not None}
     arrays["meta"] = np.array([buffer.pos, int(buffer.full), buffer.buffer_size, buffer.n_envs], dtype=np.int64)
     atomic_write(path, lambda f: np.savez(f, **arrays))
 

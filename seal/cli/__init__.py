@@ -20,6 +20,9 @@ from seal.cli.tree import CommandTree
 
 __all__ = ["COMMAND_MODULES", "CliError", "build_parser", "main"]
 
+#: Exit status when stdout's reader went away: what a shell reports for a tool killed by SIGPIPE (128 + 13).
+EXIT_BROKEN_PIPE = 141
+
 #: Modules whose ``register(tree)`` adds commands, in the order they appear in ``seal --help``.
 COMMAND_MODULES = (
     "seal.cli.data", "seal.cli.bench", "seal.cli.generators", "seal.cli.importers", "seal.cli.goose", "seal.cli.prior",
@@ -76,9 +79,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             load_plugins(args.plugin)
         return int(args.func(args) or 0)
     except BrokenPipeError:
-        # The reader of stdout went away (`seal data info | head`): stop quietly, as other command-line tools do.
+        # The reader of stdout went away (`seal data info | head`): stop quietly with the status a shell reports
+        # for `ls` or `git log` killed by SIGPIPE there (128 + 13): not a success (pipefail sees it), not an error.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 1
+        return EXIT_BROKEN_PIPE
     except (CliError, SealError, ScenarioError, RoadError, OSError, ValueError, yaml.YAMLError) as exc:
         if os.environ.get("SEAL_DEBUG"):
             raise

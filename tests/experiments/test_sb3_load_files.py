@@ -57,6 +57,7 @@ def test_vecnormalize_is_found_under_either_name(tmp_path: Path, name: str, wher
     ("stable_baselines3.sac.policies", {}, "SAC"),
     ("stable_baselines3.ddpg.policies", {}, "DDPG"),
     ("stable_baselines3.common.policies", {"n_epochs": 10}, "PPO"),
+    ("stable_baselines3.common.policies", {"clip_range": 0.2}, "PPO"),
     ("stable_baselines3.common.policies", {}, "A2C"),
     ("stable_baselines3.dqn.policies", {}, None),  # discrete actions: not an ego seal can drive
 ])

@@ -197,3 +197,72 @@ def test_no_usable_checkpoint_names_every_problem(tmp_path: Path) -> None:
     assert f"{new / 'replay_buffer.npz'} is damaged" in message
     assert f"{old / 'replay_buffer.npz'} is missing" in message
     assert message.endswith(f"delete {tmp_path / ts.CHECKPOINTS} to restart the run from step 0")
+
+
+def test_stray_folders_are_not_checkpoints(tmp_path: Path) -> None:
+    """Folders and files whose names only start like a checkpoint's (a user's copy, a stray file) are passed over."""
+    newest = _fake_checkpoint(tmp_path, 80)
+    root = tmp_path / ts.CHECKPOINTS
+    for stray in ("step_x0", "step_80_old", "step_"):
+        (root / stray).mkdir()
+    (root / "step_90").write_text("not a folder")
+    assert ts.latest_checkpoint(tmp_path) == newest
+
+
+def test_checkpoints_are_ordered_by_their_step_number(tmp_path: Path) -> None:
+    _fake_checkpoint(tmp_path, 7500)
+    newest = _fake_checkpoint(tmp_path, 10000)
+    assert ts.latest_checkpoint(tmp_path) == newest
+
+
+@pytest.mark.parametrize("name", ["backup", "step_40/../backup"])
+def test_a_pointer_outside_the_checkpoint_folders_is_not_followed(
+    tmp_path: Path, name: str, caplog: pytest.LogCaptureFixture,
+) -> None:
+    """``latest.json`` names only a ``step_<N>`` folder of its own directory, even when another complete
+    checkpoint sits where it points."""
+    _fake_checkpoint(tmp_path, 40)
+    newest = _fake_checkpoint(tmp_path, 80)
+    root = tmp_path / ts.CHECKPOINTS
+    shutil.copytree(newest, root / "backup")
+    (root / ts.LATEST).write_text(json.dumps({"step": 40, "dir": name}))
+    with caplog.at_level("WARNING", logger="seal.experiments.training.state"):
+        assert ts.latest_checkpoint(tmp_path) == newest
+    assert f"names {name!r}, not a checkpoint folder" in caplog.text
+
+
+def test_every_model_file_of_a_checkpoint_is_checked(tmp_path: Path) -> None:
+    """The extra models of a ReSkill checkpoint (``<name>.zip``) are read back like ``model.zip``."""
+    folder = _fake_checkpoint(tmp_path, 80)
+    _zip(folder / "residual.zip", {"data": b"{}", "policy.pth": b"weights" * 10})
+    assert ts.checkpoint_problem(folder) is None
+    _truncate(folder / "residual.zip")
+    problem = ts.checkpoint_problem(folder)
+    assert problem is not None and problem.startswith(f"{folder / 'residual.zip'} is damaged")
+
+
+def test_a_model_file_cut_after_an_inner_archive_is_damaged(tmp_path: Path) -> None:
+    """An SB3 model zip stores torch archives (zips) as members: cut right after one, the file opens as that
+    inner archive, every CRC passes, and only the missing ``data`` entry shows the damage."""
+    import io
+
+    inner = io.BytesIO()
+    with zipfile.ZipFile(inner, "w") as zf:
+        zf.writestr("archive/data.pkl", b"tensor bytes" * 20)
+    folder = _fake_checkpoint(tmp_path, 80)
+    model = folder / "model.zip"
+    with zipfile.ZipFile(model, "w") as zf:  # SB3's layout: data first, then the torch archives, stored
+        zf.writestr("data", b"{}")
+        zf.writestr("policy.pth", inner.getvalue())
+        zf.writestr("_stable_baselines3_version", b"2.9.2")
+    blob = model.read_bytes()
+    with zipfile.ZipFile(model) as zf:
+        info = zf.getinfo("policy.pth")
+    at = info.header_offset  # a local header: 30 bytes, then the name and the extra field (lengths at 26 and 28)
+    name_len, extra_len = (int.from_bytes(blob[at + k: at + k + 2], "little") for k in (26, 28))
+    end = at + 30 + name_len + extra_len + info.compress_size
+    model.write_bytes(blob[:end])
+    with zipfile.ZipFile(model) as zf:
+        assert zf.namelist() == ["archive/data.pkl"] and zf.testzip() is None  # opens as the inner archive
+    assert ts.checkpoint_problem(folder) == (f"{model} is damaged (BadZipFile: no 'data' entry (a truncated "
+                                             "Stable-Baselines3 file))")
