@@ -18,7 +18,7 @@ def cmd_bench_data(args: argparse.Namespace) -> int:
     seconds = time.perf_counter() - start
     result = {
         "scenarios_loaded": len(scenarios),
-        "seconds": round(seconds, 3),
+        "seconds": round(seconds, 6),
         "scenarios_per_s": round(len(scenarios) / seconds, 1),
         "target": f"{args.n} scenarios in < 2 s",
         "meets_target": len(scenarios) >= args.n and seconds < 2.0,
