@@ -147,7 +147,14 @@ class GooseCurve:
             fit_error = 0.0
         elif timing == "curve":
             # Starts with the current velocity: along the heading at the logged speed (dC/du = v T).
-            fitted = fit_timed_nurbs(path, START_DIRECTION * v_log[0] * n_future * DT_S)
+            start = START_DIRECTION * v_log[0] * n_future * DT_S
+            fitted = fit_timed_nurbs(path, start)
+            probe = cls(scenario.scenario_id, frame, track, n_future, s_log, v_log, fitted, 0.0, fitted.ctrl,
+                        fitted.weights, timing)
+            if probe.reverses():
+                # Least squares overshot a stop and comes back (5 points cannot bend sharply enough); the Greville
+                # guess keeps the control polygon in the log's order.
+                fitted = fit_timed_nurbs(path, start, least_squares=False)
             fit_error = float(np.hypot(*(fitted.points(np.linspace(0.0, 1.0, run)) - path).T).max())
         else:
             fitted = fit_nurbs(path, start_direction=START_DIRECTION)
@@ -231,6 +238,13 @@ class GooseCurve:
         out[rows, 5:7] = self.log_track[CURRENT_STEP, 5:7]
         out[rows, VALID] = 1.0
         return out
+
+    def reverses(self) -> bool:
+        """Timed curves: whether the replay turns by more than 90 degrees within one step anywhere (the curve
+        drives back over itself)."""
+        _, heading, _ = self._timed_motion()
+        turn = np.diff(np.concatenate([[0.0], heading]))
+        return bool(np.any(np.cos(turn) < 0.0))
 
     def clock(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Timed curves: the curve's clock ``t(u)`` as a share of the logged duration and ``dt/du``, ``[M]`` each.

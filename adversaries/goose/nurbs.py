@@ -266,7 +266,8 @@ def greville_abscissae(n_ctrl: int = N_CTRL, degree: int = DEGREE) -> np.ndarray
 
 
 def fit_timed_nurbs(
-    path: np.ndarray, start_derivative: np.ndarray, n_ctrl: int = N_CTRL, degree: int = DEGREE
+    path: np.ndarray, start_derivative: np.ndarray, n_ctrl: int = N_CTRL, degree: int = DEGREE,
+    least_squares: bool = True,
 ) -> NurbsCurve:
     """Least-squares NURBS (unit weights) through positions sampled at equal time steps, with the parameter
     proportional to time: point ``k`` of ``P`` is fitted at ``u = k / (P - 1)`` (no re-parameterisation, which
@@ -279,6 +280,8 @@ def fit_timed_nurbs(
     Args:
         path: ``[P >= 2, 2]`` positions at equal time steps (m).
         start_derivative: ``[2]`` ``dC/du`` at ``u = 0`` (m per unit parameter: velocity (m/s) x duration (s)).
+        least_squares: False keeps the Greville guess (a control polygon in the path's own order, for logs whose
+            least-squares fit overshoots a stop and comes back).
     """
     q = np.asarray(path, dtype=np.float64)
     if q.ndim != 2 or q.shape[1] != 2 or len(q) < 2:
@@ -289,6 +292,8 @@ def fit_timed_nurbs(
     guess = np.stack([np.interp(xi, u, q[:, 0]), np.interp(xi, u, q[:, 1])], axis=-1)
     guess[0], guess[-1] = q[0], q[-1]
     guess[1] = q[0] + xi[1] * np.asarray(start_derivative, dtype=np.float64)
+    if not least_squares:
+        return NurbsCurve(guess, np.ones(n_ctrl), degree)
     nb = basis_functions(u, knots, degree)
     rhs = q - nb @ guess  # residual of the guess; the free points 2 .. n-2 move by the min-norm correction
     delta, *_ = np.linalg.lstsq(nb[:, 2:-1], rhs, rcond=None)
