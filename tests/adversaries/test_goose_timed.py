@@ -209,3 +209,30 @@ def test_agent_files_without_the_new_spec_keys_keep_the_old_semantics(tmp_path: 
     assert load_goose_agent(new).spec == SPEC and SPEC.timing == "curve" and SPEC.obs_targets
     with pytest.raises(ValueError, match="timing"):
         GooseSpec(timing="arc")
+
+
+@pytest.mark.parametrize("timing", ["curve", "log"])
+def test_env_and_generator_replay_the_curve_of_their_spec_timing(timing: str) -> None:
+    """The env fits its scenarios with the spec's timing, and the generator with its agent's: the first update's
+    track is the curve of that timing edited by the agent's action (a braking log, where the timings differ)."""
+    import torch
+
+    from seal.adversaries.goose.agent import GooseAgent
+    from seal.adversaries.goose.env import GooseEnv, simulate
+    from seal.adversaries.goose.generator import GooseGenerator
+    from seal.envs.behaviors import ReplayBehavior
+    from seal.envs.heuristic import HeuristicDriver
+    from seal.envs.scenario_env import ScenarioEnv
+
+    s = _braking_scenario(decel=1.0)
+    spec = GooseSpec(timing=timing)
+    env = GooseEnv([s], spec)
+    assert env.start(s.scenario_id).curve.timing == timing
+    torch.manual_seed(0)
+    agent = GooseAgent(build_policy("sac", spec, [16], 8), spec, "sac")
+    history = [simulate(ScenarioEnv([s]), HeuristicDriver(), s.scenario_id, ReplayBehavior())]
+    g = GooseGenerator(agent).generate(s, history, np.random.default_rng(0))
+    expected = GooseCurve.from_scenario(s, timing).edited(np.asarray(g.extra["action"]), spec).track()
+    np.testing.assert_allclose(g.behavior._given, expected, atol=1e-3)  # the action is logged rounded to 1e-4
+    other = GooseCurve.from_scenario(s, "log" if timing == "curve" else "curve")
+    assert np.abs(other.edited(np.asarray(g.extra["action"]), spec).track() - expected).max() > 0.1
