@@ -182,7 +182,8 @@ def load_goose_agent(path: str | Path) -> GooseAgent:
     for key in ("algo", "spec", "net_arch", "gru_hidden"):
         if key not in meta:
             raise ValueError(f"{path}: field {key!r} is missing from goose.json")
-    spec = GooseSpec.from_dict(meta["spec"], where=f"{path}: field 'spec'")
+    # Files written before these options replayed the logged speed profile and observed no control-point targets.
+    spec = GooseSpec.from_dict({"timing": "log", "obs_targets": False, **meta["spec"]}, where=f"{path}: field 'spec'")
     policy = build_policy(meta["algo"], spec, meta["net_arch"], meta["gru_hidden"])
     state = torch.load(io.BytesIO(raw), map_location="cpu", weights_only=True)
     try:

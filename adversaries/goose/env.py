@@ -105,7 +105,7 @@ class GooseEnv(gym.Env):
             if scenario_id not in self._by_id:
                 raise KeyError(f"GooseEnv has no scenario {scenario_id!r}")
             scenario = self._by_id[scenario_id]
-            curve = GooseCurve.from_scenario(scenario)
+            curve = GooseCurve.from_scenario(scenario, self.goose_spec.timing)
             rollout = simulate(self.sim, self.driver, scenario_id, ReplayBehavior())
             achieved = achieved_goal(rollout)
             hit = ScenarioStart(curve, rollout, achieved, bool(goal_reached(achieved, self.goose_spec.goal_array)))

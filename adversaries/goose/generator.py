@@ -103,7 +103,7 @@ class GooseGenerator(AdversaryGenerator):
             raise ValueError(f"goose: history roll-out is of scenario {last.scenario_id!r}, not {sid!r}")
         kept = self._kept.get(sid)
         if kept is None or last is None or not driven_by(last, kept.track):
-            curve = GooseCurve.from_scenario(scenario)
+            curve = GooseCurve.from_scenario(scenario, self.spec.timing)
             kept = _Kept(curve, curve.track(), 0)
         extra: dict = {"fit_error_m": round(kept.curve.fit_error_m, 4)}
         if last is None:

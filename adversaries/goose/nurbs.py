@@ -255,3 +255,48 @@ def fit_nurbs(
         u[0], u[-1] = 0.0, 1.0
     assert curve is not None
     return curve
+
+
+def greville_abscissae(n_ctrl: int = N_CTRL, degree: int = DEGREE) -> np.ndarray:
+    """``[n_ctrl]`` parameters where each control point "sits" (averages of ``degree`` consecutive interior knots;
+    for GOOSE's knots ``[0, 1/6, 1/2, 5/6, 1]``). A B-spline whose control values are their own Greville abscissae
+    is the identity ``u -> u`` (linear precision)."""
+    knots = clamped_uniform_knots(n_ctrl, degree)
+    return np.convolve(knots[1:-1], np.ones(degree) / degree, mode="valid")
+
+
+def fit_timed_nurbs(
+    path: np.ndarray, start_derivative: np.ndarray, n_ctrl: int = N_CTRL, degree: int = DEGREE,
+    least_squares: bool = True,
+) -> NurbsCurve:
+    """Least-squares NURBS (unit weights) through positions sampled at equal time steps, with the parameter
+    proportional to time: point ``k`` of ``P`` is fitted at ``u = k / (P - 1)`` (no re-parameterisation, which
+    would change the timing). Control point 0 and the last are pinned to the path's ends and control point 1 is
+    set by the start derivative: ``C'(0) = (P_1 - P_0) / xi_1`` (``xi`` the Greville abscissae), so a vehicle's
+    curve starts with its current velocity. The remaining points solve the linear least-squares problem around
+    their Greville guess (the path at ``u = xi_i``), which also keeps them in place when a short path leaves
+    them under-determined.
+
+    Args:
+        path: ``[P >= 2, 2]`` positions at equal time steps (m).
+        start_derivative: ``[2]`` ``dC/du`` at ``u = 0`` (m per unit parameter: velocity (m/s) x duration (s)).
+        least_squares: False keeps the Greville guess (a control polygon in the path's own order, for logs whose
+            least-squares fit overshoots a stop and comes back).
+    """
+    q = np.asarray(path, dtype=np.float64)
+    if q.ndim != 2 or q.shape[1] != 2 or len(q) < 2:
+        raise ValueError(f"fit_timed_nurbs needs a path [P >= 2, 2], got shape {q.shape}")
+    knots = clamped_uniform_knots(n_ctrl, degree)
+    xi = greville_abscissae(n_ctrl, degree)
+    u = np.linspace(0.0, 1.0, len(q))
+    guess = np.stack([np.interp(xi, u, q[:, 0]), np.interp(xi, u, q[:, 1])], axis=-1)
+    guess[0], guess[-1] = q[0], q[-1]
+    guess[1] = q[0] + xi[1] * np.asarray(start_derivative, dtype=np.float64)
+    if not least_squares:
+        return NurbsCurve(guess, np.ones(n_ctrl), degree)
+    nb = basis_functions(u, knots, degree)
+    rhs = q - nb @ guess  # residual of the guess; the free points 2 .. n-2 move by the min-norm correction
+    delta, *_ = np.linalg.lstsq(nb[:, 2:-1], rhs, rcond=None)
+    ctrl = guess.copy()
+    ctrl[2:-1] += delta
+    return NurbsCurve(ctrl, np.ones(n_ctrl), degree)

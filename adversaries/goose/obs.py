@@ -3,8 +3,9 @@ achieved / desired goals (the Dict layout SB3's HER buffer needs).
 
 ``observation`` = ``[n_time * N_ROLLOUT_FEATURES]`` roll-out features (row-major ``[n_time, F]``, the roll-out
 sampled every ``obs_stride`` steps after the current step) followed by the curve state
-(`GooseCurve.features`, 22), the closest approach (`CLOSEST_FEATURES`, 7) and the share of the update budget
-used (1); ``achieved_goal`` / ``desired_goal``
+(`GooseCurve.features`, 22), the closest approach (`CLOSEST_FEATURES`, 7), with ``spec.obs_targets`` the ego
+relative to each control point at its time (`TARGET_FEATURES`, 12) and the share of the update budget used (1);
+``achieved_goal`` / ``desired_goal``
 are ``[3]`` in physical units (see `seal.adversaries.goose.goals`).
 """
 
@@ -17,6 +18,7 @@ from gymnasium import spaces
 
 from seal.adversaries.goose.curve import N_CURVE_FEATURES, POS_SCALE_M, Frame, GooseCurve
 from seal.adversaries.goose.goals import GOAL_SCALES, MAX_TERM, pair_gaps
+from seal.adversaries.goose.nurbs import greville_abscissae
 from seal.adversaries.goose.spec import GooseSpec
 from seal.core.scenario import CURRENT_STEP, HEADING, VALID, VX, VY, X, Y
 from seal.envs.rollout import Rollout
@@ -82,8 +84,30 @@ def closest_approach_features(rollout: Rollout, frame: Frame, spec: GooseSpec) -
     ]).astype(np.float32)
 
 
+TARGET_FEATURES = ("dx", "dy", "present")
+"""Per control point 1..4 (`GooseSpec.obs_targets`): where the ego was in the last roll-out at the time the point
+stands for (its Greville abscissa times the logged duration), relative to the point (frame, / `POS_SCALE_M`), and 1
+if the ego was present then (else all 0). On a timed curve (``timing="curve"``) moving a point by this offset puts
+the adversary where the ego was at that time: the edit that aims at the ego, given directly rather than left for
+the networks to work out from two coordinate lists."""
+N_TARGET_FEATURES = 4 * len(TARGET_FEATURES)
+
+
+def target_features(rollout: Rollout, curve: GooseCurve) -> np.ndarray:
+    """``[N_TARGET_FEATURES]`` float32 (see `TARGET_FEATURES`)."""
+    out = np.zeros((4, len(TARGET_FEATURES)), dtype=np.float32)
+    steps = CURRENT_STEP + np.rint(greville_abscissae(len(curve.ctrl))[1:] * curve.n_future).astype(int)
+    for i, k in enumerate(np.minimum(steps, rollout.last_step)):
+        e = rollout.ego_track[k].astype(np.float64)
+        if k > CURRENT_STEP and e[VALID] > 0.5:
+            out[i, :2] = (curve.frame.to_local(e[[X, Y]]) - curve.ctrl[i + 1]) / POS_SCALE_M
+            out[i, 2] = 1.0
+    return out.ravel()
+
+
 def observation_size(spec: GooseSpec) -> int:
-    return spec.n_time * N_ROLLOUT_FEATURES + N_CURVE_FEATURES + N_CLOSEST_FEATURES + 1
+    targets = N_TARGET_FEATURES if spec.obs_targets else 0
+    return spec.n_time * N_ROLLOUT_FEATURES + N_CURVE_FEATURES + N_CLOSEST_FEATURES + targets + 1
 
 
 def observation_space(spec: GooseSpec) -> spaces.Dict:
@@ -105,6 +129,7 @@ def build_observation(
         rollout_features(rollout, curve.frame, spec).ravel(),
         curve.features(spec),
         closest_approach_features(rollout, curve.frame, spec),
+        target_features(rollout, curve) if spec.obs_targets else np.zeros(0, dtype=np.float32),
         np.array([n_updates / spec.max_updates], dtype=np.float32),
     ]).astype(np.float32)
     return {

@@ -19,6 +19,12 @@ of its speed) and largest |yaw rate| over a roll-out."""
 DECELERATION_GOAL = (0.0, 8.0, 0.7)
 """GOOSE's "deceleration" goal: contact (gap 0) with |acc| <= 8 m/s^2 and |yaw rate| <= 0.7 rad/s."""
 
+TIMINGS = ("curve", "log")
+"""How the adversary moves along its curve: ``"curve"``: the curve is a trajectory, its parameter is time (GOOSE's
+NURBS trajectories carry the time at each control point, as OpenSCENARIO's timed NURBS do), so an edit changes
+where *and when* the adversary is; ``"log"``: the path only, driven with the logged speed profile re-mapped to
+the curve's length (agents trained before the option existed)."""
+
 
 @dataclass(frozen=True)
 class GooseSpec:
@@ -40,6 +46,9 @@ class GooseSpec:
         obs_stride: the roll-out is sampled every ``obs_stride`` steps for the GRU (10 = 1 s: the GRU's cost grows
             with the sequence length; the closest approach is given exactly besides).
         obs_horizon: steps after the current step covered by the roll-out observation (the env horizon, 90).
+        timing: ``"curve"`` or ``"log"`` (see `TIMINGS`).
+        obs_targets: observe the ego relative to each control point at the point's time in the last roll-out
+            (`seal.adversaries.goose.obs.TARGET_FEATURES`).
     """
 
     desired_goal: tuple[float, float, float] = DECELERATION_GOAL
@@ -53,6 +62,8 @@ class GooseSpec:
     reward: str = "dense"
     obs_stride: int = 10
     obs_horizon: int = 90
+    timing: str = "curve"
+    obs_targets: bool = True
 
     def __post_init__(self) -> None:
         goal = tuple(float(g) for g in self.desired_goal)
@@ -63,6 +74,8 @@ class GooseSpec:
         if len(scale) != 4 or min(scale) <= 0:
             raise ValueError(f"point_scale must be 4 positive numbers (control points 1..4), got {scale}")
         object.__setattr__(self, "point_scale", scale)
+        if self.timing not in TIMINGS:
+            raise ValueError(f"timing must be one of {TIMINGS}, got {self.timing!r}")
         if self.reward not in ("dense", "sparse"):
             raise ValueError(f"reward must be 'dense' or 'sparse', got {self.reward!r}")
         for name in ("max_updates", "obs_stride", "obs_horizon"):

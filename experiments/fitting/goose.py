@@ -44,7 +44,7 @@ class GooseFitConfig:
 
     algo: Literal["sac", "td3"] = "sac"
     """SB3 algorithm."""
-    total_steps: int = 5000
+    total_steps: int = 8000
     """Env steps = observed roll-outs of training."""
     learning_starts: int = 300
     """Random-action steps before learning."""

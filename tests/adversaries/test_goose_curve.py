@@ -24,8 +24,9 @@ def test_frame_round_trip_and_axes() -> None:
     np.testing.assert_allclose(f.to_world(f.to_local(pts)), pts, atol=1e-9)
 
 
-def test_fit_is_in_the_adversary_frame_and_the_zero_edit_replays_the_log(lane_change: Scenario) -> None:
-    c = GooseCurve.from_scenario(lane_change)
+@pytest.mark.parametrize("timing", ["log", "curve"])
+def test_fit_is_in_the_adversary_frame_and_the_zero_edit_replays_the_log(lane_change: Scenario, timing: str) -> None:
+    c = GooseCurve.from_scenario(lane_change, timing)
     log = lane_change.track(lane_change.adv_id).astype(np.float64)
     assert c.n_future == N_STEPS - 1 - CURRENT_STEP
     np.testing.assert_allclose(c.fitted.ctrl[0], [0.0, 0.0], atol=1e-9)
@@ -40,8 +41,9 @@ def test_fit_is_in_the_adversary_frame_and_the_zero_edit_replays_the_log(lane_ch
     assert c.length_ratio() == pytest.approx(1.0, abs=1e-3)
 
 
-def test_edit_moves_points_1_to_4_within_bounds(lane_change: Scenario) -> None:
-    c = GooseCurve.from_scenario(lane_change)
+@pytest.mark.parametrize("timing", ["log", "curve"])
+def test_edit_moves_points_1_to_4_within_bounds(lane_change: Scenario, timing: str) -> None:
+    c = GooseCurve.from_scenario(lane_change, timing)
     a = np.zeros(12)
     a[6] = 1.0  # x of control point 4
     a[3] = -0.5  # y of control point 2
@@ -57,9 +59,12 @@ def test_edit_moves_points_1_to_4_within_bounds(lane_change: Scenario) -> None:
         many = many.edited(np.ones(12), SPEC)
     limit = np.array(np.broadcast_to(SPEC.max_offset_m * np.array(SPEC.point_scale)[:, None], (4, 2)))
     limit[0, 1] = 0.0  # point 1 slides along the start heading only: the curve keeps leaving along it
+    if timing == "curve":
+        limit[0, 0] = 0.0  # ... and on a timed curve it is the current velocity: it does not move at all
     np.testing.assert_allclose(many.ctrl[1:] - c.fitted.ctrl[1:], limit)
-    np.testing.assert_allclose(np.delete(many.features(SPEC)[8:16], 1), 1.0)  # offsets normalised to their limits
-    assert many.features(SPEC)[9] == 0.0
+    fixed = [0, 1] if timing == "curve" else [1]
+    np.testing.assert_allclose(np.delete(many.features(SPEC)[8:16], fixed), 1.0)  # offsets normalised to limits
+    assert np.all(many.features(SPEC)[8:16][fixed] == 0.0)
     np.testing.assert_allclose(many.weights[1:], SPEC.weight_max)
     np.testing.assert_allclose(many.ctrl[0], c.fitted.ctrl[0])
     np.testing.assert_allclose(many.reset_edit().ctrl, c.fitted.ctrl)
@@ -71,7 +76,7 @@ def test_retiming_keeps_the_logged_profile_scaled_to_the_new_length(lane_change:
     """Log: constant 27 m/s along a straight lane. Stretching the (straight) curve by shift_m: with x = k / K the
     share of the log covered at future step k of K, the distance along the curve is L0 x (1 + (r - 1) g(x)) with g
     the smoothstep; the speed stays continuous."""
-    c = GooseCurve.from_scenario(lane_change)
+    c = GooseCurve.from_scenario(lane_change, "log")
     a = np.zeros(12)
     a[6] = 1.0
     e = c.edited(a, SPEC)
@@ -102,7 +107,7 @@ def test_stops_are_kept_and_a_shrunken_curve_never_reverses(lane_change: Scenari
     """A log that drives 216 m in 4 s and then stands. On a curve half as long the warp is monotone: it drives
     to the end of the curve and stands where the log stands. On a curve at 20 % the warp would go back: the
     adversary is held (speed 0) instead, and never passes the end of the curve."""
-    c = GooseCurve.from_scenario(lane_change)
+    c = GooseCurve.from_scenario(lane_change, "log")
     k = np.arange(c.n_future + 1)
     v_log = np.where(k <= 40, c.log_length_m / 4.0, 0.0)
     s_log = np.minimum(k, 40) * DT_S * c.log_length_m / 4.0
@@ -144,12 +149,13 @@ def test_an_adversary_with_no_logged_future_stays_absent(lane_change: Scenario) 
         assert np.all(np.isfinite(curve.features(SPEC)))
 
 
-def test_curve_leaves_the_current_pose_along_the_logged_heading(highway: list[Scenario]) -> None:
+@pytest.mark.parametrize("timing", ["log", "curve"])
+def test_curve_leaves_the_current_pose_along_the_logged_heading(highway: list[Scenario], timing: str) -> None:
     """The replay's first step turns no faster than the goal's yaw-rate bound allows, for the fitted curve and for
     any edit: point 1 stays on the heading ray (a sideways push of it is ignored)."""
     rng = np.random.default_rng(0)
     for scenario in highway:
-        c = GooseCurve.from_scenario(scenario)
+        c = GooseCurve.from_scenario(scenario, timing)
         assert c.fitted.ctrl[1, 1] == 0.0 and c.fitted.ctrl[1, 0] > 0
         h0 = scenario.track(scenario.adv_id)[CURRENT_STEP, HEADING]
         for a in [np.zeros(12), *rng.uniform(-1, 1, (5, 12))]:
