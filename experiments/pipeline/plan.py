@@ -139,8 +139,7 @@ def _check_fits(fit: Mapping[str, Any], models: Mapping[str, str]) -> None:
             if not Path(str(spec["path"])).expanduser().exists():
                 raise ValueError(f"fit.{name}.path: {spec['path']} does not exist")
             continue
-        kind = fit_kind(name, spec)
-        spec.pop("model", None)
+        kind, spec = fit_kind(name, spec)
         if kind not in OPTIONS or kind in DATA_TASKS:
             known = sorted(k for k in OPTIONS if k not in DATA_TASKS)
             what = f"fit.{name}.model {kind!r}" if kind != name else f"model {name!r}"

@@ -69,14 +69,15 @@ def _refs(value: Any) -> list[str]:
     return [m.group(1)] if m else []
 
 
-def fit_kind(name: str, spec: Mapping[str, Any] | None) -> str:
-    """Which ``seal fit`` command a ``fit.NAME`` entry runs: its ``model:`` option, else the name itself. ``model``
-    lets a preset fit one kind twice with different options, e.g. ``ego_skills: {model: skills, preset: ego}``
-    beside ``skills``."""
-    kind = (spec or {}).get("model", name)
+def fit_kind(name: str, spec: Mapping[str, Any] | None) -> tuple[str, dict[str, Any]]:
+    """Which ``seal fit`` command a ``fit.NAME`` entry runs and with which options: its ``model:`` option (taken
+    out of the options), else the name itself. ``model`` lets a preset fit one kind twice with different options,
+    e.g. ``ego_skills: {model: skills, preset: ego}`` beside ``skills``."""
+    options = dict(spec or {})
+    kind = options.pop("model", name)
     if not isinstance(kind, str):
         raise ValueError(f"fit.{name}.model must be the name of a fitted model kind, got {kind!r}")
-    return kind
+    return kind, options
 
 
 def fits_needed(config: Mapping[str, Any]) -> list[str]:

@@ -345,8 +345,7 @@ def _fit_steps(run: _Run, dataset: str, data_params: Mapping[str, Any]) -> dict[
         if spec.get("path"):
             models[name] = str(Path(spec["path"]).expanduser().resolve())
             continue
-        kind = fit_kind(name, spec)
-        spec.pop("model", None)
+        kind, spec = fit_kind(name, spec)
         (run.out / "models").mkdir(exist_ok=True)
         models[name] = str(run.out / "models" / FIT_OUTPUTS.get(name, name))
         job = {"name": f"fit-{name}", "task": "fit", "model": kind, "dataset": dataset, "out": models[name],

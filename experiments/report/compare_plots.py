@@ -53,11 +53,7 @@ def plot_setting_bars(table: Sequence[Mapping[str, Any]], out: Path) -> list[Pat
         ax.set_ylim(0, 105)
         ax.set_title(f"Ego {metric.replace('_', '-')} rate: median and IQR over seeds")
         ax.legend(fontsize=8, ncol=min(len(pipelines), 4))
-        fig.tight_layout()
-        path = out / f"bars_{metric}.png"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
+        path = save_figure(fig, out / f"bars_{metric}.png")
         paths.append(path)
     return paths
 
@@ -109,11 +105,7 @@ def plot_training_curves(runs: Sequence[Mapping[str, Any]], path: Path) -> Path 
         ax.set_xlabel("environment steps")
         ax.set_title(panel)
         ax.legend(fontsize=8)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def _match(cols: Mapping[str, np.ndarray], name: str) -> str | None:
@@ -176,3 +168,12 @@ def render_generator_videos(
             paths.append(write_video(frames, out / name))
         env.close()
     return paths
+
+
+def save_figure(fig: Any, path: Path) -> Path:
+    """Lay out ``fig``, write it to ``path`` (110 dpi, parent folders created) and close it; returns ``path``."""
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    _pyplot().close(fig)
+    return path

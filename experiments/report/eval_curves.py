@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from seal.experiments.report.compare import ordered_pipelines
-from seal.experiments.report.compare_plots import _pyplot, read_progress
+from seal.experiments.report.compare_plots import _pyplot, read_progress, save_figure
 
 EVAL_FILE = Path("eval") / "evaluations.csv"
 EVAL_METRICS = ("success_rate", "crash_rate", "out_of_road_rate", "route_completion")
@@ -53,8 +53,4 @@ def plot_eval_curves(runs: Sequence[Mapping[str, Any]], path: Path) -> Path | No
         ax.set_ylim(-2, 102)
         ax.set_title(f"eval {metric.replace('_', ' ')}")
         ax.legend(fontsize=8)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

@@ -29,13 +29,7 @@ F = {name: i for i, name in enumerate(FEATURE_NAMES)}
 T = 80
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Small networks: one torch thread is fastest, and the machine is shared."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_thread")  # tests/models/conftest.py
 
 
 def _t(a: np.ndarray, dtype: torch.dtype = torch.float64) -> torch.Tensor:

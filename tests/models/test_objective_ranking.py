@@ -19,12 +19,7 @@ from seal.models.objective.train import group_ranks, pairwise_loss, pearson_rank
 E = {name: i for i, name in enumerate(EGO_FEATURE_NAMES)}
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_thread")  # tests/models/conftest.py
 
 
 def _pairs(sums: list[float]) -> torch.Tensor:
