@@ -263,3 +263,39 @@ def test_build_resumes_from_finished_chunks(tmp_path, highway, monkeypatch) -> N
     fresh = Demonstrations.concat([roll_out_demonstrations(s, cfg) for s in highway])
     assert np.array_equal(merged.obs, fresh.obs) and np.array_equal(merged.seg_scenario, fresh.seg_scenario)
     assert Demonstrations.load(out).scenario_ids.tolist() == [s.scenario_id for s in highway]
+
+
+def test_expert_source_records_clean_actions_while_applying_noisy_ones(highway) -> None:
+    """DART: the applied action is noisy, so the track leaves the quiet expert's; the recorded action is the clean
+    heuristic's action for the recorded observation. Only the ego and the expert share of others are recorded."""
+    scenario = highway[0]
+    noisy = DemoConfig(source="expert", start_step=0, end_step=40, expert_share=0.0, expert_steer_noise=0.1,
+                       expert_accel_noise=0.4, seed=1)
+    demos = roll_out_demonstrations(scenario, noisy)
+    demos.validate()
+    assert demos.n_segments == 1 and int(demos.seg_agent[0]) == scenario.ego_id
+    assert set(demos.seg_source.tolist()) == {demo_mod.EXPERT}
+    driver = HeuristicDriver()
+    clean = np.stack([driver.act(o.astype(np.float64)) for o in demos.obs])
+    assert np.allclose(clean, demos.actions, atol=0.02)  # the observation went through float16
+    quiet = roll_out_demonstrations(scenario, DemoConfig(source="expert", start_step=0, end_step=40,
+                                                         expert_share=0.0, expert_steer_noise=0.0,
+                                                         expert_accel_noise=0.0, seed=1))
+    # The noise moved the expert off the quiet expert's path: its observations differ.
+    assert np.abs(quiet.obs.astype(np.float32) - demos.obs.astype(np.float32)).max() > 0.05
+    again = roll_out_demonstrations(scenario, noisy)
+    assert np.array_equal(again.obs, demos.obs) and np.array_equal(again.actions, demos.actions)
+    everyone = roll_out_demonstrations(scenario, DemoConfig(source="expert", start_step=0, end_step=40,
+                                                            expert_share=1.0))
+    assert everyone.n_segments == scenario.n_agents
+
+
+def test_expert_settings_do_not_change_the_identity_of_other_sources() -> None:
+    """Files built before the expert source existed stay reusable: the ``expert_*`` settings are not part of the
+    other sources' parameters."""
+    log = DemoConfig(source="log", expert_share=0.9).to_dict()
+    assert not any(k.startswith("expert_") for k in log)
+    assert DemoConfig.from_dict(log) == DemoConfig(source="log")
+    assert DemoConfig(source="expert", expert_share=0.9).to_dict()["expert_share"] == 0.9
+    with pytest.raises(ValueError, match="expert_share"):
+        DemoConfig(source="expert", expert_share=1.5)

@@ -7,6 +7,13 @@ applied action) per step, with the collisions and near misses of the simulated t
 * ``heuristic``: the noisy `HeuristicDriver` of thesis 6.3.3 (all agents follow the heuristic), with the noise
   model below. Its collisions give adversarial windows (the striker's, `seal.models.skills.demos.WindowSpec`);
   its other windows are not benign demonstrations (the noise is not how the logged traffic drives).
+* ``expert``: DART-style demonstrations of the clean `HeuristicDriver` (`roll_out_expert_demonstrations`): the
+  scenario's ego and a share of the other vehicles are driven by it with OU noise added to the *applied* action,
+  while the *recorded* action is the driver's clean one from the state the noise led to; the other vehicles
+  replay the log as in ``log``. A skill decoder imitating plain demonstrations never sees the states its own small
+  errors lead to and drifts in closed loop (issue 17: the ReSkill ego's prior mode reaches 0.60-0.71 success
+  where the heuristic reaches ~0.85, and it strikes ~90 % of its crashes); these windows show how a driver
+  recovers from them (Laskey et al., DART, 2017).
 
 Noise model of the heuristic source (`DemoConfig`), per agent:
 
@@ -43,10 +50,10 @@ from seal.envs import observation as ob
 from seal.envs.heuristic import HeuristicDriver
 from seal.envs.kinematics import recover_actions
 from seal.envs.multi_agent import HORIZON, MultiAgentSim, SimConfig
-from seal.models.skills.demos import HEURISTIC, LOG, Demonstrations
+from seal.models.skills.demos import EXPERT, HEURISTIC, LOG, Demonstrations
 from seal.models.skills.events import EventSpec, find_events
 
-DEMO_SOURCES = ("heuristic", "log")
+DEMO_SOURCES = ("heuristic", "log", "expert")
 """Sources a `DemoConfig` simulates (the closed-loop ego roll-outs are built by `seal.experiments.fitting`)."""
 
 
@@ -66,8 +73,13 @@ class DemoConfig:
         distraction_s: range of a distraction's duration (s).
         max_lateral_m, offroad_tolerance_m: road checks (`SimConfig`).
         seed: base seed; each scenario's stream is derived from it and the scenario id.
-        source: ``heuristic`` (the noisy drivers above) or ``log`` (the logged traffic's own actions, no noise:
-            `roll_out_log_demonstrations`; the noise settings are ignored).
+        source: ``heuristic`` (the noisy drivers above), ``log`` (the logged traffic's own actions, no noise:
+            `roll_out_log_demonstrations`; the noise settings are ignored) or ``expert`` (DART demonstrations of
+            the clean heuristic driver: `roll_out_expert_demonstrations`).
+        expert_share: ``expert`` source: share of the non-ego vehicles driven by the expert (the ego always is).
+        expert_steer_noise, expert_accel_noise: ``expert`` source: stationary std of the OU noise added to the
+            applied normalised steering / acceleration (time constant ``noise_tau_s``); the recorded action is the
+            clean one.
         near_miss_gap_m, near_miss_closing_mps, striker_margin_mps: event thresholds
             (`seal.models.skills.events.EventSpec`).
     """
@@ -91,13 +103,19 @@ class DemoConfig:
     near_miss_gap_m: float = 0.5
     near_miss_closing_mps: float = 1.0
     striker_margin_mps: float = 0.5
+    expert_share: float = 0.25
+    expert_steer_noise: float = 0.05
+    expert_accel_noise: float = 0.2
 
     def __post_init__(self) -> None:
-        for name in ("steer_noise", "accel_noise", "impaired_noise_scale", "distraction_rate_hz"):
+        for name in ("steer_noise", "accel_noise", "impaired_noise_scale", "distraction_rate_hz", "expert_steer_noise",
+                     "expert_accel_noise"):
             if float(getattr(self, name)) < 0:
                 raise ValueError(f"DemoConfig: {name} must be >= 0, got {getattr(self, name)}")
         if not 0.0 <= self.impaired_share <= 1.0:
             raise ValueError(f"DemoConfig: impaired_share must be in [0, 1], got {self.impaired_share}")
+        if not 0.0 <= self.expert_share <= 1.0:
+            raise ValueError(f"DemoConfig: expert_share must be in [0, 1], got {self.expert_share}")
         if self.noise_tau_s <= 0:
             raise ValueError(f"DemoConfig: noise_tau_s must be > 0, got {self.noise_tau_s}")
         for name in ("headway_range_s", "min_gap_range_m", "reaction_delay_steps", "distraction_s"):
@@ -118,13 +136,22 @@ class DemoConfig:
                          offroad_tolerance_m=self.offroad_tolerance_m)
 
     def to_dict(self) -> dict[str, Any]:
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+        """The settings as plain values; the ``expert_*`` settings only for the ``expert`` source, so the identity
+        of the other sources' files (what `seal.experiments.fitting.skill_data` reuses) does not change with them."""
+        d = asdict(self)
+        if self.source != "expert":
+            for name in _EXPERT_FIELDS:
+                d.pop(name)
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], where: str = "demo config") -> DemoConfig:
         check_keys(cls, d, where)
         values: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
         return cls(**values)
+
+
+_EXPERT_FIELDS = ("expert_share", "expert_steer_noise", "expert_accel_noise")
 
 
 def scenario_seed(base_seed: int, scenario_id: str) -> np.random.SeedSequence:
@@ -214,11 +241,13 @@ Act = Callable[[np.ndarray, np.ndarray, int], np.ndarray]
 
 
 def _simulate(scenario: Scenario, cfg: DemoConfig, act: Act, source: int, impaired: Callable[[int], bool],
-              record_until: np.ndarray | None = None) -> Demonstrations:
+              record_until: np.ndarray | None = None, labels: Callable[[], np.ndarray] | None = None
+              ) -> Demonstrations:
     """Drive ``scenario``'s vehicles with ``act`` in a `MultiAgentSim`, record (observation, action) per agent and
     step, find the collisions and near misses on the simulated tracks (`seal.models.skills.events.find_events`) and
     return the `Demonstrations` (segments in the order agents ended). ``record_until[i]``: agent row ``i``'s
-    actions are recorded at steps before it only (its segment is cut there)."""
+    actions are recorded at steps before it only (its segment is cut there). ``labels``: called after each ``act``,
+    the actions to record ``[n, 2]`` instead of the applied ones (the expert's clean actions)."""
     sim = MultiAgentSim(scenario, cfg.sim_config())
     tracks = np.zeros((scenario.n_agents, N_STEPS, 8))
     tracks[:, sim.t] = sim.boxes()
@@ -228,10 +257,11 @@ def _simulate(scenario: Scenario, cfg: DemoConfig, act: Act, source: int, impair
         t = sim.t
         idx, obs = sim.observe()
         actions = act(idx, obs, t)
+        recorded = actions if labels is None else labels()
         for k, i in enumerate(idx.tolist()):
             if record_until is None or t < record_until[i]:
                 rec_obs.setdefault(i, []).append(obs[k])
-                rec_act.setdefault(i, []).append(actions[k])
+                rec_act.setdefault(i, []).append(recorded[k])
         ended = sim.step(idx, actions)
         tracks[:, sim.t] = sim.boxes()
         for end in ended:
@@ -276,6 +306,8 @@ def roll_out_demonstrations(scenario: Scenario, config: DemoConfig | None = None
     cfg = config or DemoConfig()
     if cfg.source == "log":
         return roll_out_log_demonstrations(scenario, cfg)
+    if cfg.source == "expert":
+        return roll_out_expert_demonstrations(scenario, cfg)
     rng = np.random.default_rng(scenario_seed(cfg.seed, scenario.scenario_id))
     drivers = NoisyHeuristicDrivers(cfg, rng)
     return _simulate(scenario, cfg, lambda idx, obs, _t: drivers.act(idx, obs), HEURISTIC, drivers.impaired)
@@ -296,6 +328,42 @@ def roll_out_log_demonstrations(scenario: Scenario, config: DemoConfig | None = 
         return actions[idx, min(t, actions.shape[1] - 1)].astype(np.float32)
 
     return _simulate(scenario, cfg, act, LOG, lambda _i: False, record_until=last)
+
+
+def roll_out_expert_demonstrations(scenario: Scenario, config: DemoConfig | None = None) -> Demonstrations:
+    """DART demonstrations of the clean `HeuristicDriver` (module docstring): the ego and each other vehicle with
+    probability ``expert_share`` are driven by it with OU noise on the applied action (std ``expert_*_noise``,
+    time constant ``noise_tau_s``) and record its clean action; only their segments are recorded. The rest replay
+    the log (`roll_out_log_demonstrations`' actions). Deterministic for the config's seed and the scenario id."""
+    cfg = config or DemoConfig(source="expert")
+    rng = np.random.default_rng(scenario_seed(cfg.seed, scenario.scenario_id))
+    log = scenario.tracks.astype(np.float64)
+    log_actions = np.stack([recover_actions(log[i]) for i in range(scenario.n_agents)])  # [A, T - 1, 2]
+    expert = rng.random(scenario.n_agents) < cfg.expert_share
+    expert[scenario.ego_index] = True
+    driver = HeuristicDriver()  # stateless between calls: one serves every expert vehicle
+    sigma = np.array([cfg.expert_steer_noise, cfg.expert_accel_noise])
+    decay = math.exp(-DT_S / cfg.noise_tau_s)
+    noise = rng.normal(0.0, 1.0, (scenario.n_agents, 2)) * sigma  # stationary start: no noise-free transient
+    innovation = math.sqrt(1.0 - decay**2) * sigma
+    clean: list[np.ndarray] = []
+
+    def act(idx: np.ndarray, obs: np.ndarray, t: int) -> np.ndarray:
+        applied = log_actions[idx, min(t, log_actions.shape[1] - 1)].astype(np.float32)
+        labels = applied.copy()
+        step_noise = rng.normal(0.0, 1.0, (len(idx), 2)) * innovation  # drawn for every agent: order-independent
+        for k, i in enumerate(idx.tolist()):
+            if expert[i]:
+                labels[k] = driver.act(obs[k].astype(np.float64))
+                noise[i] = noise[i] * decay + step_noise[k]
+                applied[k] = labels[k] + noise[i]
+        np.clip(applied, -1.0, 1.0, out=applied)
+        clean[:] = [labels]
+        return applied
+
+    record_until = np.where(expert, N_STEPS, 0)
+    return _simulate(scenario, cfg, act, EXPERT, lambda _i: False, record_until=record_until,
+                     labels=lambda: clean[0])
 
 
 def _run_chunk(args: tuple[int, list[Scenario], dict[str, Any]]) -> tuple[int, Demonstrations]:

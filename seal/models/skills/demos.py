@@ -43,12 +43,13 @@ FORMAT = "seal-skill-demos"
 FORMAT_VERSION = 2
 BENIGN, ADVERSARIAL = 0, 1
 LABEL_NAMES = ("benign", "adversarial")
-SOURCES = ("log", "heuristic", "ego_rollout")
+SOURCES = ("log", "heuristic", "ego_rollout", "expert")
 """How a segment was produced: ``log``: the logged traffic's own drivers (the actions that reproduce each logged
 track, `seal.models.skills.demonstrations.roll_out_log_demonstrations`); ``heuristic``: the noisy, partly impaired
 heuristic drivers; ``ego_rollout``: an adversary in closed loop against an ego policy
-(`seal.experiments.fitting.skill_rollouts`)."""
-LOG, HEURISTIC, EGO_ROLLOUT = range(len(SOURCES))
+(`seal.experiments.fitting.skill_rollouts`); ``expert``: DART demonstrations of the clean heuristic driver
+(`seal.models.skills.demonstrations.roll_out_expert_demonstrations`)."""
+LOG, HEURISTIC, EGO_ROLLOUT, EXPERT = range(len(SOURCES))
 
 _SEG_FIELDS = {
     "seg_row": np.int64, "seg_len": np.int32, "seg_scenario": np.int32, "seg_agent": np.int64,
