@@ -140,7 +140,9 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--objective", default=None, help="SEAL objective network file for the seal pipeline")
     p.add_argument("--skills", default=None, help="SEAL skills folder (seal fit skills) for the seal pipeline")
     p.add_argument("--ego-skills", default=None,
-                   help="skills folder (seal fit skills) the reskill ego draws its benign skills from")
+                   help="skills folder the reskill ego draws its benign skills from (fit it with `seal fit skills "
+                        "--preset ego`: a decoder that ignores the previous action, benign windows from DART "
+                        "demonstrations of the heuristic driver)")
     p.add_argument("--hyperparams", default=None, metavar="FILE",
                    help="rl-baselines3-zoo hyperparameter file: keyed by env id (seal/Scenario-v0; the algorithm from "
                    "--algo or the config) or by algorithm (td3 / sac / ppo); n_timesteps, n_envs, policy_kwargs as "
