@@ -11,9 +11,13 @@ The projection (on the feasible set: kinematically valid *and* on the lanes):
 1. A candidate needs projecting when its centre leaves every lane, i.e. a sample (every ``sample_every`` steps)
    lies farther than half a lane width from every lane centreline (the map's crop edges opened,
    `seal.models.prior.lanes.open_map_edges`). Other candidates are returned bit-for-bit unchanged.
-2. Its samples become a reference: each sample outside the lanes is moved toward the closest centreline point until
-   it lies ``margin_m`` inside that lane; samples on a lane stay. The reference is linear between samples, from
-   the agent's current position.
+2. Its samples become a reference (`chain_reference`): each reference point is the previous one plus the
+   candidate's own move between the two samples; when that lies outside every lane it is pulled toward the
+   closest centreline point until it is ``margin_m`` inside that lane, and the move is stretched back to its own
+   length in the pulled direction (pulled in once more), so a move that leaves the road turns along it. Up to
+   the candidate's first departure the reference is its samples; after it, the chained moves keep its progress
+   along the road (the closest lane point of a sample far off the road can lie behind the agent). The reference
+   is linear between samples, from the agent's current position.
 3. The candidate is driven again from the agent's current position and direction of travel with a unicycle: its
    own speed at every step (so its longitudinal acceleration is unchanged), and the yaw rate of pure pursuit
    toward the reference ``lookahead_steps`` ahead, clipped to the prior's yaw-rate limit. Heading and speed
@@ -198,9 +202,39 @@ def _build_grid(a: np.ndarray, b: np.ndarray, half_width: np.ndarray, x0: float,
     return starts, items[:n].copy()
 
 
-@njit(types.Tuple((float64[:, ::1], float64[::1]))(float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[::1],
-                                                   float64, float64, float64, int64, int64, int64[::1], int64[::1]),
-      cache=True, nogil=True, error_model="numpy")
+_GRID_ARGS = (float64[:, ::1], float64[:, ::1], float64[::1], float64, float64, float64, int64, int64, int64[::1],
+              int64[::1])
+"""Numba types of a `LaneGrid` passed to the kernels: a, b, half_width, x0, y0, cell, nx, ny, cell_start,
+cell_items."""
+
+
+@njit(types.UniTuple(float64, 3)(float64, float64, *_GRID_ARGS), cache=True, nogil=True, error_model="numpy")
+def _closest_one(x: float, y: float, a: np.ndarray, b: np.ndarray, half_width: np.ndarray, x0: float, y0: float,
+                 cell: float, nx: int, ny: int, cell_start: np.ndarray, cell_items: np.ndarray
+                 ) -> tuple[float, float, float]:
+    """`closest_lane_points` of one point: ``(qx, qy, excess)``."""
+    ix = int(math.floor((x - x0) / cell))
+    iy = int(math.floor((y - y0) / cell))
+    if 0 <= ix < nx and 0 <= iy < ny:
+        c = ix * ny + iy
+        cands = cell_items[cell_start[c]:cell_start[c + 1]]
+    else:  # beyond the grid: every segment
+        cands = np.arange(a.shape[0])
+    best = math.inf
+    best_k = -1
+    for k in cands:
+        e = _excess(x, y, a, b, half_width, k)
+        if e < best:
+            best, best_k = e, k
+    ex = b[best_k, 0] - a[best_k, 0]
+    ey = b[best_k, 1] - a[best_k, 1]
+    len2 = ex * ex + ey * ey
+    t = 0.0 if len2 <= 1e-18 else min(max(((x - a[best_k, 0]) * ex + (y - a[best_k, 1]) * ey) / len2, 0.0), 1.0)
+    return a[best_k, 0] + t * ex, a[best_k, 1] + t * ey, best
+
+
+@njit(types.Tuple((float64[:, ::1], float64[::1]))(float64[:, ::1], *_GRID_ARGS), cache=True, nogil=True,
+      error_model="numpy")
 def closest_lane_points(points: np.ndarray, a: np.ndarray, b: np.ndarray, half_width: np.ndarray, x0: float,
                         y0: float, cell: float, nx: int, ny: int, cell_start: np.ndarray, cell_items: np.ndarray
                         ) -> tuple[np.ndarray, np.ndarray]:
@@ -210,38 +244,74 @@ def closest_lane_points(points: np.ndarray, a: np.ndarray, b: np.ndarray, half_w
     n = points.shape[0]
     q = np.empty((n, 2))
     excess = np.empty(n)
-    everything = np.arange(a.shape[0])
     for i in range(n):
-        x = points[i, 0]
-        y = points[i, 1]
-        ix = int(math.floor((x - x0) / cell))
-        iy = int(math.floor((y - y0) / cell))
-        if 0 <= ix < nx and 0 <= iy < ny:
-            c = ix * ny + iy
-            cands = cell_items[cell_start[c]:cell_start[c + 1]]
-        else:
-            cands = everything
-        best = math.inf
-        best_k = -1
-        for k in cands:
-            e = _excess(x, y, a, b, half_width, k)
-            if e < best:
-                best, best_k = e, k
-        ex = b[best_k, 0] - a[best_k, 0]
-        ey = b[best_k, 1] - a[best_k, 1]
-        len2 = ex * ex + ey * ey
-        t = 0.0 if len2 <= 1e-18 else min(max(((x - a[best_k, 0]) * ex + (y - a[best_k, 1]) * ey) / len2, 0.0), 1.0)
-        q[i, 0] = a[best_k, 0] + t * ex
-        q[i, 1] = a[best_k, 1] + t * ey
-        excess[i] = best
+        q[i, 0], q[i, 1], excess[i] = _closest_one(points[i, 0], points[i, 1], a, b, half_width, x0, y0, cell, nx,
+                                                   ny, cell_start, cell_items)
     return q, excess
+
+
+@njit(types.UniTuple(float64, 2)(float64, float64, float64, *_GRID_ARGS), cache=True, nogil=True,
+      error_model="numpy")
+def _pull_in(x: float, y: float, margin: float, a: np.ndarray, b: np.ndarray, half_width: np.ndarray, x0: float,
+             y0: float, cell: float, nx: int, ny: int, cell_start: np.ndarray, cell_items: np.ndarray
+             ) -> tuple[float, float]:
+    """(x, y) when it lies on a lane, else moved toward the closest centreline point to ``margin`` m inside that
+    lane."""
+    cx, cy, e = _closest_one(x, y, a, b, half_width, x0, y0, cell, nx, ny, cell_start, cell_items)
+    if e <= 0.0:
+        return x, y
+    dist = math.sqrt((x - cx) ** 2 + (y - cy) ** 2)
+    keep = max(dist - e - margin, 0.0) / max(dist, 1e-12)  # distance - excess = the half width
+    return cx + (x - cx) * keep, cy + (y - cy) * keep
+
+
+@njit(float64[:, :, ::1](float64[:, :, ::1], int64[::1], float64, float64, float64, *_GRID_ARGS), cache=True,
+      nogil=True, error_model="numpy")
+def chain_reference(samples: np.ndarray, rows: np.ndarray, x0: float, y0: float, margin: float, a: np.ndarray,
+                    b: np.ndarray, half_width: np.ndarray, gx: float, gy: float, cell: float, nx: int, ny: int,
+                    cell_start: np.ndarray, cell_items: np.ndarray) -> np.ndarray:
+    """References ``[len(rows), S, 2]`` of the candidates ``rows`` of ``samples [K, S, 2]`` starting at (x0, y0):
+    each reference point is the previous one plus the candidate's own move between the two samples; when that lies
+    outside every lane it is pulled toward the closest centreline point until it is ``margin`` m inside that lane
+    (`_pull_in`), then the move is stretched back to its own length in the pulled direction and pulled in once more
+    (so a move that leaves the road turns along it instead of shrinking).
+
+    Chaining the moves keeps the candidate's progress: a sample far off the road has its closest lane point
+    somewhere behind, which a point-wise projection would make the reference go back to."""
+    out = np.empty((rows.shape[0], samples.shape[1], 2))
+    for m in range(rows.shape[0]):
+        r = rows[m]
+        px = x0
+        py = y0
+        qx_prev = x0
+        qy_prev = y0
+        for j in range(samples.shape[1]):
+            dx = samples[r, j, 0] - qx_prev
+            dy = samples[r, j, 1] - qy_prev
+            qx_prev = samples[r, j, 0]
+            qy_prev = samples[r, j, 1]
+            step = math.sqrt(dx * dx + dy * dy)
+            rx, ry = _pull_in(px + dx, py + dy, margin, a, b, half_width, gx, gy, cell, nx, ny, cell_start,
+                              cell_items)
+            moved = math.sqrt((rx - px) ** 2 + (ry - py) ** 2)
+            if moved > 1e-9 and abs(moved - step) > 1e-9:  # pulled in: restore the move's length along the road
+                rx, ry = _pull_in(px + (rx - px) * step / moved, py + (ry - py) * step / moved, margin, a, b,
+                                  half_width, gx, gy, cell, nx, ny, cell_start, cell_items)
+            px = rx
+            py = ry
+            out[m, j, 0] = px
+            out[m, j, 1] = py
+    return out
+
+
+def _grid_args(grid: LaneGrid) -> tuple:
+    return (grid.a, grid.b, grid.half_width, float(grid.origin[0]), float(grid.origin[1]), grid.cell_m,
+            grid.shape[0], grid.shape[1], grid.cell_start, grid.cell_items)
 
 
 def closest_on_grid(points: np.ndarray, grid: LaneGrid) -> tuple[np.ndarray, np.ndarray]:
     """`closest_lane_points` of ``points [N, 2]`` (m) on ``grid``."""
-    return closest_lane_points(np.ascontiguousarray(points, np.float64), grid.a, grid.b, grid.half_width,
-                               float(grid.origin[0]), float(grid.origin[1]), grid.cell_m, grid.shape[0],
-                               grid.shape[1], grid.cell_start, grid.cell_items)
+    return closest_lane_points(np.ascontiguousarray(points, np.float64), *_grid_args(grid))
 
 
 @njit(float64[:, :, ::1](float64[:, :, ::1], int64[::1], float64[:, ::1], int64[::1], float64, float64, float64,
@@ -304,22 +374,17 @@ def project_to_road(xy: np.ndarray, start_xy: np.ndarray, course_rad: float, gri
     if idx.size == 0 or idx[-1] != t - 1:
         idx = np.append(idx, t - 1)  # the end of the horizon is always tested
     samples = xy[:, idx].reshape(-1, 2)
-    closest, excess = closest_on_grid(samples, grid)
+    _, excess = closest_on_grid(samples, grid)
     moved = (excess > 0.0).reshape(k, -1).any(axis=1)
     if not moved.any():
         return xy, moved
     out = xy.copy()
-    # Off-lane samples move toward the closest centreline point so that they end margin_m inside the lane.
-    gap = samples - closest
-    dist = np.linalg.norm(gap, axis=-1)
-    half = dist - excess
-    inside = np.minimum(dist, np.maximum(half - cfg.margin_m, 0.0))
-    scale = np.where(excess > 0.0, inside / np.maximum(dist, 1e-12), 1.0)
-    ref = (closest + gap * scale[:, None]).reshape(k, -1, 2)
-    prev = np.concatenate([np.broadcast_to(start, (k, 1, 2)), xy[:, :-1]], axis=1)
-    speed = np.ascontiguousarray(np.linalg.norm(xy - prev, axis=-1) / dt_s)
     rows = np.flatnonzero(moved).astype(np.int64)
-    out[rows] = pursue(np.ascontiguousarray(ref), idx.astype(np.int64), speed, rows, float(start[0]),
+    ref = chain_reference(np.ascontiguousarray(samples.reshape(k, -1, 2)), rows, float(start[0]), float(start[1]),
+                          cfg.margin_m, *_grid_args(grid))
+    prev = np.concatenate([np.broadcast_to(start, (k, 1, 2)), xy[:, :-1]], axis=1)
+    speed = np.ascontiguousarray(np.linalg.norm(xy - prev, axis=-1)[rows] / dt_s)
+    out[rows] = pursue(ref, idx.astype(np.int64), speed, np.arange(len(rows), dtype=np.int64), float(start[0]),
                        float(start[1]), float(course_rad), cfg.lookahead_steps, cfg.yaw_rate_limit_rps,
                        cfg.min_speed_mps, dt_s)
     return out, moved
