@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import scenario_factory as sf
 import torch
+from kernel_reference import reference_lane_excess
 
 from seal.core.scenario import CURRENT_STEP, DT_S, HEADING, X, Y
 from seal.models.prior.kinematics import integrate_controls
-from seal.models.prior.lanes import open_map_edges
 from seal.models.prior.metrics import drivability, kinematic_limits
 from seal.models.prior.prior import TrajectoryPrior
 from seal.models.prior.road_projection import (
@@ -23,23 +23,6 @@ from seal.models.prior.road_projection import (
 )
 
 
-def _scan(points: np.ndarray, road) -> tuple[np.ndarray, np.ndarray]:
-    """Reference: closest centreline point and excess over the half width of the least-outside lane, every segment
-    scanned in numpy (first segment wins a tie)."""
-    best_e = np.full(len(points), np.inf)
-    best_q = np.zeros((len(points), 2))
-    for lane in open_map_edges(road).lanes:
-        c = lane.centerline
-        for a, b in zip(c[:-1], c[1:], strict=True):
-            e = b - a
-            t = np.clip(((points - a) @ e) / max(e @ e, 1e-18), 0.0, 1.0)
-            q = a + t[:, None] * e
-            ex = np.linalg.norm(points - q, axis=1) - lane.width_m / 2
-            better = ex < best_e
-            best_e[better], best_q[better] = ex[better], q[better]
-    return best_q, best_e
-
-
 @pytest.mark.parametrize("road", [sf.straight_road(3), sf.curved_road(2, radius_m=30.0)], ids=["straight", "curve"])
 def test_grid_lookup_equals_a_scan_of_every_segment(road) -> None:
     grid = lane_grid(road)
@@ -49,7 +32,7 @@ def test_grid_lookup_equals_a_scan_of_every_segment(road) -> None:
     # Points everywhere in the grid and beyond it (those are scanned in full).
     pts = rng.uniform(lo - 30.0, hi + 30.0, (3000, 2))
     q, e = closest_on_grid(pts, grid)
-    q_ref, e_ref = _scan(pts, road)
+    q_ref, e_ref = reference_lane_excess(pts, road)
     np.testing.assert_allclose(e, e_ref, atol=1e-9)
     np.testing.assert_allclose(q, q_ref, atol=1e-9)
     assert (e_ref < 0).any() and (e_ref > 5).any()  # the draw covers lanes and far off-road points
