@@ -375,7 +375,7 @@ def project_to_road(xy: np.ndarray, start_xy: np.ndarray, course_rad: float, gri
         idx = np.append(idx, t - 1)  # the end of the horizon is always tested
     samples = xy[:, idx].reshape(-1, 2)
     _, excess = closest_on_grid(samples, grid)
-    moved = (excess > 0.0).reshape(k, -1).any(axis=1)
+    moved: np.ndarray = np.asarray((excess > 0.0).reshape(k, -1).any(axis=1))
     if not moved.any():
         return xy, moved
     out = xy.copy()
