@@ -35,6 +35,12 @@ def test_grid_lookup_equals_a_scan_of_every_segment(road) -> None:
     q_ref, e_ref = reference_lane_excess(pts, road)
     np.testing.assert_allclose(e, e_ref, atol=1e-9)
     np.testing.assert_allclose(q, q_ref, atol=1e-9)
+    # Cells are filled on first use: asking again (every cell now filled) gives the same answer.
+    filled = int((grid.span[:, 0] >= 0).sum())
+    assert filled > 0 and grid.fill[0] == grid.span[:, 1].max()
+    q2, e2 = closest_on_grid(pts[::-1].copy(), grid)
+    np.testing.assert_array_equal(e2, e[::-1])
+    assert int((grid.span[:, 0] >= 0).sum()) == filled
     assert (e_ref < 0).any() and (e_ref > 5).any()  # the draw covers lanes and far off-road points
 
 

@@ -69,25 +69,26 @@ class RoadProjection:
 
 
 GRID_CELL_M = 8.0
-"""Cell size of the per-road lookup grid (m): smaller cells hold fewer segments but take longer to build."""
+"""Cell size of the per-road lookup grid (m): smaller cells hold fewer segments but cost more to fill."""
 GRID_PAD_M = 20.0
 """The grid covers the lanes' bounding box grown by this much (m); points beyond it are tested against every
 segment."""
-GRID_MAX_CELLS = 40_000
-"""A road whose grid would have more cells gets larger cells (build time grows with cells x segments)."""
 
 
-@dataclass(frozen=True)
+@dataclass
 class LaneGrid:
     """Every lane centreline segment of a road (crop edges opened) and a uniform grid listing, per cell, the
-    segments that can be the least-outside lane of a point in that cell (exact: see `_build_grid`).
+    segments that can be the least-outside lane of a point in that cell (exact: see `_fill_cell`). Cells are filled
+    on first use (a road's candidates touch a few hundred of its thousands of cells), so the kernels that query
+    it return the item buffer, which `closest_on_grid` / `project_to_road` store back.
 
     Attributes:
         a, b: ``[S, 2]`` segment starts and ends (m).
         half_width: ``[S]`` half width of each segment's lane (m).
         origin: ``[2]`` the grid's lower-left corner (m); ``cell_m`` its cell size (m); ``shape`` (nx, ny).
-        cell_start: ``[nx * ny + 1]`` where each cell's segments start in ``cell_items`` (cell ``ix * ny + iy``).
-        cell_items: the segment indices of every cell, one after the other.
+        span: ``[nx * ny, 2]`` where each cell's segments lie in ``items`` (cell ``ix * ny + iy``; -1: not filled).
+        items: the segment indices of the filled cells, one after the other (a buffer: ``fill[0]`` are used).
+        fill: ``[1]`` the used length of ``items``.
     """
 
     a: np.ndarray
@@ -96,12 +97,13 @@ class LaneGrid:
     origin: np.ndarray
     cell_m: float
     shape: tuple[int, int]
-    cell_start: np.ndarray
-    cell_items: np.ndarray
+    span: np.ndarray
+    items: np.ndarray
+    fill: np.ndarray
 
 
 def lane_grid(road: RoadDescription, cell_m: float = GRID_CELL_M) -> LaneGrid:
-    """`LaneGrid` of ``road`` with the lanes that leave the map continued (`open_map_edges`)."""
+    """`LaneGrid` of ``road`` with the lanes that leave the map continued (`open_map_edges`), no cell filled."""
     a_parts, b_parts, hw_parts = [], [], []
     for lane in open_map_edges(road).lanes:
         c = np.asarray(lane.centerline, np.float64)
@@ -112,11 +114,10 @@ def lane_grid(road: RoadDescription, cell_m: float = GRID_CELL_M) -> LaneGrid:
     b = np.ascontiguousarray(np.concatenate(b_parts))
     hw = np.ascontiguousarray(np.concatenate(hw_parts))
     lo = np.minimum(a.min(0), b.min(0)) - GRID_PAD_M
-    span = np.maximum(a.max(0), b.max(0)) + GRID_PAD_M - lo
-    cell = max(cell_m, float(np.sqrt(span[0] * span[1] / GRID_MAX_CELLS)))
-    nx, ny = (int(v) for v in np.ceil(span / cell).astype(np.int64))
-    starts, items = _build_grid(a, b, hw, float(lo[0]), float(lo[1]), cell, nx, ny)
-    return LaneGrid(a, b, hw, lo, cell, (nx, ny), starts, items)
+    size = np.maximum(a.max(0), b.max(0)) + GRID_PAD_M - lo
+    nx, ny = (int(v) for v in np.ceil(size / cell_m).astype(np.int64))
+    return LaneGrid(a, b, hw, lo, float(cell_m), (nx, ny), np.full((nx * ny, 2), -1, np.int64),
+                    np.empty(1024, np.int64), np.zeros(1, np.int64))
 
 
 def _road_key(road: RoadDescription) -> bytes:
@@ -169,55 +170,55 @@ def _excess(x: float, y: float, a: np.ndarray, b: np.ndarray, half_width: np.nda
     return math.sqrt(dx * dx + dy * dy) - half_width[k]
 
 
-@njit(types.Tuple((int64[::1], int64[::1]))(float64[:, ::1], float64[:, ::1], float64[::1], float64, float64,
-                                            float64, int64, int64), cache=True, nogil=True, error_model="numpy")
-def _build_grid(a: np.ndarray, b: np.ndarray, half_width: np.ndarray, x0: float, y0: float, cell: float, nx: int,
-                ny: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per cell, the segments whose excess at the cell centre is within ``2 r`` of the smallest (``r`` the half
-    diagonal): a point of the cell is at most ``r`` from the centre and each excess is 1-Lipschitz, so its
-    least-outside segment is among them."""
+_GRID_ARGS = (float64[:, ::1], float64[:, ::1], float64[::1], float64, float64, float64, int64, int64, int64[:, ::1],
+              int64[::1], int64[::1])
+"""Numba types of a `LaneGrid` passed to the kernels: a, b, half_width, x0, y0, cell, nx, ny, span, items, fill."""
+
+
+@njit(int64[::1](int64, float64[:, ::1], float64[:, ::1], float64[::1], float64, float64, float64, int64,
+                 int64[:, ::1], int64[::1], int64[::1]), cache=True, nogil=True, error_model="numpy")
+def _fill_cell(c: int, a: np.ndarray, b: np.ndarray, half_width: np.ndarray, x0: float, y0: float, cell: float,
+               ny: int, span: np.ndarray, items: np.ndarray, fill: np.ndarray) -> np.ndarray:
+    """List cell ``c``'s segments: those whose excess at the cell centre is within ``2 r`` of the smallest (``r`` the
+    half diagonal). A point of the cell is at most ``r`` from the centre and each excess is 1-Lipschitz, so its
+    least-outside segment is among them. Returns the item buffer (a new one when it had to grow)."""
+    cx = x0 + (c // ny + 0.5) * cell
+    cy = y0 + (c % ny + 0.5) * cell
     n_seg = a.shape[0]
-    band = cell * math.sqrt(2.0) + 1e-9
-    starts = np.zeros(nx * ny + 1, np.int64)
-    items = np.empty(max(16, 4 * nx * ny), np.int64)
     tmp = np.empty(n_seg)
-    n = 0
-    for ix in range(nx):
-        for iy in range(ny):
-            cx = x0 + (ix + 0.5) * cell
-            cy = y0 + (iy + 0.5) * cell
-            best = math.inf
-            for k in range(n_seg):
-                tmp[k] = _excess(cx, cy, a, b, half_width, k)
-                best = min(best, tmp[k])
-            for k in range(n_seg):
-                if tmp[k] <= best + band:
-                    if n == items.shape[0]:
-                        grown = np.empty(2 * n, np.int64)
-                        grown[:n] = items
-                        items = grown
-                    items[n] = k
-                    n += 1
-            starts[ix * ny + iy + 1] = n
-    return starts, items[:n].copy()
+    best = math.inf
+    for k in range(n_seg):
+        tmp[k] = _excess(cx, cy, a, b, half_width, k)
+        best = min(best, tmp[k])
+    band = best + cell * math.sqrt(2.0) + 1e-9
+    n = fill[0]
+    for k in range(n_seg):
+        if tmp[k] <= band:
+            if n == items.shape[0]:
+                grown = np.empty(2 * n, np.int64)
+                grown[:n] = items
+                items = grown
+            items[n] = k
+            n += 1
+    span[c, 0] = fill[0]
+    span[c, 1] = n
+    fill[0] = n
+    return items
 
 
-_GRID_ARGS = (float64[:, ::1], float64[:, ::1], float64[::1], float64, float64, float64, int64, int64, int64[::1],
-              int64[::1])
-"""Numba types of a `LaneGrid` passed to the kernels: a, b, half_width, x0, y0, cell, nx, ny, cell_start,
-cell_items."""
-
-
-@njit(types.UniTuple(float64, 3)(float64, float64, *_GRID_ARGS), cache=True, nogil=True, error_model="numpy")
+@njit(types.Tuple((float64, float64, float64, int64[::1]))(float64, float64, *_GRID_ARGS), cache=True, nogil=True,
+      error_model="numpy")
 def _closest_one(x: float, y: float, a: np.ndarray, b: np.ndarray, half_width: np.ndarray, x0: float, y0: float,
-                 cell: float, nx: int, ny: int, cell_start: np.ndarray, cell_items: np.ndarray
-                 ) -> tuple[float, float, float]:
-    """`closest_lane_points` of one point: ``(qx, qy, excess)``."""
+                 cell: float, nx: int, ny: int, span: np.ndarray, items: np.ndarray, fill: np.ndarray
+                 ) -> tuple[float, float, float, np.ndarray]:
+    """`closest_lane_points` of one point: ``(qx, qy, excess, items)`` (the item buffer, see `_fill_cell`)."""
     ix = int(math.floor((x - x0) / cell))
     iy = int(math.floor((y - y0) / cell))
     if 0 <= ix < nx and 0 <= iy < ny:
         c = ix * ny + iy
-        cands = cell_items[cell_start[c]:cell_start[c + 1]]
+        if span[c, 0] < 0:
+            items = _fill_cell(c, a, b, half_width, x0, y0, cell, ny, span, items, fill)
+        cands = items[span[c, 0]:span[c, 1]]
     else:  # beyond the grid: every segment
         cands = np.arange(a.shape[0])
     best = math.inf
@@ -230,46 +231,47 @@ def _closest_one(x: float, y: float, a: np.ndarray, b: np.ndarray, half_width: n
     ey = b[best_k, 1] - a[best_k, 1]
     len2 = ex * ex + ey * ey
     t = 0.0 if len2 <= 1e-18 else min(max(((x - a[best_k, 0]) * ex + (y - a[best_k, 1]) * ey) / len2, 0.0), 1.0)
-    return a[best_k, 0] + t * ex, a[best_k, 1] + t * ey, best
+    return a[best_k, 0] + t * ex, a[best_k, 1] + t * ey, best, items
 
 
-@njit(types.Tuple((float64[:, ::1], float64[::1]))(float64[:, ::1], *_GRID_ARGS), cache=True, nogil=True,
-      error_model="numpy")
+@njit(types.Tuple((float64[:, ::1], float64[::1], int64[::1]))(float64[:, ::1], *_GRID_ARGS), cache=True,
+      nogil=True, error_model="numpy")
 def closest_lane_points(points: np.ndarray, a: np.ndarray, b: np.ndarray, half_width: np.ndarray, x0: float,
-                        y0: float, cell: float, nx: int, ny: int, cell_start: np.ndarray, cell_items: np.ndarray
-                        ) -> tuple[np.ndarray, np.ndarray]:
+                        y0: float, cell: float, nx: int, ny: int, span: np.ndarray, items: np.ndarray,
+                        fill: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For each point ``[N, 2]``: the closest centreline point ``[N, 2]`` of the lane it is least outside of, and
     how far it is outside that lane ``[N]`` (distance minus half width, m; <= 0 means on the lane). The first such
-    segment in segment order wins a tie (cell lists are in segment order), as a scan of every segment would."""
+    segment in segment order wins a tie (cell lists are in segment order), as a scan of every segment would. Also
+    returns the grid's item buffer (`_fill_cell`)."""
     n = points.shape[0]
     q = np.empty((n, 2))
     excess = np.empty(n)
     for i in range(n):
-        q[i, 0], q[i, 1], excess[i] = _closest_one(points[i, 0], points[i, 1], a, b, half_width, x0, y0, cell, nx,
-                                                   ny, cell_start, cell_items)
-    return q, excess
+        q[i, 0], q[i, 1], excess[i], items = _closest_one(points[i, 0], points[i, 1], a, b, half_width, x0, y0, cell,
+                                                          nx, ny, span, items, fill)
+    return q, excess, items
 
 
-@njit(types.UniTuple(float64, 2)(float64, float64, float64, *_GRID_ARGS), cache=True, nogil=True,
-      error_model="numpy")
+@njit(types.Tuple((float64, float64, int64[::1]))(float64, float64, float64, *_GRID_ARGS), cache=True,
+      nogil=True, error_model="numpy")
 def _pull_in(x: float, y: float, margin: float, a: np.ndarray, b: np.ndarray, half_width: np.ndarray, x0: float,
-             y0: float, cell: float, nx: int, ny: int, cell_start: np.ndarray, cell_items: np.ndarray
-             ) -> tuple[float, float]:
+             y0: float, cell: float, nx: int, ny: int, span: np.ndarray, items: np.ndarray, fill: np.ndarray
+             ) -> tuple[float, float, np.ndarray]:
     """(x, y) when it lies on a lane, else moved toward the closest centreline point to ``margin`` m inside that
-    lane."""
-    cx, cy, e = _closest_one(x, y, a, b, half_width, x0, y0, cell, nx, ny, cell_start, cell_items)
+    lane; and the grid's item buffer."""
+    cx, cy, e, items = _closest_one(x, y, a, b, half_width, x0, y0, cell, nx, ny, span, items, fill)
     if e <= 0.0:
-        return x, y
+        return x, y, items
     dist = math.sqrt((x - cx) ** 2 + (y - cy) ** 2)
     keep = max(dist - e - margin, 0.0) / max(dist, 1e-12)  # distance - excess = the half width
-    return cx + (x - cx) * keep, cy + (y - cy) * keep
+    return cx + (x - cx) * keep, cy + (y - cy) * keep, items
 
 
-@njit(float64[:, :, ::1](float64[:, :, ::1], int64[::1], float64, float64, float64, *_GRID_ARGS), cache=True,
-      nogil=True, error_model="numpy")
+@njit(types.Tuple((float64[:, :, ::1], int64[::1]))(float64[:, :, ::1], int64[::1], float64, float64, float64,
+                                                     *_GRID_ARGS), cache=True, nogil=True, error_model="numpy")
 def chain_reference(samples: np.ndarray, rows: np.ndarray, x0: float, y0: float, margin: float, a: np.ndarray,
                     b: np.ndarray, half_width: np.ndarray, gx: float, gy: float, cell: float, nx: int, ny: int,
-                    cell_start: np.ndarray, cell_items: np.ndarray) -> np.ndarray:
+                    span: np.ndarray, items: np.ndarray, fill: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """References ``[len(rows), S, 2]`` of the candidates ``rows`` of ``samples [K, S, 2]`` starting at (x0, y0):
     each reference point is the previous one plus the candidate's own move between the two samples; when that lies
     outside every lane it is pulled toward the closest centreline point until it is ``margin`` m inside that lane
@@ -277,7 +279,8 @@ def chain_reference(samples: np.ndarray, rows: np.ndarray, x0: float, y0: float,
     (so a move that leaves the road turns along it instead of shrinking).
 
     Chaining the moves keeps the candidate's progress: a sample far off the road has its closest lane point
-    somewhere behind, which a point-wise projection would make the reference go back to."""
+    somewhere behind, which a point-wise projection would make the reference go back to. Also returns the grid's
+    item buffer (`_fill_cell`)."""
     out = np.empty((rows.shape[0], samples.shape[1], 2))
     for m in range(rows.shape[0]):
         r = rows[m]
@@ -291,27 +294,28 @@ def chain_reference(samples: np.ndarray, rows: np.ndarray, x0: float, y0: float,
             qx_prev = samples[r, j, 0]
             qy_prev = samples[r, j, 1]
             step = math.sqrt(dx * dx + dy * dy)
-            rx, ry = _pull_in(px + dx, py + dy, margin, a, b, half_width, gx, gy, cell, nx, ny, cell_start,
-                              cell_items)
+            rx, ry, items = _pull_in(px + dx, py + dy, margin, a, b, half_width, gx, gy, cell, nx, ny, span, items,
+                                     fill)
             moved = math.sqrt((rx - px) ** 2 + (ry - py) ** 2)
             if moved > 1e-9 and abs(moved - step) > 1e-9:  # pulled in: restore the move's length along the road
-                rx, ry = _pull_in(px + (rx - px) * step / moved, py + (ry - py) * step / moved, margin, a, b,
-                                  half_width, gx, gy, cell, nx, ny, cell_start, cell_items)
+                rx, ry, items = _pull_in(px + (rx - px) * step / moved, py + (ry - py) * step / moved, margin, a, b,
+                                         half_width, gx, gy, cell, nx, ny, span, items, fill)
             px = rx
             py = ry
             out[m, j, 0] = px
             out[m, j, 1] = py
-    return out
+    return out, items
 
 
 def _grid_args(grid: LaneGrid) -> tuple:
     return (grid.a, grid.b, grid.half_width, float(grid.origin[0]), float(grid.origin[1]), grid.cell_m,
-            grid.shape[0], grid.shape[1], grid.cell_start, grid.cell_items)
+            grid.shape[0], grid.shape[1], grid.span, grid.items, grid.fill)
 
 
 def closest_on_grid(points: np.ndarray, grid: LaneGrid) -> tuple[np.ndarray, np.ndarray]:
-    """`closest_lane_points` of ``points [N, 2]`` (m) on ``grid``."""
-    return closest_lane_points(np.ascontiguousarray(points, np.float64), *_grid_args(grid))
+    """`closest_lane_points` of ``points [N, 2]`` (m) on ``grid`` (filling its cells as needed)."""
+    q, excess, grid.items = closest_lane_points(np.ascontiguousarray(points, np.float64), *_grid_args(grid))
+    return q, excess
 
 
 @njit(float64[:, :, ::1](float64[:, :, ::1], int64[::1], float64[:, ::1], int64[::1], float64, float64, float64,
@@ -380,8 +384,8 @@ def project_to_road(xy: np.ndarray, start_xy: np.ndarray, course_rad: float, gri
         return xy, moved
     out = xy.copy()
     rows = np.flatnonzero(moved).astype(np.int64)
-    ref = chain_reference(np.ascontiguousarray(samples.reshape(k, -1, 2)), rows, float(start[0]), float(start[1]),
-                          cfg.margin_m, *_grid_args(grid))
+    ref, grid.items = chain_reference(np.ascontiguousarray(samples.reshape(k, -1, 2)), rows, float(start[0]),
+                                      float(start[1]), cfg.margin_m, *_grid_args(grid))
     prev = np.concatenate([np.broadcast_to(start, (k, 1, 2)), xy[:, :-1]], axis=1)
     speed = np.ascontiguousarray(np.linalg.norm(xy - prev, axis=-1)[rows] / dt_s)
     out[rows] = pursue(ref, idx.astype(np.int64), speed, np.arange(len(rows), dtype=np.int64), float(start[0]),
