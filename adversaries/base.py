@@ -103,7 +103,7 @@ def _opts(*names: str, models: tuple[str, ...] = (), builtins: dict[str, tuple[s
 
 
 _CANDIDATE_OPTIONS = ("prior", "candidates", "follow", "stride", "decay", "n_kept_modes", "steer", "steer_vector",
-                      "steer_alpha")
+                      "steer_alpha", "project_road")
 
 GENERATORS: dict[str, GeneratorSpec] = {
     "replay": GeneratorSpec("replay", "seal.adversaries.replay"),

@@ -134,6 +134,8 @@ class CandidateGenerator(AdversaryGenerator):
             adversary's latent moved by ``steer_alpha`` along ``steer_vector`` (needs ``prior``).
         steer_vector: vector name (``FEATURE@SITE``, or a bare feature at its best probe site).
         steer_alpha: steering strength.
+        project_road: project the prior's candidates on the road (`seal.models.prior.road_projection`); None: off
+            for the plain prior, on for a steered one (`seal.adversaries.candidate_sources.make_candidate_source`).
     """
 
     def __init__(
@@ -145,10 +147,11 @@ class CandidateGenerator(AdversaryGenerator):
         steer: str | Path | None = None,
         steer_vector: str = DEFAULT_STEER_VECTOR,
         steer_alpha: float | Sequence[float] | str = DEFAULT_STEER_ALPHA,
+        project_road: bool | None = None,
     ) -> None:
         self.follow = check_follow(self.name, follow)
         self.candidate_source = make_candidate_source(candidate_source, prior, candidates, steer, steer_vector,
-                                                      steer_alpha)
+                                                      steer_alpha, project_road)
         self.prior_file = None if prior is None else Path(prior)
         """The trajectory prior file the candidates come from, if any (its process runs torch with
         `seal.adversaries.candidate_sources.PRIOR_THREADS`, set by the entry point)."""

@@ -38,6 +38,8 @@ class SteeredGenerator(CATGenerator):
         steer_alpha: steering strength(s) (a list for a grid): tau / 100 for control vectors, standard deviations
             of the latents for risk vectors.
         steer_random_seed: random directions of the same norms instead of the fitted vectors (the baseline).
+        project_road: project the decoded candidates on the road (`seal.models.prior.road_projection`): on by
+            default, the decoder's candidates leave the road in curves whether steered or not.
         candidate_source, candidates, follow, stride, decay, n_kept_modes: as `CATGenerator`.
     """
 
@@ -54,6 +56,7 @@ class SteeredGenerator(CATGenerator):
         steer_vector: str = DEFAULT_STEER_VECTOR,
         steer_alpha: float | Sequence[float] | str = DEFAULT_STEER_ALPHA,
         steer_random_seed: int | None = None,
+        project_road: bool = True,
     ) -> None:
         if candidate_source is None and steer is None:
             raise ValueError("steered: option 'steer' is required: the folder written by `seal fit probes` "
@@ -62,10 +65,11 @@ class SteeredGenerator(CATGenerator):
             if prior is None:
                 raise ValueError("steered: option 'steer_random_seed' steers the prior's latents: give a prior file")
             candidate_source = steered_prior_source(prior, steer or "", steer_vector, steer_alpha,
-                                                    int(steer_random_seed))
+                                                    int(steer_random_seed), bool(project_road))
             super().__init__(candidate_source, None, candidates, follow, stride, decay, n_kept_modes)
             self.prior_file = Path(prior)  # the process still runs prior inference (entry points set threads)
         else:
             super().__init__(candidate_source, prior, candidates, follow, stride, decay, n_kept_modes, steer,
-                             steer_vector, steer_alpha)
+                             steer_vector, steer_alpha, bool(project_road) if prior is not None else None)
         self.steer_vector, self.steer_alpha, self.steer_random_seed = steer_vector, steer_alpha, steer_random_seed
+        self.project_road = bool(project_road)

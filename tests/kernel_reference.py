@@ -1,7 +1,8 @@
 """Pure-numpy references of the compiled hot-loop kernels (issue 23): the observation's ray casts, box lidar and
 nearest vehicles (`seal.envs.obs_kernels`), the env's box collision test and the route projection
-(`seal.core.kernels`). These are the float64 numpy code paths the kernels replaced, kept here (and only here) as
-the reference the kernels are tested against.
+(`seal.core.kernels`), the lane lookup of the prior's road projection (`seal.models.prior.road_projection`). These
+are the float64 numpy code paths the kernels replaced, kept here (and only here) as the reference the kernels are
+tested against.
 """
 
 from __future__ import annotations
@@ -11,10 +12,12 @@ import math
 import numpy as np
 
 from seal.core.geometry import overlaps_one
+from seal.core.road import RoadDescription
 from seal.envs import observation as ob
 from seal.envs.kinematics import MAX_SPEED_MPS, AgentState
 from seal.envs.road_geometry import RoadGeometry
 from seal.envs.route import Route, RouteProjection
+from seal.models.prior.lanes import open_map_edges
 
 _RAY_COS = np.concatenate([np.cos(ob._EDGE_ANG), np.cos(ob._LINE_ANG)])[:, None]  # [42, 1]
 _RAY_SIN_SIGNED = np.array([-1.0, 1.0])[:, None, None] * np.concatenate(
@@ -203,3 +206,21 @@ def rapid_neighbors(cur: np.ndarray, rows: np.ndarray, k: int, max_range: float)
     pad = k - idx.shape[1]
     return (np.pad(idx, ((0, 0), (0, pad)), constant_values=-1),
             np.pad(d_sel, ((0, 0), (0, pad)), constant_values=np.inf))
+
+
+def reference_lane_excess(points: np.ndarray, road: RoadDescription) -> tuple[np.ndarray, np.ndarray]:
+    """`seal.models.prior.road_projection.closest_lane_points` by a scan of every segment: the closest centreline
+    point ``[N, 2]`` of the lane each point is least outside of and the excess over its half width ``[N]`` (m;
+    the first segment wins a tie), the map's crop edges opened."""
+    best_e = np.full(len(points), np.inf)
+    best_q = np.zeros((len(points), 2))
+    for lane in open_map_edges(road).lanes:
+        c = lane.centerline
+        for a, b in zip(c[:-1], c[1:], strict=True):
+            e = b - a
+            t = np.clip(((points - a) @ e) / max(float(e @ e), 1e-18), 0.0, 1.0)
+            q = a + t[:, None] * e
+            ex = np.linalg.norm(points - q, axis=1) - lane.width_m / 2
+            better = ex < best_e
+            best_e[better], best_q[better] = ex[better], q[better]
+    return best_q, best_e

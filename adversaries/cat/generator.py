@@ -27,7 +27,8 @@ class CATGenerator(CandidateGenerator):
         stride: sub-sampling (steps), 5 = 0.5 s.
         decay: uncertainty factor per sample.
         n_kept_modes: modes below this rank share its score in P1.
-        steer, steer_vector, steer_alpha: latent steering of the prior's candidates (`CandidateGenerator`).
+        steer, steer_vector, steer_alpha, project_road: latent steering of the prior's candidates and their
+            projection on the road (`CandidateGenerator`).
     """
 
     def __init__(
@@ -42,8 +43,10 @@ class CATGenerator(CandidateGenerator):
         steer: str | Path | None = None,
         steer_vector: str = DEFAULT_STEER_VECTOR,
         steer_alpha: float | Sequence[float] | str = DEFAULT_STEER_ALPHA,
+        project_road: bool | None = None,
     ) -> None:
-        super().__init__(candidate_source, prior, candidates, follow, steer, steer_vector, steer_alpha)
+        super().__init__(candidate_source, prior, candidates, follow, steer, steer_vector, steer_alpha,
+                         project_road)
         self.stride = int(stride)
         self.decay = float(decay)
         self.n_kept_modes = int(n_kept_modes)

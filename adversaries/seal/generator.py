@@ -83,7 +83,8 @@ class SEALGenerator(CandidateGenerator):
             10 = 1 s).
         policy: a ready skill policy (``reset(seed)`` / ``act(obs)``) instead of loading ``skills``.
         stride, decay, n_kept_modes: CAT's selection options (``objective="cat"`` only).
-        steer, steer_vector, steer_alpha: latent steering of the prior's candidates (`CandidateGenerator`).
+        steer, steer_vector, steer_alpha, project_road: latent steering of the prior's candidates and their
+            projection on the road (`CandidateGenerator`).
     """
 
     def __init__(
@@ -105,6 +106,7 @@ class SEALGenerator(CandidateGenerator):
         steer: str | Path | None = None,
         steer_vector: str = DEFAULT_STEER_VECTOR,
         steer_alpha: float | Sequence[float] | str = DEFAULT_STEER_ALPHA,
+        project_road: bool | None = None,
     ) -> None:
         check_follow(self.name, follow)
         if switch not in SWITCH_MODES:
@@ -120,7 +122,8 @@ class SEALGenerator(CandidateGenerator):
         self.switch_offset_steps = int(switch_offset_steps)
         self.policy = policy if policy is not None or switch == Switch.NONE else load_skill_policy(
             skills, switch, noise_scale, None if skill_horizon is None else int(skill_horizon))
-        super().__init__(candidate_source, prior, candidates, follow, steer, steer_vector, steer_alpha)
+        super().__init__(candidate_source, prior, candidates, follow, steer, steer_vector, steer_alpha,
+                         project_road)
 
     def _rank(self, context: CandidateContext) -> Ranking:
         """The objective's ranking of the candidates against the past ego roll-outs (a subclass whose objective

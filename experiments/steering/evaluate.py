@@ -77,6 +77,10 @@ class SteeringEvalConfig:
     """Miss: minFDE@6 above this (m)."""
     check_road: bool = True
     """Measure drivability (on-road check included); off: risk only, faster."""
+    project_road: bool = True
+    """Measure the candidates as the ``steered`` generator uses them: projected on the road
+    (`seal.models.prior.road_projection`); the decoder's own candidates' drivable share is reported beside them
+    (``plausible_raw``). Off: the decoder's candidates everywhere."""
     n_boot: int = 2000
     """Bootstrap resamples of the margin's CI."""
     seed: int = 0
@@ -108,7 +112,7 @@ def _risk_section(prior: TrajectoryPrior, scenarios: Sequence[Scenario], targets
     bar = tqdm(total=2 * len(alphas) * len(vectors), desc="risk sweeps", unit="decode", disable=not progress)
     decoders: dict[str, Decoder] = {}
     for v in vectors:
-        dec = decoders.setdefault(v.site, Decoder(prior, scenarios, targets, v.site))
+        dec = decoders.setdefault(v.site, Decoder(prior, scenarios, targets, v.site, cfg.project_road))
         s = risk_sweep(dec, v, alphas, risk, None, cfg.check_road, bar.update)
         r = risk_sweep(dec, v, alphas, risk, cfg.seed, cfg.check_road, bar.update)
         feature = "activity" if "activity" in v.name else "proximity"
@@ -116,13 +120,17 @@ def _risk_section(prior: TrajectoryPrior, scenarios: Sequence[Scenario], targets
         out[v.name] = {
             "site": v.site, "feature": feature, "alphas": alphas,
             "structured": {"activity": _mean(s.activity), "proximity": _mean(s.proximity),
-                           "plausible": _mean(s.plausible)},
+                           "plausible": _mean(s.plausible), "plausible_raw": _mean(s.plausible_raw)},
             "random": {"activity": _mean(r.activity), "proximity": _mean(r.proximity),
-                       "plausible": _mean(r.plausible)},
+                       "plausible": _mean(r.plausible), "plausible_raw": _mean(r.plausible_raw)},
             "alpha_report": alphas[at],
             "margin": paired_bootstrap(own_s[at], own_r[at], cfg.n_boot, cfg.seed),
             "plausible_structured": float(np.nanmean(s.plausible[at])),
             "plausible_random": float(np.nanmean(r.plausible[at])),
+            "plausible_unsteered": float(np.nanmean(s.plausible[alphas.index(0.0)])) if 0.0 in alphas else None,
+            "plausible_raw_structured": float(np.nanmean(s.plausible_raw[at])),
+            "plausible_raw_random": float(np.nanmean(r.plausible_raw[at])),
+            "project_road": cfg.project_road,
         }
     bar.close()
     return out
@@ -136,7 +144,7 @@ def _speed_section(prior: TrajectoryPrior, scenarios: Sequence[Scenario], target
         taus = np.sort(np.append(taus, 0.0))
     decoders: dict[str, Decoder] = {}
     for v in vectors:
-        dec = decoders.setdefault(v.site, Decoder(prior, scenarios, targets, v.site))
+        dec = decoders.setdefault(v.site, Decoder(prior, scenarios, targets, v.site, cfg.project_road))
         speeds = speed_sweep(dec, v, taus.tolist())  # [taus, N]
         base = speeds[int(np.flatnonzero(taus == 0)[0])]
         moving = base > 0.5  # relative change of a near-still prediction is noise
@@ -150,12 +158,12 @@ def _shift_rows(prior: TrajectoryPrior, scenarios: Sequence[Scenario], targets: 
                 future: np.ndarray, vectors: Sequence[SteeringVector], calibrated: dict[str, float],
                 cfg: SteeringEvalConfig) -> list[dict[str, Any]]:
     site = vectors[0].site if vectors else OUTPUT
-    decoders = {site: Decoder(prior, scenarios, targets, site)}
+    decoders = {site: Decoder(prior, scenarios, targets, site, cfg.project_road)}
     xy, pr = decoders[site].decode(None)
     rows = [{"vector": None, "tau_pct": 0.0, "tau_from": "unsteered",
              **displacement(xy, pr, future, miss_m=cfg.miss_threshold_m)}]
     for v in vectors:
-        dec = decoders.setdefault(v.site, Decoder(prior, scenarios, targets, v.site))
+        dec = decoders.setdefault(v.site, Decoder(prior, scenarios, targets, v.site, cfg.project_road))
         taus = [("calibrated", calibrated[v.name])] if v.name in calibrated else []
         taus += [("fixed", t) for t in cfg.shift_taus_pct]
         for how, tau in taus:

@@ -24,12 +24,15 @@ def write_plots(report: dict[str, Any], out: Path) -> list[Path]:
         ax.plot(sec["alphas"], sec["random"][sec["feature"]], "--", color=colour)
         ax2.plot(sec["alphas"], sec["structured"]["plausible"], "-o", color=colour, label=name)
         ax2.plot(sec["alphas"], sec["random"]["plausible"], "--", color=colour)
+        if sec.get("project_road"):  # the decoder's own candidates, before the road projection
+            ax2.plot(sec["alphas"], sec["structured"]["plausible_raw"], ":", color=colour, lw=1)
     for ax, title in zip(axes, ("activity risk (paper 000)", "proximity risk to the ego"), strict=True):
         ax.set(xlabel="alpha (latent std)", ylabel="prior-weighted risk", title=title)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7)
     ax2.axhline(0.94, color="grey", lw=0.8)
-    ax2.set(xlabel="alpha (latent std)", ylabel="share of drivable candidates", title="plausibility (dashed: random)")
+    ax2.set(xlabel="alpha (latent std)", ylabel="share of drivable candidates",
+            title="plausibility (dashed: random, dotted: before projection)")
     ax2.legend(fontsize=7)
     for f, name in ((fig, "risk_vs_alpha.png"), (fig2, "plausibility_vs_alpha.png")):
         f.tight_layout()

@@ -3,7 +3,10 @@
 * `risk_sweep`: per target and alpha, the prior-weighted risk of the candidates (activity and proximity,
   `seal.experiments.steering.collect.future_labels`) and the share of drivable candidates
   (`seal.models.prior.metrics.drivability`: |acc| <= 8 m/s^2, |yaw rate| <= 1 rad/s, on or near the road), for a
-  steering vector and for a random direction of the same norm (a fresh direction per target, seeded).
+  steering vector and for a random direction of the same norm (a fresh direction per target, seeded). With the
+  decoder's ``project_road`` (the steered generator's default) the candidates are measured as the generator uses
+  them, projected on the road (`seal.models.prior.road_projection`), and the drivable share of the decoder's own
+  candidates is kept beside it (``plausible_raw``).
 * `speed_sweep`: per target and tau, the prior-weighted mean speed of the candidates.
 * `displacement`: minADE@6, minFDE@6 and misses of candidates against futures.
 """
@@ -27,12 +30,14 @@ from seal.models.steering.linear import random_direction
 
 @dataclass
 class Decoder:
-    """Decodes the targets batch by batch with a per-target offset at one site."""
+    """Decodes the targets batch by batch with a per-target offset at one site; ``project_road``: candidates
+    projected on the road as the steered generator projects them (`TrajectoryPrior.project`)."""
 
     prior: TrajectoryPrior
     scenarios: Sequence[Scenario]
     targets: Sequence[Target]
     site: str
+    project_road: bool = False
 
     def __post_init__(self) -> None:
         self.sessions: list[tuple[int, SteeringSession]] = []
@@ -41,9 +46,9 @@ class Decoder:
             batch = prepare(self.prior, [self.scenarios[t.scene] for t in chunk], [t.agent for t in chunk])
             self.sessions.append((lo, SteeringSession(self.prior, batch, self.site)))
 
-    def decode(self, offsets: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    def decode(self, offsets: np.ndarray | None, raw: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Candidates ``[N, K, 80, 2]`` and probabilities ``[N, K]`` with ``offsets`` ``[N, d]`` or ``[d]`` (the
-        same for every target; None: unsteered)."""
+        same for every target; None: unsteered); projected on the road when ``project_road`` unless ``raw``."""
         if offsets is not None and np.ndim(offsets) == 1:
             offsets = np.broadcast_to(offsets, (len(self.targets), np.size(offsets)))
         xy, pr = [], []
@@ -52,21 +57,35 @@ class Decoder:
             a, b = session.decode(off)
             xy.append(a)
             pr.append(b)
-        return np.concatenate(xy), np.concatenate(pr)
+        out = np.concatenate(xy)
+        return (out if raw or not self.project_road else self.projected(out)), np.concatenate(pr)
+
+    def projected(self, xy: np.ndarray) -> np.ndarray:
+        """Candidates ``[N, K, 80, 2]`` of the targets (as `decode` with ``raw``) projected on the road."""
+        out = []
+        for lo, session in self.sessions:
+            b = session.batch
+            scenes = [self.scenarios[t.scene] for t in self.targets[lo : lo + b.size]]
+            out.append(self.prior.project(xy[lo : lo + b.size], b.pose, b.feats["start"].numpy(), scenes))
+        return np.concatenate(out)
 
 
 @dataclass(frozen=True)
 class RiskCurves:
-    """``[A, N]`` per alpha and target: prior-weighted activity and proximity risk, share of drivable candidates."""
+    """``[A, N]`` per alpha and target: prior-weighted activity and proximity risk, share of drivable candidates
+    (as measured: projected when the decoder projects) and share of the decoder's own candidates that are drivable
+    (``plausible_raw``; equal to ``plausible`` without projection)."""
 
     activity: np.ndarray
     proximity: np.ndarray
     plausible: np.ndarray
+    plausible_raw: np.ndarray
 
 
 def _risk_of(xy: np.ndarray, probs: np.ndarray, scenarios: Sequence[Scenario], targets: Sequence[Target],
-             risk: RiskConfig, check_road: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    act, prox, ok = (np.empty(len(targets)) for _ in range(3))
+             risk: RiskConfig, check_road: bool, xy_raw: np.ndarray | None = None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    act, prox, ok, ok_raw = (np.full(len(targets), np.nan) for _ in range(4))
     for i, t in enumerate(targets):
         s = scenarios[t.scene]
         st = target_state(s, t.agent)
@@ -75,9 +94,9 @@ def _risk_of(xy: np.ndarray, probs: np.ndarray, scenarios: Sequence[Scenario], t
         prox[i] = float(probs[i] @ lab["proximity"]) if not st.is_ego else np.nan
         if check_road:
             ok[i] = float(drivability(xy[i], st.start_xy, st.start_heading, s.road).drivable.mean())
-        else:
-            ok[i] = np.nan
-    return act, prox, ok
+            ok_raw[i] = ok[i] if xy_raw is None else float(
+                drivability(xy_raw[i], st.start_xy, st.start_heading, s.road).drivable.mean())
+    return act, prox, ok, ok_raw
 
 
 def risk_sweep(decoder: Decoder, vector: SteeringVector, alphas: Sequence[float], risk: RiskConfig,
@@ -92,11 +111,13 @@ def risk_sweep(decoder: Decoder, vector: SteeringVector, alphas: Sequence[float]
         directions = np.stack([random_direction(d, rng) for _ in range(n)])
     curves = []
     for a in alphas:
-        xy, probs = decoder.decode(a * vector.unit * directions if a != 0 else None)
-        curves.append(_risk_of(xy, probs, decoder.scenarios, decoder.targets, risk, check_road))
+        xy_raw, probs = decoder.decode(a * vector.unit * directions if a != 0 else None, raw=True)
+        xy = decoder.projected(xy_raw) if decoder.project_road else xy_raw
+        curves.append(_risk_of(xy, probs, decoder.scenarios, decoder.targets, risk, check_road,
+                               xy_raw if decoder.project_road else None))
         if tick is not None:
             tick()
-    return RiskCurves(*(np.stack([c[k] for c in curves]) for k in range(3)))
+    return RiskCurves(*(np.stack([c[k] for c in curves]) for k in range(4)))
 
 
 def speed_sweep(decoder: Decoder, vector: SteeringVector, taus_pct: Sequence[float]) -> np.ndarray:

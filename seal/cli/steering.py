@@ -94,7 +94,9 @@ def _print_summary(report: dict[str, Any]) -> None:
         m = sec["margin"]
         print(f"{name:<28} alpha {sec['alpha_report']}: {sec['feature']} margin over random {m['mean']:+.4f} "
               f"[{m['ci_low']:+.4f}, {m['ci_high']:+.4f}], drivable {sec['plausible_structured']:.3f} "
-              f"(random {sec['plausible_random']:.3f})")
+              f"(random {sec['plausible_random']:.3f}, unsteered {sec.get('plausible_unsteered') or float('nan'):.3f}"
+              f"; decoder before road projection {sec['plausible_raw_structured']:.3f} / "
+              f"{sec['plausible_raw_random']:.3f})")
     for name, sec in report["speed"].items():
         lin = sec["linearity"]
         print(f"{name:<28} Pearson {lin['pearson']:.3f}, R2 fit {lin['r2_fit']:.3f}, R2 identity "

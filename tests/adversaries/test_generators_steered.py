@@ -33,7 +33,8 @@ def _generate(gen, scenario):
 def test_steered_at_alpha_zero_is_cat_and_steering_changes_the_candidates(files: tuple[Path, Path]) -> None:
     prior, steer = files
     scenario = sf.highway_scenario(1)
-    cat = _generate(make_generator("cat", prior=str(prior)), scenario)
+    # The steered generator projects its candidates on the road by default: CAT with the same projection.
+    cat = _generate(make_generator("cat", prior=str(prior), project_road=True), scenario)
     same = _generate(make_generator("steered", prior=str(prior), steer=str(steer), steer_alpha=0.0,
                                     steer_vector="risk_proximity"), scenario)
     assert same.chosen_candidate == cat.chosen_candidate and same.extra["score"] == pytest.approx(cat.extra["score"])
@@ -84,7 +85,7 @@ def test_a_grid_of_vectors_and_alphas_keeps_every_decode(files: tuple[Path, Path
     grid = make_generator("steered", prior=str(prior), steer=str(tmp_path))  # the default: this grid
     cands = grid.candidate_source(scenario)
     assert cands.n_candidates == 9 * 32 and cands.probs.sum() == pytest.approx(1.0)
-    plain = make_generator("cat", prior=str(prior)).candidate_source(scenario)
+    plain = make_generator("cat", prior=str(prior), project_road=True).candidate_source(scenario)
     # The (0, 0) decode is the prior's own: each of its candidates is in the grid with a ninth of its probability.
     for k in range(32):
         d = np.abs(cands.xy - plain.xy[k]).max(axis=(1, 2))
@@ -99,3 +100,21 @@ def test_a_grid_of_vectors_and_alphas_keeps_every_decode(files: tuple[Path, Path
     with pytest.raises(ValueError, match="steer_alpha"):
         make_generator("steered", prior=str(prior), steer=str(tmp_path), steer_vector="lane_change@output",
                        steer_alpha="fast")
+
+
+def test_project_road_option(files: tuple[Path, Path]) -> None:
+    prior, steer = files
+    scenario = sf.curve_scenario()  # the untrained prior's candidates leave this curved road
+    raw = make_generator("cat", prior=str(prior)).candidate_source(scenario)  # CAT's default: the decoder's own
+    projected = make_generator("cat", prior=str(prior), project_road=True).candidate_source(scenario)
+    unprojected = make_generator("steered", prior=str(prior), steer=str(steer), steer_alpha=0.0,
+                                 steer_vector="risk_proximity", project_road=False).candidate_source(scenario)
+    steered = make_generator("steered", prior=str(prior), steer=str(steer), steer_alpha=0.0,
+                             steer_vector="risk_proximity").candidate_source(scenario)
+    np.testing.assert_allclose(unprojected.xy, raw.xy, atol=1e-6)
+    np.testing.assert_allclose(steered.xy, projected.xy, atol=1e-6)
+    changed = np.abs(projected.xy - raw.xy).max(axis=(1, 2)) > 1e-6
+    assert 0 < changed.sum() < 32  # some candidates re-driven, the ones on the road kept
+    np.testing.assert_allclose(projected.speed, raw.speed, atol=1e-6)  # re-driven with their own speeds
+    with pytest.raises(ValueError, match="option 'project_road'.*give a prior file"):
+        make_generator("cat", candidates="lanes", project_road=True)

@@ -12,10 +12,10 @@ import scenario_factory as sf
 import torch
 
 from seal.experiments.steering.collect import find_targets, target_state
-from seal.experiments.steering.sweeps import Decoder, speed_sweep
+from seal.experiments.steering.sweeps import Decoder, risk_sweep, speed_sweep
 from seal.models.prior.prior import TrajectoryPrior
 from seal.models.steering.bundle import SteeringBundle, SteeringFileError, SteeringVector
-from seal.models.steering.labels import mean_speed
+from seal.models.steering.labels import RiskConfig, mean_speed
 from seal.models.steering.latents import OUTPUT, SteeringSession, hidden_states, prepare, site_names
 from seal.models.steering.linear import random_direction
 from seal.models.steering.steer import SteeredPrior, resolve_vector
@@ -77,6 +77,19 @@ def test_steering_along_the_speed_gradient_moves_speed_and_random_does_not(prior
     assert np.abs(change["rand@output"]).max() < 0.5 * (change["known@output"][-1] - change["known@output"][0])
 
 
+def test_risk_sweep_measures_projected_candidates_and_keeps_the_decoders_share(prior: TrajectoryPrior) -> None:
+    scenes = [sf.curve_scenario(), sf.highway_scenario(0)]
+    targets = find_targets(scenes)
+    vec = SteeringVector("risk_activity@output", OUTPUT, random_direction(64, np.random.default_rng(1)), 1.0, "risk")
+    risk = RiskConfig()
+    plain = risk_sweep(Decoder(prior, scenes, targets, OUTPUT), vec, [0.0, 2.0], risk)
+    projected = risk_sweep(Decoder(prior, scenes, targets, OUTPUT, project_road=True), vec, [0.0, 2.0], risk)
+    # The decoder's own share is the unprojected sweep's; the projected candidates are more often on the road.
+    np.testing.assert_array_equal(projected.plausible_raw, plain.plausible)
+    np.testing.assert_array_equal(plain.plausible_raw, plain.plausible)
+    assert projected.plausible.mean() > plain.plausible.mean() + 0.05
+
+
 def _bundle(d: int = 64) -> SteeringBundle:
     v = np.zeros(d)
     v[0] = 1.0
@@ -104,9 +117,9 @@ def test_bundle_round_trip_and_errors(tmp_path) -> None:
 def test_steered_prior_at_zero_is_the_prior_and_checks_dimensions(prior: TrajectoryPrior, scenes: list) -> None:
     s = scenes[0]
     plain = prior.predict([s])[0]
-    same = SteeredPrior(prior, _bundle(), "risk_proximity", 0.0).predict(s, s.adv_index)
+    same = SteeredPrior(prior, _bundle(), "risk_proximity", 0.0, project_road=False).predict(s, s.adv_index)
     np.testing.assert_allclose(same.xy, plain.xy, atol=1e-6)
-    moved = SteeredPrior(prior, _bundle(), "risk_proximity", 3.0).predict(s, s.adv_index)
+    moved = SteeredPrior(prior, _bundle(), "risk_proximity", 3.0, project_road=False).predict(s, s.adv_index)
     assert moved.fallback is None and np.abs(moved.xy - plain.xy).max() > 1e-3
     with pytest.raises(SteeringFileError, match="another prior"):
         SteeredPrior(prior, _bundle(d=8), "speed@output", 1.0)

@@ -14,6 +14,7 @@ import numpy as np
 import torch
 
 from seal.core.atomic import atomic_write_bytes
+from seal.core.road import RoadDescription
 from seal.core.scenario import CURRENT_STEP, Scenario
 from seal.core.weights_file import check_header, read_weights_file
 from seal.models.prior.baseline import constant_velocity_candidates
@@ -21,6 +22,7 @@ from seal.models.prior.candidates import Candidates
 from seal.models.prior.features import ContextTables, build_tables, featurise, history_steps
 from seal.models.prior.lanes import ChunkCache
 from seal.models.prior.network import PriorConfig, PriorNet
+from seal.models.prior.road_projection import GridCache, RoadProjection, project_to_road
 
 FORMAT = "seal-trajectory-prior"
 FORMAT_VERSION = 1
@@ -76,6 +78,11 @@ class TrajectoryPrior:
     Args:
         net: the network.
         training: JSON-serialisable summary of how it was trained (recorded in the saved file).
+
+    Attributes:
+        road_projection: when set, `predict` projects its candidates on the road
+            (`seal.models.prior.road_projection`; `default_road_projection`). None by default, so CAT, SEAL and
+            ``seal eval prior`` see the decoder's own candidates; it is a setting of the caller, not of the file.
     """
 
     def __init__(self, net: PriorNet, training: dict[str, Any] | None = None) -> None:
@@ -84,6 +91,8 @@ class TrajectoryPrior:
         # JSON round trip: the summary must hold only types torch.load(weights_only=True) accepts.
         self.training: dict[str, Any] = json.loads(json.dumps(training or {}, default=_jsonable))
         self._cache = ChunkCache(self.config.features.chunk_length_m, self.config.features.chunk_points)
+        self.road_projection: RoadProjection | None = None
+        self._grids = GridCache()
 
     @classmethod
     def untrained(cls, config: PriorConfig | None = None, seed: int = 0) -> TrajectoryPrior:
@@ -170,6 +179,29 @@ class TrajectoryPrior:
         xy, logits = self.net.decode(encoding.tokens, encoding.mask, encoding.start)
         return to_world(xy.double().numpy(), encoding.pose), torch.softmax(logits.double(), dim=1).numpy()
 
+    def default_road_projection(self) -> RoadProjection:
+        """`RoadProjection` with this prior's yaw-rate limit (re-driven candidates stay within its limits)."""
+        return RoadProjection(yaw_rate_limit_rps=self.config.yaw_rate_limit_rps)
+
+    def project(self, xy: np.ndarray, pose: np.ndarray, start: np.ndarray, scenarios: Sequence[Scenario],
+                cfg: RoadProjection | None = None) -> np.ndarray:
+        """World-frame candidates ``xy [B, K, T, 2]`` (m) of targets with frames ``pose [B, 3]`` and ``start
+        [B, 2]`` (speed m/s, direction of travel relative to the heading, rad) projected on the roads of
+        ``scenarios`` (`project_agent` per target)."""
+        out = np.empty(np.shape(xy), np.float64)
+        for b, scenario in enumerate(scenarios):
+            out[b] = self.project_agent(xy[b], pose[b], start[b], scenario.road, cfg)
+        return out
+
+    def project_agent(self, xy: np.ndarray, pose: np.ndarray, start: np.ndarray, road: RoadDescription,
+                      cfg: RoadProjection | None = None) -> np.ndarray:
+        """Candidates ``xy [K, T, 2]`` (world, m) of one target with frame ``pose [3]`` and ``start [2]`` projected
+        on ``road`` (`seal.models.prior.road_projection.project_to_road`; ``cfg`` None: `road_projection`, else
+        `default_road_projection`)."""
+        cfg = cfg or self.road_projection or self.default_road_projection()
+        course = float(pose[2]) + float(start[1])
+        return project_to_road(xy, np.asarray(pose[:2], np.float64), course, self._grids.get(road), cfg)[0]
+
     @staticmethod
     def _check_present(scenario: Scenario, agent_index: int) -> None:
         if not 0 <= agent_index < scenario.n_agents:
@@ -207,7 +239,8 @@ class TrajectoryPrior:
                 at the current step, or an index out of range, always raises `ValueError`.
 
         Returns:
-            ``Candidates`` with ``n_modes`` (32) candidates x 80 steps, most probable first.
+            ``Candidates`` with ``n_modes`` (32) candidates x 80 steps, most probable first (projected on the road
+            when `road_projection` is set).
         """
         targets = self._targets(scenarios, agent_indices)
         out: list[Candidates | None] = [None] * len(scenarios)
@@ -225,6 +258,8 @@ class TrajectoryPrior:
         if net_rows:
             enc = self.encode([scenarios[k] for k in net_rows], [targets[k] for k in net_rows])
             xy, probs = self.decode(enc)
+            if self.road_projection is not None:
+                xy = self.project(xy, enc.pose, enc.start.numpy(), [scenarios[k] for k in net_rows])
             for j, k in enumerate(net_rows):
                 out[k] = Candidates.from_positions(
                     xy[j], probs[j], enc.pose[j, :2], float(enc.pose[j, 2]), targets[k]

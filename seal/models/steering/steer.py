@@ -69,12 +69,16 @@ class SteeredPrior:
         alpha: steering strength(s) in the vectors' unit (alpha for risk vectors, tau / 100 for control vectors).
         random_seed: the baseline: each vector's direction replaced by a random unit direction (seeded), its unit
             kept, so every offset has the norm of the structured one.
+        project_road: project the decoded candidates on the road (`TrajectoryPrior.project`, with the prior's
+            `road_projection` or its default): on by default, because the decoder's candidates leave the road in
+            curves (roundabouts) whether steered or not, and steering moves more of them there (issue 20 note).
     """
 
     def __init__(self, prior: TrajectoryPrior, steer: str | os.PathLike[str] | SteeringBundle, vector: str,
-                 alpha: SteerAlpha, random_seed: int | None = None) -> None:
+                 alpha: SteerAlpha, random_seed: int | None = None, project_road: bool = True) -> None:
         bundle = steer if isinstance(steer, SteeringBundle) else SteeringBundle.load(steer)
         self.prior = prior
+        self.project_road = bool(project_road)
         self.vectors = [resolve_vector(bundle, name.strip()) for name in str(vector).split(",") if name.strip()]
         if not self.vectors:
             raise ValueError(f"steer_vector: no vector name in {vector!r}")
@@ -115,5 +119,8 @@ class SteeredPrior:
         tokens[:, 0] = tokens[:, 0] + torch.as_tensor(self.offsets, dtype=tokens.dtype)
         grid = SceneBatch({"start": batch.feats["start"].repeat(n, 1)}, np.repeat(batch.pose, n, axis=0))
         xy, probs = decode_tokens(self.prior, grid, finish(self.prior, self.site, tokens, mask), mask)
-        return Candidates.from_positions(xy.reshape(-1, *xy.shape[2:]), probs.reshape(-1) / n, batch.pose[0, :2],
+        xy = xy.reshape(-1, *xy.shape[2:])
+        if self.project_road:  # every decode of the grid is the same agent: one call for all its candidates
+            xy = self.prior.project_agent(xy, batch.pose[0], batch.feats["start"][0].numpy(), scenario.road)
+        return Candidates.from_positions(xy, probs.reshape(-1) / n, batch.pose[0, :2],
                                          float(batch.pose[0, 2]), agent)
