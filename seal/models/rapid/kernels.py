@@ -109,11 +109,14 @@ def _cos_sin(b: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _route_dist(cur: np.ndarray, route: np.ndarray, t: int, i: int, px: float, py: float, reach: float) -> float:
-    """Distance (m) from (px, py) to agent ``i``'s route: `seal.envs.car_following.route_distances` (the polyline
-    from ``cur[i]`` through ``route[i, t:]``'s valid positions, segments starting within ``reach`` of arc)."""
+def _near_route(cur: np.ndarray, route: np.ndarray, t: int, i: int, px: float, py: float, reach: float,
+                within: float) -> bool:
+    """Whether (px, py) is closer than ``within`` (m) to agent ``i``'s route: `seal.envs.car_following.
+    route_distances` (the polyline from ``cur[i]`` through ``route[i, t:]``'s valid positions, segments starting
+    within ``reach`` of arc); stops at the first segment that close (a leader is near the route's start)."""
     ax, ay = cur[i, _X], cur[i, _Y]
-    best = math.hypot(px - ax, py - ay)
+    if math.hypot(px - ax, py - ay) < within:
+        return True
     arc = 0.0
     for k in range(t, route.shape[1]):
         if route[i, k, _VALID] <= 0.5:
@@ -124,10 +127,11 @@ def _route_dist(cur: np.ndarray, route: np.ndarray, t: int, i: int, px: float, p
         qx, qy = px - ax, py - ay
         u = min(max((qx * ex + qy * ey) / max(ex * ex + ey * ey, 1e-12), 0.0), 1.0)
         dx, dy = qx - u * ex, qy - u * ey
-        best = min(best, math.sqrt(dx * dx + dy * dy))
+        if math.sqrt(dx * dx + dy * dy) < within:
+            return True
         arc += math.hypot(ex, ey)
         ax, ay = route[i, k, _X], route[i, k, _Y]
-    return best
+    return False
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -142,12 +146,14 @@ def _obstacle(cur: np.ndarray, cs: np.ndarray, logged: np.ndarray, cs_log: np.nd
     dx, dy = cur[j, _X] - cur[i, _X], cur[j, _Y] - cur[i, _Y]
     lon, lat = c * dx + s * dy, -s * dx + c * dy
     half_w = 0.5 * (cur[i, _W] + cur[j, _W])
-    if lon > 0.0 and lon < reach and abs(lat) < half_w + margin_p:
-        if route.shape[1] == 0 or _route_dist(cur, route, t, i, cur[j, _X], cur[j, _Y], reach) < half_w + margin_p:
-            return True
-    if _contact(cur, cs, i, j, horizon, margin_c, reach, margin_p, cos_same):
-        return not (use_log and _contact(logged, cs_log, i, j, horizon, margin_c, reach, margin_p, cos_same))
-    return False
+    in_path = lon > 0.0 and lon < reach and abs(lat) < half_w + margin_p
+    if in_path and route.shape[1] == 0:
+        return True
+    # the contact test first: it is cheaper than the walk along the route
+    if _contact(cur, cs, i, j, horizon, margin_c, reach, margin_p, cos_same) and not (
+            use_log and _contact(logged, cs_log, i, j, horizon, margin_c, reach, margin_p, cos_same)):
+        return True
+    return in_path and _near_route(cur, route, t, i, cur[j, _X], cur[j, _Y], reach, half_w + margin_p)
 
 
 @njit(types.Tuple((float64[:, ::1], int64[:, ::1], float64[:, ::1]))(
