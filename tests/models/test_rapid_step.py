@@ -76,7 +76,8 @@ def test_pair_scan_with_routes_matches_the_numpy_safety_obstacles(seed: int) -> 
     cur[:, :2] *= 0.5  # denser: more boxes in each other's paths
     t, n_steps = 5, 30
     route = np.zeros((len(cur), n_steps, 8))  # wandering logged tracks through each agent's position at t
-    steps = rng.normal(0, 1.5, (len(cur), n_steps, 2)) + 6.0 * np.stack([np.cos(cur[:, 2]), np.sin(cur[:, 2])], 1)[:, None]
+    heading = np.stack([np.cos(cur[:, 2]), np.sin(cur[:, 2])], 1)
+    steps = rng.normal(0, 1.5, (len(cur), n_steps, 2)) + 6.0 * heading[:, None]
     route[:, :, :2] = cur[:, None, :2] + np.cumsum(steps, axis=1) - steps[:, t:t + 1].cumsum(axis=1)
     route[:, :, 7] = (rng.random((len(cur), n_steps)) > 0.2).astype(float)
     logged = cur.copy()

@@ -156,6 +156,18 @@ def _obstacle(cur: np.ndarray, cs: np.ndarray, logged: np.ndarray, cs_log: np.nd
     return in_path and _near_route(cur, route, t, i, cur[j, _X], cur[j, _Y], reach, half_w + margin_p)
 
 
+@njit(cache=True, nogil=True, error_model="numpy")
+def _rows_and_speeds(cur: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``[A]`` whether each box is one of ``rows``, and each box's speed (m/s)."""
+    is_row = np.zeros(cur.shape[0], dtype=np.bool_)
+    for r in range(rows.shape[0]):
+        is_row[rows[r]] = True
+    speed = np.empty(cur.shape[0])
+    for j in range(cur.shape[0]):
+        speed[j] = math.hypot(cur[j, _VX], cur[j, _VY])
+    return is_row, speed
+
+
 @njit(types.Tuple((float64[:, ::1], int64[:, ::1], float64[:, ::1]))(
     float64[:, ::1], int64[::1], float64[:, ::1], float64[::1], int64, float64[:, :, ::1], int64),
     cache=True, nogil=True, error_model="numpy")
@@ -192,12 +204,7 @@ def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.
     out = np.empty((n, 6))
     nb = np.full((n, k), -1, dtype=np.int64)
     nbd = np.full((n, k), np.inf)
-    is_row = np.zeros(m, dtype=np.bool_)
-    for r in range(n):
-        is_row[rows[r]] = True
-    speed = np.empty(m)
-    for j in range(m):
-        speed[j] = math.hypot(cur[j, _VX], cur[j, _VY])
+    is_row, speed = _rows_and_speeds(cur, rows)
     mutual = route.shape[1] > 0
     for r in range(n):
         i = rows[r]
