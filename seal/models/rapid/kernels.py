@@ -185,10 +185,8 @@ def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.
             (m/s^2), social range (m), social headway (s), weight behind, neighbour range (m), cosine of the
             same-direction angle, 0.
         k: neighbours kept.
-        route: ``[A, T, 8]`` the logged tracks, read from step ``t`` on: with steps, the obstacles are those of
-            `seal.envs.car_following.safety_obstacles` (the route test, and between two agents of ``rows`` that
-            are each other's obstacle only the one without priority brakes); ``[A, 0, 8]``: those of
-            `seal.envs.car_following.obstacle_gaps`.
+        route: ``[A, T, 8]`` the logged tracks, read from step ``t`` on: the obstacles are then those of
+            `seal.envs.car_following.safety_obstacles`; ``[A, 0, 8]``: those of `obstacle_gaps`.
 
     Returns:
         ``[n, 6]`` leader gap (m, inf: none), leader speed along the heading (m/s), obstacle gap, obstacle speed,
