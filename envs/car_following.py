@@ -136,15 +136,38 @@ def predicted_contacts(boxes: np.ndarray, rows: np.ndarray, horizon_s: float = C
     return contact
 
 
-def obstacle_gaps(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray | None = None,
-                  horizon_s: float = CONTACT_HORIZON_S) -> tuple[np.ndarray, np.ndarray]:
-    """For each agent of ``rows``: (bumper gap (m, inf: none) to the nearest obstacle, its speed along the
-    agent's heading (m/s)). Obstacles: the boxes of `leader_gaps` and the `predicted_contacts` (a car cutting
-    in, one crossing first) that the log did not have: with ``logged [A, 8]`` (the logged boxes of the same step),
-    a pair that is a predicted contact there too is left out: the logged drivers resolved that encounter
-    themselves (right of way, signals, a turn) in ways constant velocity cannot see, and braking for it (e.g. for
-    a car turning away at a junction) stops the agent in the path of traffic that the log lets pass. The gap is
-    the current one along the agent's heading (<= 0 for a box already beside it: brake as hard as allowed)."""
+def route_distances(cur: np.ndarray, rows: np.ndarray, log: np.ndarray, t: int) -> np.ndarray:
+    """``[n, A]`` distance (m) from the centre of each box of ``cur`` to the route of each agent of ``rows``: the
+    polyline from the agent's current position through its logged positions from step ``t`` on (``log
+    [A, T, 8]``, valid steps only; the current position first, so an agent behind its log keeps the stretch up
+    to its logged one), its segments that start within `LEADER_RANGE_M` of arc length."""
+    out = np.full((rows.size, len(cur)), np.inf)
+    for k, r in enumerate(rows.tolist()):
+        pts = log[r, t:][log[r, t:, VALID] > 0.5][:, [X, Y]]
+        poly = np.vstack([cur[r, [X, Y]], pts])
+        a, e = poly[:-1], np.diff(poly, axis=0)
+        seg = np.hypot(e[:, 0], e[:, 1])
+        keep = np.concatenate([[0.0], np.cumsum(seg)[:-1]]) < LEADER_RANGE_M
+        a, e = a[keep], e[keep]
+        if not len(a):
+            out[k] = np.hypot(cur[:, X] - poly[0, 0], cur[:, Y] - poly[0, 1])
+            continue
+        p = cur[:, None, [X, Y]] - a[None]
+        len2 = np.maximum((e**2).sum(axis=1), 1e-12)
+        u = np.clip((p * e[None]).sum(axis=2) / len2, 0.0, 1.0)
+        d = p - u[..., None] * e[None]
+        out[k] = np.sqrt((d**2).sum(axis=2)).min(axis=1)
+    return out
+
+
+def obstacle_pairs(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray | None = None,
+                   horizon_s: float = CONTACT_HORIZON_S, route_dist: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``[n, A]`` tables for each agent of ``rows`` and box of ``cur``: whether the box is an obstacle of the
+    agent (`obstacle_gaps`), the bumper gap to it along the agent's heading (m, inf where not an obstacle) and
+    its speed along that heading (m/s). With ``route_dist`` (`route_distances`), a box in the heading corridor
+    counts only where its centre is also within the two half widths plus `PATH_MARGIN_M` of the agent's route:
+    on a curve or a turn the straight corridor holds cars of other lanes that are not in the agent's way."""
     allrows = np.arange(len(cur))
     f = _frames(cur, rows, allrows)
     me, other = cur[rows], cur
@@ -156,8 +179,43 @@ def obstacle_gaps(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray | None =
     half_w = 0.5 * (me[:, WIDTH, None] + other[None, :, WIDTH])
     in_path = (f["lon"] > 0) & (f["lon"] < LEADER_RANGE_M) & (np.abs(f["lat"]) < half_w + PATH_MARGIN_M)
     in_path &= (other[None, :, VALID] > 0.5) & (allrows[None, :] != rows[:, None])
-    gap = np.where(in_path | contact, f["lon"] - ext_lon, np.inf)
-    return _nearest(gap, f["v_lon"])
+    if route_dist is not None:
+        in_path &= route_dist < half_w + PATH_MARGIN_M
+    hit = in_path | contact
+    return hit, np.where(hit, f["lon"] - ext_lon, np.inf), f["v_lon"]
+
+
+def obstacle_gaps(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray | None = None,
+                  horizon_s: float = CONTACT_HORIZON_S) -> tuple[np.ndarray, np.ndarray]:
+    """For each agent of ``rows``: (bumper gap (m, inf: none) to the nearest obstacle, its speed along the
+    agent's heading (m/s)). Obstacles: the boxes of `leader_gaps` and the `predicted_contacts` (a car cutting
+    in, one crossing first) that the log did not have: with ``logged [A, 8]`` (the logged boxes of the same step),
+    a pair that is a predicted contact there too is left out: the logged drivers resolved that encounter
+    themselves (right of way, signals, a turn) in ways constant velocity cannot see, and braking for it (e.g. for
+    a car turning away at a junction) stops the agent in the path of traffic that the log lets pass. The gap is
+    the current one along the agent's heading (<= 0 for a box already beside it: brake as hard as allowed)."""
+    _, gap, v_lon = obstacle_pairs(cur, rows, logged, horizon_s)
+    return _nearest(gap, v_lon)
+
+
+def safety_obstacles(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray | None, route_dist: np.ndarray | None,
+                     horizon_s: float = CONTACT_HORIZON_S) -> tuple[np.ndarray, np.ndarray]:
+    """`obstacle_gaps` for the safety bound of learned background agents (`seal.models.rapid`): the boxes of
+    `obstacle_pairs` with ``route_dist``, less, for two agents of ``rows`` that are each other's obstacle (both
+    simulated), the one the agent has priority over: the faster one goes first (ties: the lower row). Why: two
+    simulated agents that meet where their logs did not (a left turner and oncoming traffic, each a little off its
+    log's timing) would otherwise both brake for each other until both stand still; the ego and the adversary
+    are never in ``rows``, so a background agent always yields to them."""
+    hit, gap, v_lon = obstacle_pairs(cur, rows, logged, horizon_s, route_dist)
+    pos = np.full(len(cur), -1)
+    pos[rows] = np.arange(rows.size)
+    speed = np.hypot(cur[:, VX], cur[:, VY])
+    back = np.zeros_like(hit)
+    kk, jj = np.nonzero(pos[None, :].repeat(rows.size, 0) >= 0)
+    back[kk, jj] = hit[pos[jj], rows[kk]]
+    mine = speed[rows, None]
+    first = (mine > speed[None, :]) | ((mine == speed[None, :]) & (rows[:, None] < np.arange(len(cur))[None, :]))
+    return _nearest(np.where(hit & back & first, np.inf, gap), v_lon)
 
 
 def _wanted_gap(speed: np.ndarray, lead_speed: np.ndarray, time_wanted_s: float | np.ndarray) -> np.ndarray:

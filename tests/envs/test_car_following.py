@@ -23,7 +23,9 @@ from seal.envs.car_following import (
     leader_gaps,
     logged_time_headway,
     obstacle_gaps,
+    route_distances,
     safe_acceleration,
+    safety_obstacles,
 )
 
 
@@ -156,3 +158,34 @@ def test_idm_background_yields_to_an_ego_cutting_in() -> None:
 
     assert touches(sc.tracks.astype(np.float64))
     assert not touches(roll_background(sc, IDMBackground(), np.random.default_rng(0)))
+
+
+def test_a_box_in_the_straight_corridor_but_off_the_route_is_no_safety_obstacle() -> None:
+    # agent 0 at 10 m/s turning left (its logged route bends up at x = 10); a car stopped across the road 30 m
+    # straight ahead (no contact within the 2 s horizon; a same-direction box there would count as a cut-in)
+    cur = boxes((0.0, 0.0, 0.0, 10.0), (30.0, 0.0, math.pi / 2, 0.0))
+    log = np.zeros((2, 10, 8))
+    log[0, :, VALID] = 1.0
+    log[0, :, 0] = np.minimum(np.arange(10) * 5.0, 10.0)
+    log[0, :, 1] = np.maximum(np.arange(10) * 5.0 - 10.0, 0.0)
+    rows = np.array([0])
+    assert obstacle_gaps(cur, rows)[0][0] == pytest.approx(26.5)  # the straight corridor sees it
+    gap, _ = safety_obstacles(cur, rows, None, route_distances(cur, rows, log, 0))
+    assert np.isinf(gap[0])
+    straight = log.copy()
+    straight[0, :, 0], straight[0, :, 1] = np.arange(10) * 5.0, 0.0
+    gap, _ = safety_obstacles(cur, rows, None, route_distances(cur, rows, straight, 0))
+    assert gap[0] == pytest.approx(26.5)  # on its route: an obstacle
+
+
+def test_of_two_simulated_agents_in_each_others_way_only_the_slower_yields() -> None:
+    # agents 1 and 2 head-on in one corridor, 20 m apart; agent 0 (not simulated: the ego) stands 10 m behind 2
+    cur = boxes((30.0, 0.0, math.pi, 0.0), (0.0, 0.0, 0.0, 8.0), (20.0, 0.0, math.pi, 5.0))
+    rows = np.array([1, 2])
+    plain, _ = obstacle_gaps(cur, rows)
+    assert np.isfinite(plain).all()  # each brakes for the other (and 1 for the ego)
+    gap, _ = safety_obstacles(cur, rows, None, None)
+    assert gap[0] == pytest.approx(25.0)  # agent 1 is faster: it no longer yields to 2, but to the ego behind 2
+    assert gap[1] == pytest.approx(15.0)  # agent 2 yields to agent 1
+    alone, _ = safety_obstacles(cur, np.array([1]), None, None)
+    assert alone[0] == pytest.approx(15.0)  # agent 2 not simulated (ego-like): agent 1 yields to it

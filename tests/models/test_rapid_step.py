@@ -13,7 +13,13 @@ from seal.core import scenario as scn
 from seal.core.geometry import pairwise_overlaps
 from seal.core.scenario import CURRENT_STEP, VALID
 from seal.envs.background import roll_background
-from seal.envs.car_following import leader_gaps, obstacle_gaps, safe_acceleration
+from seal.envs.car_following import (
+    leader_gaps,
+    obstacle_gaps,
+    route_distances,
+    safe_acceleration,
+    safety_obstacles,
+)
 from seal.models.rapid import Guidance, RapidBackground
 from seal.models.rapid import kernels as K
 from seal.models.rapid.features import N_NEIGHBORS, NEIGHBOR_RANGE_M, scan_pairs
@@ -61,6 +67,29 @@ def test_pair_scan_matches_the_numpy_terms(seed: int) -> None:
     idx, dist = rapid_neighbors(cur, rows, N_NEIGHBORS, NEIGHBOR_RANGE_M)
     np.testing.assert_array_equal(scan.neighbor_rows, idx)
     np.testing.assert_allclose(scan.neighbor_dist, dist, rtol=1e-12)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_pair_scan_with_routes_matches_the_numpy_safety_obstacles(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    cur = random_scene(seed, 60)
+    cur[:, :2] *= 0.5  # denser: more boxes in each other's paths
+    t, n_steps = 5, 30
+    route = np.zeros((len(cur), n_steps, 8))  # wandering logged tracks through each agent's position at t
+    heading = np.stack([np.cos(cur[:, 2]), np.sin(cur[:, 2])], 1)
+    steps = rng.normal(0, 1.5, (len(cur), n_steps, 2)) + 6.0 * heading[:, None]
+    route[:, :, :2] = cur[:, None, :2] + np.cumsum(steps, axis=1) - steps[:, t:t + 1].cumsum(axis=1)
+    route[:, :, 7] = (rng.random((len(cur), n_steps)) > 0.2).astype(float)
+    logged = cur.copy()
+    logged[:, :2] += rng.normal(0, 3, (len(cur), 2))
+    rows = np.flatnonzero(cur[:, VALID] > 0.5)[1:]
+    for log in (None, logged):
+        scan = scan_pairs(cur, rows, log, route=route, t=t)
+        gap, lv = safety_obstacles(cur, rows, log, route_distances(cur, rows, route, t))
+        np.testing.assert_allclose(scan.obstacle_gap, gap, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(scan.obstacle_v, lv, rtol=1e-12, atol=1e-9)
+        plain, _ = obstacle_gaps(cur, rows, log)
+        assert (np.isfinite(plain) & ~np.isfinite(gap)).sum() > 0  # the route / priority rules drop some
 
 
 def test_segment_grid_gives_the_brute_force_closest_points() -> None:

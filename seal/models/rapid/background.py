@@ -96,7 +96,8 @@ class RapidBackground(SimulatedBackground):
         desired = self.intent.desired_at(t, rows)
         dest = self.intent.destination_xy[rows]
         logged = self.log[:, t]
-        scan = scan_pairs(cur, rows, logged, social_constants(self.guidance))
+        # the logged tracks as routes: the safety bound's obstacles are `safety_obstacles` (issue 22 follow-up)
+        scan = scan_pairs(cur, rows, logged, social_constants(self.guidance), self.log, t)
         inp = agent_inputs(self._geo, cur, rows, prev_vel, prev_ok, desired, dest, scan)
         targets = physics_targets(self._geo, cur, rows, desired, dest, self.guidance, logged, scan)
         with torch.inference_mode():

@@ -200,15 +200,20 @@ class PairScan:
 
 
 def scan_pairs(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray | None = None,
-               social: tuple[float, float, float, float] = (6.0, 2.0, 0.0, 0.1)) -> PairScan:
+               social: tuple[float, float, float, float] = (6.0, 2.0, 0.0, 0.1), route: np.ndarray | None = None,
+               t: int = 0) -> PairScan:
     """`PairScan` of the agents ``rows`` of the box table ``cur [A, 8]`` in one compiled call; ``logged``: the
     logged boxes of the step (`obstacle_gaps`); ``social``: strength (m/s^2), range (m), headway (s) and weight
-    behind of the social force."""
+    behind of the social force; ``route``: the logged tracks ``[A, T, 8]`` and ``t`` the step: the obstacles are
+    then `seal.envs.car_following.safety_obstacles` (route test, priority between two simulated agents)."""
     cur = np.ascontiguousarray(cur, dtype=np.float64)
     log = np.zeros_like(cur) if logged is None else np.ascontiguousarray(logged, dtype=np.float64)
     params = np.array([LEADER_RANGE_M, PATH_MARGIN_M, CONTACT_HORIZON_S, CONTACT_MARGIN_M, *social,
                        NEIGHBOR_RANGE_M, COS_SAME_DIRECTION, 0.0])
-    out, nb, nbd = pair_scan(cur, np.ascontiguousarray(rows, dtype=np.int64), log, params, N_NEIGHBORS)
+    if route is None:
+        route = np.zeros((len(cur), 0, 8))
+    out, nb, nbd = pair_scan(cur, np.ascontiguousarray(rows, dtype=np.int64), log, params, N_NEIGHBORS,
+                             np.ascontiguousarray(route, dtype=np.float64), int(t))
     return PairScan(out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4:6], nb, nbd)
 
 

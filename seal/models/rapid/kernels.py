@@ -108,10 +108,71 @@ def _cos_sin(b: np.ndarray) -> np.ndarray:
     return out
 
 
+@njit(cache=True, nogil=True, error_model="numpy")
+def _near_route(cur: np.ndarray, route: np.ndarray, t: int, i: int, px: float, py: float, reach: float,
+                within: float) -> bool:
+    """Whether (px, py) is closer than ``within`` (m) to agent ``i``'s route: `seal.envs.car_following.
+    route_distances` (the polyline from ``cur[i]`` through ``route[i, t:]``'s valid positions, segments starting
+    within ``reach`` of arc); stops at the first segment that close (a leader is near the route's start)."""
+    ax, ay = cur[i, _X], cur[i, _Y]
+    if math.hypot(px - ax, py - ay) < within:
+        return True
+    arc = 0.0
+    for k in range(t, route.shape[1]):
+        if route[i, k, _VALID] <= 0.5:
+            continue
+        if arc >= reach:
+            break
+        ex, ey = route[i, k, _X] - ax, route[i, k, _Y] - ay
+        qx, qy = px - ax, py - ay
+        u = min(max((qx * ex + qy * ey) / max(ex * ex + ey * ey, 1e-12), 0.0), 1.0)
+        dx, dy = qx - u * ex, qy - u * ey
+        if math.sqrt(dx * dx + dy * dy) < within:
+            return True
+        arc += math.hypot(ex, ey)
+        ax, ay = route[i, k, _X], route[i, k, _Y]
+    return False
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _obstacle(cur: np.ndarray, cs: np.ndarray, logged: np.ndarray, cs_log: np.ndarray, use_log: bool,
+              route: np.ndarray, t: int, i: int, j: int, params: np.ndarray) -> bool:
+    """Whether box ``j`` is an obstacle of agent ``i``: `seal.envs.car_following.obstacle_pairs` for one pair,
+    with the route test where ``route`` has steps."""
+    if i == j or cur[i, _VALID] <= 0.5 or cur[j, _VALID] <= 0.5:
+        return False
+    reach, margin_p, horizon, margin_c, cos_same = params[0], params[1], params[2], params[3], params[9]
+    c, s = cs[i, 0], cs[i, 1]
+    dx, dy = cur[j, _X] - cur[i, _X], cur[j, _Y] - cur[i, _Y]
+    lon, lat = c * dx + s * dy, -s * dx + c * dy
+    half_w = 0.5 * (cur[i, _W] + cur[j, _W])
+    in_path = lon > 0.0 and lon < reach and abs(lat) < half_w + margin_p
+    if in_path and route.shape[1] == 0:
+        return True
+    # the contact test first: it is cheaper than the walk along the route
+    if _contact(cur, cs, i, j, horizon, margin_c, reach, margin_p, cos_same) and not (
+            use_log and _contact(logged, cs_log, i, j, horizon, margin_c, reach, margin_p, cos_same)):
+        return True
+    return in_path and _near_route(cur, route, t, i, cur[j, _X], cur[j, _Y], reach, half_w + margin_p)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _rows_and_speeds(cur: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``[A]`` whether each box is one of ``rows``, and each box's speed (m/s)."""
+    is_row = np.zeros(cur.shape[0], dtype=np.bool_)
+    for r in range(rows.shape[0]):
+        is_row[rows[r]] = True
+    speed = np.empty(cur.shape[0])
+    for j in range(cur.shape[0]):
+        speed[j] = math.hypot(cur[j, _VX], cur[j, _VY])
+    return is_row, speed
+
+
 @njit(types.Tuple((float64[:, ::1], int64[:, ::1], float64[:, ::1]))(
-    float64[:, ::1], int64[::1], float64[:, ::1], float64[::1], int64), cache=True, nogil=True, error_model="numpy")
-def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.ndarray, k: int
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    float64[:, ::1], int64[::1], float64[:, ::1], float64[::1], int64, float64[:, :, ::1], int64),
+    cache=True, nogil=True, error_model="numpy")
+def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.ndarray, k: int,
+              route: np.ndarray, t: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every pairwise quantity of the RAPID step in one pass over (agent, box) pairs, float64, the numpy
     functions' operations (`seal.envs.car_following.leader_gaps` / `obstacle_gaps`, the eq. 9 social force, the
     ``k`` nearest neighbours of `seal.models.rapid.features`): one compiled loop instead of a dozen ``[n, A]``
@@ -124,6 +185,8 @@ def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.
             (m/s^2), social range (m), social headway (s), weight behind, neighbour range (m), cosine of the
             same-direction angle, 0.
         k: neighbours kept.
+        route: ``[A, T, 8]`` the logged tracks, read from step ``t`` on: the obstacles are then those of
+            `seal.envs.car_following.safety_obstacles`; ``[A, 0, 8]``: those of `obstacle_gaps`.
 
     Returns:
         ``[n, 6]`` leader gap (m, inf: none), leader speed along the heading (m/s), obstacle gap, obstacle speed,
@@ -132,14 +195,15 @@ def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.
     """
     n = rows.shape[0]
     m = cur.shape[0]
-    reach, margin_p, horizon, margin_c = params[0], params[1], params[2], params[3]
+    reach, margin_p = params[0], params[1]
     a_soc, b_soc, t_head, behind, nb_range = params[4], params[5], params[6], params[7], params[8]
-    cos_same = params[9]
     use_log = logged[:, _VALID].max() > 0.5 if m else False
     cs, cs_log = _cos_sin(cur), _cos_sin(logged)
     out = np.empty((n, 6))
     nb = np.full((n, k), -1, dtype=np.int64)
     nbd = np.full((n, k), np.inf)
+    is_row, speed = _rows_and_speeds(cur, rows)
+    mutual = route.shape[1] > 0
     for r in range(n):
         i = rows[r]
         c, s = cs[i, 0], cs[i, 1]
@@ -155,9 +219,10 @@ def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.
                 g = lon - 0.5 * (cur[i, _L] + cur[j, _L])
                 if g < lead:
                     lead, lead_v = g, v_lon
-            hit = in_path
-            if not hit and _contact(cur, cs, i, j, horizon, margin_c, reach, margin_p, cos_same):
-                hit = not (use_log and _contact(logged, cs_log, i, j, horizon, margin_c, reach, margin_p, cos_same))
+            hit = _obstacle(cur, cs, logged, cs_log, use_log, route, t, i, j, params)
+            if hit and mutual and is_row[j] and (speed[i] > speed[j] or (speed[i] == speed[j] and i < j)):
+                # each other's obstacle: the agent with priority goes (`safety_obstacles`)
+                hit = not _obstacle(cur, cs, logged, cs_log, use_log, route, t, j, i, params)
             if hit:
                 cd = abs(cs[j, 0] * c + cs[j, 1] * s)
                 sd = abs(cs[j, 1] * c - cs[j, 0] * s)
