@@ -108,37 +108,79 @@ def _cos_sin(b: np.ndarray) -> np.ndarray:
     return out
 
 
+ROUTE_CHUNK = 8
+"""Route segments per bounding box of `_route_table` (a box far from a chunk's box skips its segments)."""
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
-def _near_route(cur: np.ndarray, route: np.ndarray, t: int, i: int, px: float, py: float, reach: float,
+def _route_table(cur: np.ndarray, rows: np.ndarray, route: np.ndarray, t: int, reach: float
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each agent's route of `seal.envs.car_following.route_distances`, built once per step: ``verts [n, V, 2]``
+    (the agent's position, then ``route[i, t:]``'s valid positions while the arc before them is below ``reach``),
+    ``nv [n]`` vertices used, ``boxes [n, C, 4]`` (x min, y min, x max, y max) of the vertices of each chunk of
+    `ROUTE_CHUNK` segments. Why: the route test of every (agent, box) pair walked the same polyline again."""
+    n = rows.shape[0]
+    n_steps = route.shape[1]
+    nvmax = max(n_steps - t, 0) + 1
+    verts = np.empty((n, nvmax, 2))
+    nv = np.zeros(n, dtype=np.int64)
+    boxes = np.empty((n, (nvmax + ROUTE_CHUNK - 1) // ROUTE_CHUNK, 4))
+    for r in range(n):
+        i = rows[r]
+        ax, ay = cur[i, _X], cur[i, _Y]
+        verts[r, 0, 0], verts[r, 0, 1] = ax, ay
+        m, arc = 1, 0.0
+        for k in range(t, n_steps):
+            if route[i, k, _VALID] <= 0.5:
+                continue
+            if arc >= reach:
+                break
+            bx, by = route[i, k, _X], route[i, k, _Y]
+            arc += math.hypot(bx - ax, by - ay)
+            verts[r, m, 0], verts[r, m, 1] = bx, by
+            m += 1
+            ax, ay = bx, by
+        nv[r] = m
+        for c in range((m - 1 + ROUTE_CHUNK - 1) // ROUTE_CHUNK):
+            lo, hi = c * ROUTE_CHUNK, min((c + 1) * ROUTE_CHUNK, m - 1)
+            x0, y0, x1, y1 = verts[r, lo, 0], verts[r, lo, 1], verts[r, lo, 0], verts[r, lo, 1]
+            for q in range(lo + 1, hi + 1):
+                x0, x1 = min(x0, verts[r, q, 0]), max(x1, verts[r, q, 0])
+                y0, y1 = min(y0, verts[r, q, 1]), max(y1, verts[r, q, 1])
+            boxes[r, c, 0], boxes[r, c, 1], boxes[r, c, 2], boxes[r, c, 3] = x0, y0, x1, y1
+    return verts, nv, boxes
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _near_route(verts: np.ndarray, nv: np.ndarray, boxes: np.ndarray, r: int, px: float, py: float,
                 within: float) -> bool:
-    """Whether (px, py) is closer than ``within`` (m) to agent ``i``'s route: `seal.envs.car_following.
-    route_distances` (the polyline from ``cur[i]`` through ``route[i, t:]``'s valid positions, segments starting
-    within ``reach`` of arc); stops at the first segment that close (a leader is near the route's start)."""
-    ax, ay = cur[i, _X], cur[i, _Y]
-    if math.hypot(px - ax, py - ay) < within:
+    """Whether (px, py) is closer than ``within`` (m) to the route of the ``r``-th agent of a `_route_table`
+    (`seal.envs.car_following.route_distances` < ``within``, the same segment arithmetic); chunks whose box,
+    grown by ``within`` and 1 mm (rounding), misses the point are skipped: none of their segments can be near."""
+    if math.hypot(px - verts[r, 0, 0], py - verts[r, 0, 1]) < within:
         return True
-    arc = 0.0
-    for k in range(t, route.shape[1]):
-        if route[i, k, _VALID] <= 0.5:
+    grow = within + 1e-3
+    for c in range((nv[r] - 1 + ROUTE_CHUNK - 1) // ROUTE_CHUNK):
+        if (px < boxes[r, c, 0] - grow or px > boxes[r, c, 2] + grow or py < boxes[r, c, 1] - grow
+                or py > boxes[r, c, 3] + grow):
             continue
-        if arc >= reach:
-            break
-        ex, ey = route[i, k, _X] - ax, route[i, k, _Y] - ay
-        qx, qy = px - ax, py - ay
-        u = min(max((qx * ex + qy * ey) / max(ex * ex + ey * ey, 1e-12), 0.0), 1.0)
-        dx, dy = qx - u * ex, qy - u * ey
-        if math.sqrt(dx * dx + dy * dy) < within:
-            return True
-        arc += math.hypot(ex, ey)
-        ax, ay = route[i, k, _X], route[i, k, _Y]
+        for q in range(c * ROUTE_CHUNK, min((c + 1) * ROUTE_CHUNK, nv[r] - 1)):
+            ax, ay = verts[r, q, 0], verts[r, q, 1]
+            ex, ey = verts[r, q + 1, 0] - ax, verts[r, q + 1, 1] - ay
+            qx, qy = px - ax, py - ay
+            u = min(max((qx * ex + qy * ey) / max(ex * ex + ey * ey, 1e-12), 0.0), 1.0)
+            dx, dy = qx - u * ex, qy - u * ey
+            if math.sqrt(dx * dx + dy * dy) < within:
+                return True
     return False
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _obstacle(cur: np.ndarray, cs: np.ndarray, logged: np.ndarray, cs_log: np.ndarray, use_log: bool,
-              route: np.ndarray, t: int, i: int, j: int, params: np.ndarray) -> bool:
+              table: tuple[np.ndarray, np.ndarray, np.ndarray], pos: np.ndarray, i: int, j: int,
+              params: np.ndarray) -> bool:
     """Whether box ``j`` is an obstacle of agent ``i``: `seal.envs.car_following.obstacle_pairs` for one pair,
-    with the route test where ``route`` has steps."""
+    with the route test where ``pos[i]`` >= 0 (``i``'s row of the `_route_table` ``table``)."""
     if i == j or cur[i, _VALID] <= 0.5 or cur[j, _VALID] <= 0.5:
         return False
     reach, margin_p, horizon, margin_c, cos_same = params[0], params[1], params[2], params[3], params[9]
@@ -147,25 +189,48 @@ def _obstacle(cur: np.ndarray, cs: np.ndarray, logged: np.ndarray, cs_log: np.nd
     lon, lat = c * dx + s * dy, -s * dx + c * dy
     half_w = 0.5 * (cur[i, _W] + cur[j, _W])
     in_path = lon > 0.0 and lon < reach and abs(lat) < half_w + margin_p
-    if in_path and route.shape[1] == 0:
+    if in_path and (pos[i] < 0 or _near_route(table[0], table[1], table[2], pos[i], cur[j, _X], cur[j, _Y],
+                                              half_w + margin_p)):
         return True
-    # the contact test first: it is cheaper than the walk along the route
-    if _contact(cur, cs, i, j, horizon, margin_c, reach, margin_p, cos_same) and not (
-            use_log and _contact(logged, cs_log, i, j, horizon, margin_c, reach, margin_p, cos_same)):
-        return True
-    return in_path and _near_route(cur, route, t, i, cur[j, _X], cur[j, _Y], reach, half_w + margin_p)
+    return _contact(cur, cs, i, j, horizon, margin_c, reach, margin_p, cos_same) and not (
+        use_log and _contact(logged, cs_log, i, j, horizon, margin_c, reach, margin_p, cos_same))
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _rows_and_speeds(cur: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``[A]`` whether each box is one of ``rows``, and each box's speed (m/s)."""
-    is_row = np.zeros(cur.shape[0], dtype=np.bool_)
+    """``[A]`` each box's row in ``rows`` (-1: none), and each box's speed (m/s)."""
+    pos = np.full(cur.shape[0], -1, dtype=np.int64)
     for r in range(rows.shape[0]):
-        is_row[rows[r]] = True
+        pos[rows[r]] = r
     speed = np.empty(cur.shape[0])
     for j in range(cur.shape[0]):
         speed[j] = math.hypot(cur[j, _VX], cur[j, _VY])
-    return is_row, speed
+    return pos, speed
+
+
+SOCIAL_CUTOFF = 40.0
+"""Gaps beyond this many social ranges add nothing to the social force (exp(-40) ~ 4e-18 of its strength): the
+exponential is skipped, the largest per-pair cost after the route walk."""
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _social(cur: np.ndarray, i: int, j: int, dx: float, dy: float, lon: float, lat: float, dist: float,
+            params: np.ndarray) -> float:
+    """Magnitude (m/s^2) of the eq. 9 repulsion of box ``j`` on agent ``i`` (`pair_scan`'s ``params``), pushing
+    along ``-(dx, dy) / dist``."""
+    a_soc, b_soc, t_head, behind = params[4], params[5], params[6], params[7]
+    d = max(dist, 1e-6)
+    gap_lon = abs(lon) - 0.5 * (cur[i, _L] + cur[j, _L])
+    gap_lat = abs(lat) - 0.5 * (cur[i, _W] + cur[j, _W])
+    gap = max(gap_lon, gap_lat)
+    if t_head > 0.0:
+        closing = max(((cur[i, _VX] - cur[j, _VX]) * dx + (cur[i, _VY] - cur[j, _VY]) * dy) / d, 0.0)
+        gap = gap - t_head * closing
+    gap = max(gap, 0.0)
+    if gap > SOCIAL_CUTOFF * b_soc:
+        return 0.0
+    fov = behind + (1.0 - behind) * 0.5 * (1.0 + lon / d)
+    return a_soc * math.exp(-gap / b_soc) * fov
 
 
 @njit(types.Tuple((float64[:, ::1], int64[:, ::1], float64[:, ::1]))(
@@ -175,8 +240,7 @@ def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.
               route: np.ndarray, t: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every pairwise quantity of the RAPID step in one pass over (agent, box) pairs, float64, the numpy
     functions' operations (`seal.envs.car_following.leader_gaps` / `obstacle_gaps`, the eq. 9 social force, the
-    ``k`` nearest neighbours of `seal.models.rapid.features`): one compiled loop instead of a dozen ``[n, A]``
-    numpy tables per term, which made these terms the largest per-agent cost at 120 agents.
+    ``k`` nearest neighbours of `seal.models.rapid.features`); the routes are built once (`_route_table`).
 
     Args:
         cur: ``[A, 8]`` boxes of the step; rows: ``[n]`` the agents; logged: ``[A, 8]`` the logged boxes of the
@@ -193,17 +257,16 @@ def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.
         social force x, y (map frame, m/s^2); ``[n, k]`` neighbour rows nearest first (-1: none); ``[n, k]``
         their centre distances (m, inf: none).
     """
-    n = rows.shape[0]
-    m = cur.shape[0]
-    reach, margin_p = params[0], params[1]
-    a_soc, b_soc, t_head, behind, nb_range = params[4], params[5], params[6], params[7], params[8]
+    n, m = rows.shape[0], cur.shape[0]
+    reach, margin_p, nb_range = params[0], params[1], params[8]
     use_log = logged[:, _VALID].max() > 0.5 if m else False
     cs, cs_log = _cos_sin(cur), _cos_sin(logged)
     out = np.empty((n, 6))
-    nb = np.full((n, k), -1, dtype=np.int64)
-    nbd = np.full((n, k), np.inf)
-    is_row, speed = _rows_and_speeds(cur, rows)
+    nb, nbd = np.full((n, k), -1, dtype=np.int64), np.full((n, k), np.inf)
+    pos, speed = _rows_and_speeds(cur, rows)
     mutual = route.shape[1] > 0
+    table = _route_table(cur, rows, route, t, reach)
+    route_pos = pos if mutual else np.full(m, -1, dtype=np.int64)
     for r in range(n):
         i = rows[r]
         c, s = cs[i, 0], cs[i, 1]
@@ -214,15 +277,14 @@ def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.
             dx, dy = cur[j, _X] - cur[i, _X], cur[j, _Y] - cur[i, _Y]
             lon, lat = c * dx + s * dy, -s * dx + c * dy
             v_lon = c * cur[j, _VX] + s * cur[j, _VY]
-            in_path = lon > 0.0 and lon < reach and abs(lat) < 0.5 * (cur[i, _W] + cur[j, _W]) + margin_p
-            if in_path:
+            if lon > 0.0 and lon < reach and abs(lat) < 0.5 * (cur[i, _W] + cur[j, _W]) + margin_p:
                 g = lon - 0.5 * (cur[i, _L] + cur[j, _L])
                 if g < lead:
                     lead, lead_v = g, v_lon
-            hit = _obstacle(cur, cs, logged, cs_log, use_log, route, t, i, j, params)
-            if hit and mutual and is_row[j] and (speed[i] > speed[j] or (speed[i] == speed[j] and i < j)):
+            hit = _obstacle(cur, cs, logged, cs_log, use_log, table, route_pos, i, j, params)
+            if hit and mutual and pos[j] >= 0 and (speed[i] > speed[j] or (speed[i] == speed[j] and i < j)):
                 # each other's obstacle: the agent with priority goes (`safety_obstacles`)
-                hit = not _obstacle(cur, cs, logged, cs_log, use_log, route, t, j, i, params)
+                hit = not _obstacle(cur, cs, logged, cs_log, use_log, table, route_pos, j, i, params)
             if hit:
                 cd = abs(cs[j, 0] * c + cs[j, 1] * s)
                 sd = abs(cs[j, 1] * c - cs[j, 0] * s)
@@ -230,23 +292,16 @@ def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.
                 if g < obs:
                     obs, obs_v = g, v_lon
             dist = math.hypot(dx, dy)
-            d = max(dist, 1e-6)
-            closing = max(((cur[i, _VX] - cur[j, _VX]) * dx + (cur[i, _VY] - cur[j, _VY]) * dy) / d, 0.0)
-            gap_lon = abs(lon) - 0.5 * (cur[i, _L] + cur[j, _L])
-            gap_lat = abs(lat) - 0.5 * (cur[i, _W] + cur[j, _W])
-            gap = max(max(gap_lon, gap_lat) - t_head * closing, 0.0)
-            fov = behind + (1.0 - behind) * 0.5 * (1.0 + lon / d)
-            mag = a_soc * math.exp(-gap / b_soc) * fov
-            fx -= mag * dx / d
-            fy -= mag * dy / d
+            mag = _social(cur, i, j, dx, dy, lon, lat, dist, params)
+            if mag > 0.0:
+                fx -= mag * dx / max(dist, 1e-6)
+                fy -= mag * dy / max(dist, 1e-6)
             if dist <= nb_range and k > 0 and dist < nbd[r, k - 1]:
                 q = k - 1
                 while q > 0 and nbd[r, q - 1] > dist:
-                    nbd[r, q] = nbd[r, q - 1]
-                    nb[r, q] = nb[r, q - 1]
+                    nbd[r, q], nb[r, q] = nbd[r, q - 1], nb[r, q - 1]
                     q -= 1
-                nbd[r, q] = dist
-                nb[r, q] = j
+                nbd[r, q], nb[r, q] = dist, j
         out[r, 0], out[r, 1] = lead, (lead_v if math.isfinite(lead) else 0.0)
         out[r, 2], out[r, 3] = obs, (obs_v if math.isfinite(obs) else 0.0)
         out[r, 4], out[r, 5] = fx, fy
