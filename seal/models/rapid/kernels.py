@@ -53,7 +53,7 @@ N_PAIR_PARAMS = 11
 """Length of `pair_scan`'s ``params`` (see there)."""
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _interval(x0: float, u: float, half: float) -> tuple[float, float]:
     """Times ``(lo, hi)`` (s) during which ``|x0 + u t| < half``: `seal.envs.car_following._interval`."""
     if abs(u) > 1e-9:
@@ -66,26 +66,25 @@ def _interval(x0: float, u: float, half: float) -> tuple[float, float]:
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _contact(b: np.ndarray, cs: np.ndarray, i: int, j: int, horizon: float, margin: float, reach: float,
-             path_margin: float, cos_same: float) -> bool:
-    """`seal.envs.car_following.predicted_contacts` for one pair (agent ``i``, box ``j``) of the boxes ``b``
-    (``cs [A, 2]``: cos / sin of their headings)."""
-    if i == j or b[i, _VALID] <= 0.5 or b[j, _VALID] <= 0.5:
-        return False
-    c, s = cs[i, 0], cs[i, 1]
-    dx, dy = b[j, _X] - b[i, _X], b[j, _Y] - b[i, _Y]
-    lon = c * dx + s * dy
+def _contact_frame(lon: float, lat: float, v_lat: float, rel_u: float, cos_dh: float, sin_dh: float,
+                   li: float, wi: float, lj: float, wj: float, reach: float, path_margin: float, horizon: float,
+                   margin: float, cos_same: float) -> bool:
+    """`seal.envs.car_following.predicted_contacts` for one pair in the agent's frame: box ``j`` at (``lon``,
+    ``lat``) (m) moving ``v_lat`` sideways and ``rel_u`` ahead relative to the agent (m/s), heading difference
+    cos / sin, lengths and widths of agent ``i`` and box ``j`` (m); leader reach (m), path margin (m), horizon
+    (s), contact margin (m), cosine of the same-direction angle. Scalars only and not inlined: the inlined
+    array form made the pair loop three times slower (and array arguments cost reference counting)."""
     if lon >= reach:
         return False
-    lat = -s * dx + c * dy
-    v_lon, v_lat = c * b[j, _VX] + s * b[j, _VY], -s * b[j, _VX] + c * b[j, _VY]
-    rel_u = v_lon - (c * b[i, _VX] + s * b[i, _VY])
-    cd = abs(cs[j, 0] * c + cs[j, 1] * s)
-    sd = abs(cs[j, 1] * c - cs[j, 0] * s)
-    ext_lon = 0.5 * b[i, _L] + 0.5 * (cd * b[j, _L] + sd * b[j, _W])
-    ext_lat = 0.5 * b[i, _W] + 0.5 * (sd * b[j, _L] + cd * b[j, _W])
-    if cs[j, 0] * c + cs[j, 1] * s > cos_same:  # same direction: entering the corridor ahead (a cut-in)
-        lo_c, hi_c = _interval(lat, v_lat, 0.5 * (b[i, _W] + b[j, _W]) + path_margin)
+    # both tests below need the box within its widest lateral extent (either corridor) at some time of the
+    # horizon: most pairs fail this without the divisions of `_interval` (1 mm covers their rounding)
+    if abs(lat) - abs(v_lat) * horizon > 0.5 * wi + 0.5 * (lj + wj) + max(margin, path_margin) + 1e-3:
+        return False
+    cd, sd = abs(cos_dh), abs(sin_dh)
+    ext_lon = 0.5 * li + 0.5 * (cd * lj + sd * wj)
+    ext_lat = 0.5 * wi + 0.5 * (sd * lj + cd * wj)
+    if cos_dh > cos_same:  # same direction: entering the corridor ahead (a cut-in)
+        lo_c, hi_c = _interval(lat, v_lat, 0.5 * (wi + wj) + path_margin)
         enter = max(lo_c, 0.0)
         at = enter if math.isfinite(enter) else 0.0
         if enter <= horizon and enter < hi_c and lon + rel_u * at > 0.0:
@@ -97,6 +96,20 @@ def _contact(b: np.ndarray, cs: np.ndarray, i: int, j: int, horizon: float, marg
         return False
     at = first if math.isfinite(first) else 0.0
     return lon + rel_u * at > 0.0 and lon > -ext_lon
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _contact(b: np.ndarray, cs: np.ndarray, i: int, j: int, params: np.ndarray) -> bool:
+    """`_contact_frame` of agent ``i`` and box ``j`` of the boxes ``b`` (``cs [A, 2]``: cos / sin of their
+    headings)."""
+    if i == j or b[i, _VALID] <= 0.5 or b[j, _VALID] <= 0.5:
+        return False
+    c, s = cs[i, 0], cs[i, 1]
+    dx, dy = b[j, _X] - b[i, _X], b[j, _Y] - b[i, _Y]
+    rel_u = c * b[j, _VX] + s * b[j, _VY] - (c * b[i, _VX] + s * b[i, _VY])
+    return _contact_frame(c * dx + s * dy, -s * dx + c * dy, -s * b[j, _VX] + c * b[j, _VY], rel_u,
+                          cs[j, 0] * c + cs[j, 1] * s, cs[j, 1] * c - cs[j, 0] * s, b[i, _L], b[i, _W], b[j, _L],
+                          b[j, _W], params[0], params[1], params[2], params[3], params[9])
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -183,7 +196,7 @@ def _obstacle(cur: np.ndarray, cs: np.ndarray, logged: np.ndarray, cs_log: np.nd
     with the route test where ``pos[i]`` >= 0 (``i``'s row of the `_route_table` ``table``)."""
     if i == j or cur[i, _VALID] <= 0.5 or cur[j, _VALID] <= 0.5:
         return False
-    reach, margin_p, horizon, margin_c, cos_same = params[0], params[1], params[2], params[3], params[9]
+    reach, margin_p = params[0], params[1]
     c, s = cs[i, 0], cs[i, 1]
     dx, dy = cur[j, _X] - cur[i, _X], cur[j, _Y] - cur[i, _Y]
     lon, lat = c * dx + s * dy, -s * dx + c * dy
@@ -192,8 +205,7 @@ def _obstacle(cur: np.ndarray, cs: np.ndarray, logged: np.ndarray, cs_log: np.nd
     if in_path and (pos[i] < 0 or _near_route(table[0], table[1], table[2], pos[i], cur[j, _X], cur[j, _Y],
                                               half_w + margin_p)):
         return True
-    return _contact(cur, cs, i, j, horizon, margin_c, reach, margin_p, cos_same) and not (
-        use_log and _contact(logged, cs_log, i, j, horizon, margin_c, reach, margin_p, cos_same))
+    return _contact(cur, cs, i, j, params) and not (use_log and _contact(logged, cs_log, i, j, params))
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -214,23 +226,31 @@ exponential is skipped, the largest per-pair cost after the route walk."""
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _social(cur: np.ndarray, i: int, j: int, dx: float, dy: float, lon: float, lat: float, dist: float,
-            params: np.ndarray) -> float:
-    """Magnitude (m/s^2) of the eq. 9 repulsion of box ``j`` on agent ``i`` (`pair_scan`'s ``params``), pushing
-    along ``-(dx, dy) / dist``."""
-    a_soc, b_soc, t_head, behind = params[4], params[5], params[6], params[7]
+def _social(dx: float, dy: float, lon: float, lat: float, dist: float, sum_l: float, sum_w: float, rvx: float,
+            rvy: float, a_soc: float, b_soc: float, t_head: float, behind: float) -> float:
+    """Magnitude (m/s^2) of the eq. 9 repulsion of a box at (``dx``, ``dy``) (m; ``lon``, ``lat`` in the agent's
+    frame, ``dist`` away) on the agent, pushing along ``-(dx, dy) / dist``: ``sum_l`` / ``sum_w`` the two
+    lengths / widths (m), (``rvx``, ``rvy``) the agent's velocity less the box's (m/s); strength (m/s^2), range
+    (m), headway (s), weight behind."""
     d = max(dist, 1e-6)
-    gap_lon = abs(lon) - 0.5 * (cur[i, _L] + cur[j, _L])
-    gap_lat = abs(lat) - 0.5 * (cur[i, _W] + cur[j, _W])
-    gap = max(gap_lon, gap_lat)
+    gap = max(abs(lon) - 0.5 * sum_l, abs(lat) - 0.5 * sum_w)
     if t_head > 0.0:
-        closing = max(((cur[i, _VX] - cur[j, _VX]) * dx + (cur[i, _VY] - cur[j, _VY]) * dy) / d, 0.0)
-        gap = gap - t_head * closing
+        gap = gap - t_head * max((rvx * dx + rvy * dy) / d, 0.0)
     gap = max(gap, 0.0)
     if gap > SOCIAL_CUTOFF * b_soc:
         return 0.0
     fov = behind + (1.0 - behind) * 0.5 * (1.0 + lon / d)
     return a_soc * math.exp(-gap / b_soc) * fov
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _insert(nb: np.ndarray, nbd: np.ndarray, j: int, dist: float) -> None:
+    """Box ``j`` at ``dist`` (m) into the nearest-first lists ``nb`` / ``nbd`` (the last one drops out)."""
+    q = nb.shape[0] - 1
+    while q > 0 and nbd[q - 1] > dist:
+        nbd[q], nb[q] = nbd[q - 1], nb[q - 1]
+        q -= 1
+    nbd[q], nb[q] = dist, j
 
 
 @njit(types.Tuple((float64[:, ::1], int64[:, ::1], float64[:, ::1]))(
@@ -259,6 +279,7 @@ def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.
     """
     n, m = rows.shape[0], cur.shape[0]
     reach, margin_p, nb_range = params[0], params[1], params[8]
+    a_soc, b_soc, t_head, behind = params[4], params[5], params[6], params[7]
     use_log = logged[:, _VALID].max() > 0.5 if m else False
     cs, cs_log = _cos_sin(cur), _cos_sin(logged)
     out = np.empty((n, 6))
@@ -266,42 +287,44 @@ def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.
     pos, speed = _rows_and_speeds(cur, rows)
     mutual = route.shape[1] > 0
     table = _route_table(cur, rows, route, t, reach)
-    route_pos = pos if mutual else np.full(m, -1, dtype=np.int64)
     for r in range(n):
         i = rows[r]
         c, s = cs[i, 0], cs[i, 1]
+        my_v = c * cur[i, _VX] + s * cur[i, _VY]
         lead, lead_v, obs, obs_v, fx, fy = np.inf, 0.0, np.inf, 0.0, 0.0, 0.0
         for j in range(m):
             if j == i or cur[j, _VALID] <= 0.5:
                 continue
             dx, dy = cur[j, _X] - cur[i, _X], cur[j, _Y] - cur[i, _Y]
             lon, lat = c * dx + s * dy, -s * dx + c * dy
-            v_lon = c * cur[j, _VX] + s * cur[j, _VY]
-            if lon > 0.0 and lon < reach and abs(lat) < 0.5 * (cur[i, _W] + cur[j, _W]) + margin_p:
-                g = lon - 0.5 * (cur[i, _L] + cur[j, _L])
-                if g < lead:
-                    lead, lead_v = g, v_lon
-            hit = _obstacle(cur, cs, logged, cs_log, use_log, table, route_pos, i, j, params)
+            v_lon, v_lat = c * cur[j, _VX] + s * cur[j, _VY], -s * cur[j, _VX] + c * cur[j, _VY]
+            cos_dh, sin_dh = cs[j, 0] * c + cs[j, 1] * s, cs[j, 1] * c - cs[j, 0] * s
+            half_w = 0.5 * (cur[i, _W] + cur[j, _W])
+            in_path = lon > 0.0 and lon < reach and abs(lat) < half_w + margin_p
+            if in_path and lon - 0.5 * (cur[i, _L] + cur[j, _L]) < lead:
+                lead, lead_v = lon - 0.5 * (cur[i, _L] + cur[j, _L]), v_lon
+            # `_obstacle` written out on scalars (the hot path); the reverse test below is rare
+            hit = cur[i, _VALID] > 0.5 and in_path and (not mutual or _near_route(
+                table[0], table[1], table[2], r, cur[j, _X], cur[j, _Y], half_w + margin_p))
+            if not hit and cur[i, _VALID] > 0.5 and _contact_frame(
+                    lon, lat, v_lat, v_lon - my_v, cos_dh, sin_dh, cur[i, _L], cur[i, _W], cur[j, _L], cur[j, _W],
+                    reach, margin_p, params[2], params[3], params[9]):
+                hit = not (use_log and _contact(logged, cs_log, i, j, params))
             if hit and mutual and pos[j] >= 0 and (speed[i] > speed[j] or (speed[i] == speed[j] and i < j)):
                 # each other's obstacle: the agent with priority goes (`safety_obstacles`)
-                hit = not _obstacle(cur, cs, logged, cs_log, use_log, table, route_pos, j, i, params)
+                hit = not _obstacle(cur, cs, logged, cs_log, use_log, table, pos, j, i, params)
             if hit:
-                cd = abs(cs[j, 0] * c + cs[j, 1] * s)
-                sd = abs(cs[j, 1] * c - cs[j, 0] * s)
-                g = lon - (0.5 * cur[i, _L] + 0.5 * (cd * cur[j, _L] + sd * cur[j, _W]))
+                g = lon - (0.5 * cur[i, _L] + 0.5 * (abs(cos_dh) * cur[j, _L] + abs(sin_dh) * cur[j, _W]))
                 if g < obs:
                     obs, obs_v = g, v_lon
             dist = math.hypot(dx, dy)
-            mag = _social(cur, i, j, dx, dy, lon, lat, dist, params)
+            mag = _social(dx, dy, lon, lat, dist, cur[i, _L] + cur[j, _L], cur[i, _W] + cur[j, _W],
+                          cur[i, _VX] - cur[j, _VX], cur[i, _VY] - cur[j, _VY], a_soc, b_soc, t_head, behind)
             if mag > 0.0:
                 fx -= mag * dx / max(dist, 1e-6)
                 fy -= mag * dy / max(dist, 1e-6)
             if dist <= nb_range and k > 0 and dist < nbd[r, k - 1]:
-                q = k - 1
-                while q > 0 and nbd[r, q - 1] > dist:
-                    nbd[r, q], nb[r, q] = nbd[r, q - 1], nb[r, q - 1]
-                    q -= 1
-                nbd[r, q], nb[r, q] = dist, j
+                _insert(nb[r], nbd[r], j, dist)
         out[r, 0], out[r, 1] = lead, (lead_v if math.isfinite(lead) else 0.0)
         out[r, 2], out[r, 3] = obs, (obs_v if math.isfinite(obs) else 0.0)
         out[r, 4], out[r, 5] = fx, fy
