@@ -22,7 +22,8 @@ from seal.envs.car_following import (
 )
 from seal.models.rapid import Guidance, RapidBackground
 from seal.models.rapid import kernels as K
-from seal.models.rapid.features import N_NEIGHBORS, NEIGHBOR_RANGE_M, scan_pairs
+from seal.models.rapid.fast import FastAgentEncoder, FastDenoiser
+from seal.models.rapid.features import N_NEIGHBORS, NEIGHBOR_DIM, NEIGHBOR_RANGE_M, OWN_DIM, scan_pairs
 from seal.models.rapid.network import RapidNet
 from seal.models.rapid.sampler import NO_BOUND, guide, safety_bound
 
@@ -119,6 +120,37 @@ def test_cached_read_out_and_the_denoisers_context_term_match_the_modules() -> N
         for k in (0, 12, 49):
             torch.testing.assert_close(net.denoiser.forward_from(x, k, net.denoiser.context_part(ctx)),
                                        net.denoiser(x, torch.full((7,), k), ctx), rtol=1e-5, atol=1e-6)
+
+
+def test_fast_inference_path_matches_the_modules() -> None:
+    torch.manual_seed(1)
+    net = RapidNet(16).eval()
+    with torch.no_grad():  # trained-looking weights: the missing embeddings are not zero
+        for p in net.agent.missing.values():
+            p.normal_()
+    rng = np.random.default_rng(3)
+    n = 9
+    inp = {"own": rng.normal(size=(n, OWN_DIM)), "prev_acc": rng.normal(size=(n, 2)), "speed_cmd": rng.normal(
+        size=(n, 1)), "dest": rng.normal(size=(n, 3)), "leader": rng.normal(size=(n, 2)),
+        "neighbors": rng.normal(size=(n, N_NEIGHBORS, NEIGHBOR_DIM))}
+    for name in ("prev", "speed", "dest", "leader"):
+        inp[f"{name}_mask"] = (rng.random(n) > 0.4).astype(float)
+    inp["neighbor_mask"] = (rng.random((n, N_NEIGHBORS)) > 0.5).astype(float)
+    inp["neighbor_mask"][0] = 0.0  # an agent with no neighbour: the missing embedding
+    for field, mask in (("prev_acc", "prev_mask"), ("speed_cmd", "speed_mask"), ("dest", "dest_mask"),
+                        ("leader", "leader_mask")):
+        inp[field] *= inp[mask][:, None]  # `agent_inputs` zeroes absent inputs
+    t = {k: torch.from_numpy(v.astype(np.float32)) for k, v in inp.items()}
+    z = torch.randn(1, 16, 16)
+    kv = net.agent.latent_kv(z)
+    with torch.no_grad():
+        ref = net.agent(t, z.expand(n, -1, -1))
+        torch.testing.assert_close(FastAgentEncoder(net.agent)(t, kv), ref, rtol=1e-5, atol=1e-5)
+        fast = FastDenoiser(net.denoiser)
+        x = torch.randn(n, 2)
+        for k in (0, 12, 49, 12):  # 12 twice: the cached step term
+            torch.testing.assert_close(fast.forward_from(x, k, fast.context_part(ref)),
+                                       net.denoiser(x, torch.full((n,), k), ref), rtol=1e-5, atol=1e-5)
 
 
 def test_safety_term_caps_the_longitudinal_acceleration_only_above_the_bound() -> None:

@@ -21,8 +21,9 @@ from seal.core.errors import SealError
 from seal.core.road import RoadDescription
 from seal.core.scenario import HEADING, VALID, VX, VY, Scenario
 from seal.envs.background import SimulatedBackground
+from seal.models.rapid.fast import FastAgentEncoder, FastDenoiser
 from seal.models.rapid.features import ACC_SCALE_MPS2, MapGeometry, agent_inputs, build_map_geometry, scan_pairs
-from seal.models.rapid.network import RapidNet, anchor_encoding, inputs_to_torch
+from seal.models.rapid.network import Denoiser, RapidNet, anchor_encoding, inputs_to_torch
 from seal.models.rapid.sampler import Guidance, ddim_sample, physics_targets, schedule, social_constants
 from seal.models.rapid.train import load_rapid_net
 
@@ -47,6 +48,10 @@ class RapidBackground(SimulatedBackground):
     def __init__(self, net: RapidNet, guidance: Guidance | None = None, ddim_steps: int = 5,
                  temperature: float = 1.0) -> None:
         self.net = net.eval()
+        # the per-step path of the network (`seal.models.rapid.fast`); a denoiser of another kind is called as is
+        self._agent = FastAgentEncoder(net.agent)
+        self._denoiser: torch.nn.Module | FastDenoiser = (
+            FastDenoiser(net.denoiser) if isinstance(net.denoiser, Denoiser) else net.denoiser)
         self.guidance = guidance or Guidance()
         self.ddim_steps = int(ddim_steps)
         self.temperature = float(temperature)
@@ -59,6 +64,7 @@ class RapidBackground(SimulatedBackground):
         """The same network (and map cache) with other guidance options."""
         other = RapidBackground(self.net, guidance, self.ddim_steps, self.temperature)
         other._maps = self._maps
+        other._agent, other._denoiser = self._agent, self._denoiser
         return other
 
     def map_context(self, road: RoadDescription) -> tuple[MapGeometry, torch.Tensor]:
@@ -101,8 +107,8 @@ class RapidBackground(SimulatedBackground):
         inp = agent_inputs(self._geo, cur, rows, prev_vel, prev_ok, desired, dest, scan)
         targets = physics_targets(self._geo, cur, rows, desired, dest, self.guidance, logged, scan)
         with torch.inference_mode():
-            ctx = self.net.agent(inputs_to_torch(inp), self._z, self._kv)
-            acc = ddim_sample(self.net.denoiser, ctx, self.alpha_bar, self.ddim_steps, self._gen,
+            ctx = self._agent(inputs_to_torch(inp), self._kv)
+            acc = ddim_sample(self._denoiser, ctx, self.alpha_bar, self.ddim_steps, self._gen,
                               {k: torch.from_numpy(v.astype(np.float32)) for k, v in targets.items()},
                               self.guidance, self.temperature).numpy().astype(np.float64) * ACC_SCALE_MPS2
         self._prev = cur.copy()

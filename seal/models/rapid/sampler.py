@@ -54,6 +54,7 @@ from seal.core.scenario import HEADING, VX, VY, WIDTH, X, Y
 from seal.envs.background import idm_acceleration, leader_gaps
 from seal.envs.car_following import EMERGENCY_DECEL_MPS2, safe_acceleration
 from seal.models.rapid.features import ACC_SCALE_MPS2, MapGeometry, PairScan, scan_pairs
+from seal.models.rapid.fast import FastDenoiser
 from seal.models.rapid.network import Denoiser
 
 N_DIFFUSION = 50
@@ -227,16 +228,16 @@ def ddim_steps(n_steps: int, n_train: int = N_DIFFUSION) -> list[int]:
 
 
 @torch.no_grad()
-def ddim_sample(denoise: torch.nn.Module, ctx: torch.Tensor, alpha_bar: torch.Tensor, n_steps: int,
+def ddim_sample(denoise: torch.nn.Module | FastDenoiser, ctx: torch.Tensor, alpha_bar: torch.Tensor, n_steps: int,
                 generator: torch.Generator, targets: dict[str, torch.Tensor], g: Guidance,
                 temperature: float = 1.0) -> torch.Tensor:
     """Clean accelerations ``[n, 2]`` (model units) for contexts ``ctx [n, D]`` (module docstring); a
-    `Denoiser` multiplies the contexts once per call (`Denoiser.context_part`), any other module is called as
-    ``denoise(x, k, ctx)`` at every step."""
+    `Denoiser` (or its `FastDenoiser`) multiplies the contexts once per call (`Denoiser.context_part`), any other
+    module is called as ``denoise(x, k, ctx)`` at every step."""
     n = ctx.shape[0]
     x = torch.randn(n, 2, generator=generator) * temperature
     steps = ddim_steps(n_steps, len(alpha_bar))
-    if isinstance(denoise, Denoiser):
+    if isinstance(denoise, (Denoiser, FastDenoiser)):
         ctx_part = denoise.context_part(ctx)
 
         def predict(x: torch.Tensor, k: int) -> torch.Tensor:
