@@ -244,13 +244,14 @@ def _social(dx: float, dy: float, lon: float, lat: float, dist: float, sum_l: fl
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _insert(nb: np.ndarray, nbd: np.ndarray, j: int, dist: float) -> None:
-    """Box ``j`` at ``dist`` (m) into the nearest-first lists ``nb`` / ``nbd`` (the last one drops out)."""
-    q = nb.shape[0] - 1
-    while q > 0 and nbd[q - 1] > dist:
-        nbd[q], nb[q] = nbd[q - 1], nb[q - 1]
+def _insert(nb: np.ndarray, nbd: np.ndarray, r: int, j: int, dist: float) -> None:
+    """Box ``j`` at ``dist`` (m) into row ``r`` of the nearest-first lists ``nb`` / ``nbd`` (the last one drops
+    out); whole arrays, not row views: a view per call cost as much as the rest of the pair."""
+    q = nb.shape[1] - 1
+    while q > 0 and nbd[r, q - 1] > dist:
+        nbd[r, q], nb[r, q] = nbd[r, q - 1], nb[r, q - 1]
         q -= 1
-    nbd[q], nb[q] = dist, j
+    nbd[r, q], nb[r, q] = dist, j
 
 
 @njit(types.Tuple((float64[:, ::1], int64[:, ::1], float64[:, ::1]))(
@@ -317,14 +318,14 @@ def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.
                 g = lon - (0.5 * cur[i, _L] + 0.5 * (abs(cos_dh) * cur[j, _L] + abs(sin_dh) * cur[j, _W]))
                 if g < obs:
                     obs, obs_v = g, v_lon
-            dist = math.hypot(dx, dy)
+            dist = math.sqrt(dx * dx + dy * dy)  # not math.hypot: a library call per pair
             mag = _social(dx, dy, lon, lat, dist, cur[i, _L] + cur[j, _L], cur[i, _W] + cur[j, _W],
                           cur[i, _VX] - cur[j, _VX], cur[i, _VY] - cur[j, _VY], a_soc, b_soc, t_head, behind)
             if mag > 0.0:
                 fx -= mag * dx / max(dist, 1e-6)
                 fy -= mag * dy / max(dist, 1e-6)
             if dist <= nb_range and k > 0 and dist < nbd[r, k - 1]:
-                _insert(nb[r], nbd[r], j, dist)
+                _insert(nb, nbd, r, j, dist)
         out[r, 0], out[r, 1] = lead, (lead_v if math.isfinite(lead) else 0.0)
         out[r, 2], out[r, 3] = obs, (obs_v if math.isfinite(obs) else 0.0)
         out[r, 4], out[r, 5] = fx, fy
