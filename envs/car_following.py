@@ -162,10 +162,10 @@ def route_distances(cur: np.ndarray, rows: np.ndarray, log: np.ndarray, t: int) 
 
 def obstacle_pairs(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray | None = None,
                    horizon_s: float = CONTACT_HORIZON_S, route_dist: np.ndarray | None = None
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``[n, A]`` tables for each agent of ``rows`` and box of ``cur``: whether the box is an obstacle of the
-    agent (`obstacle_gaps`), the bumper gap to it along the agent's heading (m, inf where not an obstacle) and
-    its speed along that heading (m/s). With ``route_dist`` (`route_distances`), a box in the heading corridor
+    agent (`obstacle_gaps`), the bumper gap to it along the agent's heading (m, inf where not an obstacle), its
+    speed along that heading (m/s) and whether it is in the agent's path (the rest are predicted contacts only). With ``route_dist`` (`route_distances`), a box in the heading corridor
     counts only where its centre is also within the two half widths plus `PATH_MARGIN_M` of the agent's route:
     on a curve or a turn the straight corridor holds cars of other lanes that are not in the agent's way."""
     allrows = np.arange(len(cur))
@@ -182,7 +182,7 @@ def obstacle_pairs(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray | None 
     if route_dist is not None:
         in_path &= route_dist < half_w + PATH_MARGIN_M
     hit = in_path | contact
-    return hit, np.where(hit, f["lon"] - ext_lon, np.inf), f["v_lon"]
+    return hit, np.where(hit, f["lon"] - ext_lon, np.inf), f["v_lon"], in_path
 
 
 def obstacle_gaps(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray | None = None,
@@ -194,19 +194,23 @@ def obstacle_gaps(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray | None =
     themselves (right of way, signals, a turn) in ways constant velocity cannot see, and braking for it (e.g. for
     a car turning away at a junction) stops the agent in the path of traffic that the log lets pass. The gap is
     the current one along the agent's heading (<= 0 for a box already beside it: brake as hard as allowed)."""
-    _, gap, v_lon = obstacle_pairs(cur, rows, logged, horizon_s)
+    _, gap, v_lon, _ = obstacle_pairs(cur, rows, logged, horizon_s)
     return _nearest(gap, v_lon)
 
 
 def safety_obstacles(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray | None, route_dist: np.ndarray | None,
                      horizon_s: float = CONTACT_HORIZON_S) -> tuple[np.ndarray, np.ndarray]:
     """`obstacle_gaps` for the safety bound of learned background agents (`seal.models.rapid`): the boxes of
-    `obstacle_pairs` with ``route_dist``, less, for two agents of ``rows`` that are each other's obstacle (both
-    simulated), the one the agent has priority over: the faster one goes first (ties: the lower row). Why: two
-    simulated agents that meet where their logs did not (a left turner and oncoming traffic, each a little off its
-    log's timing) would otherwise both brake for each other until both stand still; the ego and the adversary
-    are never in ``rows``, so a background agent always yields to them."""
-    hit, gap, v_lon = obstacle_pairs(cur, rows, logged, horizon_s, route_dist)
+    `obstacle_pairs` with ``route_dist``, less, between two agents of ``rows`` (both simulated), the one the agent
+    has priority over (the faster one goes first; ties: the lower row) where they are each other's obstacle or
+    where that one is only a predicted contact of the agent (crossing or cutting in, not in its path on its
+    route). Why: two simulated agents that meet where their logs did not (a left turner and oncoming traffic, each
+    a little off its log's timing) would otherwise both brake for each other until both stand still; and a car
+    that waited at a junction in its log creeps forward at its log's timing, so the faster agent it would cross
+    braked for a car that was not coming (on validation, pool2500 train 300-339, this second rule took the 8 s
+    ADE from 2.197 to 2.153 m, background collisions 0.037 -> 0.039). The ego and the adversary are never in
+    ``rows``, so a background agent always yields to them."""
+    hit, gap, v_lon, in_path = obstacle_pairs(cur, rows, logged, horizon_s, route_dist)
     pos = np.full(len(cur), -1)
     pos[rows] = np.arange(rows.size)
     speed = np.hypot(cur[:, VX], cur[:, VY])
@@ -215,7 +219,10 @@ def safety_obstacles(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray | Non
     back[kk, jj] = hit[pos[jj], rows[kk]]
     mine = speed[rows, None]
     first = (mine > speed[None, :]) | ((mine == speed[None, :]) & (rows[:, None] < np.arange(len(cur))[None, :]))
-    return _nearest(np.where(hit & back & first, np.inf, gap), v_lon)
+    simulated = np.zeros(len(cur), dtype=bool)
+    simulated[rows] = True
+    yields = first & (back | ~in_path) & simulated[None, :]
+    return _nearest(np.where(hit & yields, np.inf, gap), v_lon)
 
 
 def _wanted_gap(speed: np.ndarray, lead_speed: np.ndarray, time_wanted_s: float | np.ndarray) -> np.ndarray:

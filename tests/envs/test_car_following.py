@@ -189,3 +189,15 @@ def test_of_two_simulated_agents_in_each_others_way_only_the_slower_yields() -> 
     assert gap[1] == pytest.approx(15.0)  # agent 2 yields to agent 1
     alone, _ = safety_obstacles(cur, np.array([1]), None, None)
     assert alone[0] == pytest.approx(15.0)  # agent 2 not simulated (ego-like): agent 1 yields to it
+
+
+def test_a_slower_simulated_crosser_yields_to_a_faster_simulated_agent_but_a_slower_leader_does_not() -> None:
+    # agent 0 at 10 m/s; agent 1 creeping across its lane 30 m ahead at 2 m/s (a predicted contact within 4 s);
+    # agent 2 in its lane 50 m ahead at 3 m/s (in its path)
+    cur = boxes((0.0, 0.0, 0.0, 10.0), (30.0, -6.0, math.pi / 2, 2.0), (50.0, 0.0, 0.0, 3.0))
+    both, _ = safety_obstacles(cur[:2], np.array([0, 1]), None, None, horizon_s=4.0)
+    assert np.isinf(both[0])  # both simulated: the faster agent 0 goes first
+    only, _ = safety_obstacles(cur[:2], np.array([0]), None, None, horizon_s=4.0)
+    assert only[0] == pytest.approx(30.0 - 2.5 - 1.0)  # agent 1 not simulated (ego-like): agent 0 yields to it
+    led, _ = safety_obstacles(cur[[0, 2]], np.array([0, 1]), None, None, horizon_s=4.0)
+    assert led[0] == pytest.approx(50.0 - 5.0)  # a slower simulated car in the path stays an obstacle

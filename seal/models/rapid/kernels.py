@@ -305,15 +305,17 @@ def pair_scan(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray, params: np.
             if in_path and lon - 0.5 * (cur[i, _L] + cur[j, _L]) < lead:
                 lead, lead_v = lon - 0.5 * (cur[i, _L] + cur[j, _L]), v_lon
             # `_obstacle` written out on scalars (the hot path); the reverse test below is rare
-            hit = cur[i, _VALID] > 0.5 and in_path and (not mutual or _near_route(
+            on_route = cur[i, _VALID] > 0.5 and in_path and (not mutual or _near_route(
                 table[0], table[1], table[2], r, cur[j, _X], cur[j, _Y], half_w + margin_p))
+            hit = on_route
             if not hit and cur[i, _VALID] > 0.5 and _contact_frame(
                     lon, lat, v_lat, v_lon - my_v, cos_dh, sin_dh, cur[i, _L], cur[i, _W], cur[j, _L], cur[j, _W],
                     reach, margin_p, params[2], params[3], params[9]):
                 hit = not (use_log and _contact(logged, cs_log, i, j, params))
             if hit and mutual and pos[j] >= 0 and (speed[i] > speed[j] or (speed[i] == speed[j] and i < j)):
-                # each other's obstacle: the agent with priority goes (`safety_obstacles`)
-                hit = not _obstacle(cur, cs, logged, cs_log, use_log, table, pos, j, i, params)
+                # the agent with priority goes where the other is only a predicted contact or has it as its obstacle
+                # too (`safety_obstacles`)
+                hit = on_route and not _obstacle(cur, cs, logged, cs_log, use_log, table, pos, j, i, params)
             if hit:
                 g = lon - (0.5 * cur[i, _L] + 0.5 * (abs(cos_dh) * cur[j, _L] + abs(sin_dh) * cur[j, _W]))
                 if g < obs:
