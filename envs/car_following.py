@@ -165,9 +165,10 @@ def obstacle_pairs(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray | None 
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``[n, A]`` tables for each agent of ``rows`` and box of ``cur``: whether the box is an obstacle of the
     agent (`obstacle_gaps`), the bumper gap to it along the agent's heading (m, inf where not an obstacle), its
-    speed along that heading (m/s) and whether it is in the agent's path (the rest are predicted contacts only). With ``route_dist`` (`route_distances`), a box in the heading corridor
-    counts only where its centre is also within the two half widths plus `PATH_MARGIN_M` of the agent's route:
-    on a curve or a turn the straight corridor holds cars of other lanes that are not in the agent's way."""
+    speed along that heading (m/s) and whether it is in the agent's path (the other obstacles are predicted
+    contacts only). With ``route_dist`` (`route_distances`), a box in the heading corridor counts only where its
+    centre is also within the two half widths plus `PATH_MARGIN_M` of the agent's route: on a curve or a turn the
+    straight corridor holds cars of other lanes that are not in the agent's way."""
     allrows = np.arange(len(cur))
     f = _frames(cur, rows, allrows)
     me, other = cur[rows], cur
