@@ -41,7 +41,7 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -97,6 +97,7 @@ class Intent:
     log: np.ndarray | None = None
     speed_set: np.ndarray | None = None
     valid: np.ndarray | None = None
+    _logged: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def from_log(cls, scenario: Scenario) -> Intent:
@@ -128,7 +129,13 @@ class Intent:
         fixed = self.desired_speed_mps[rows]
         if self.log is None or self.speed_set is None or self.valid is None:
             return fixed
-        logged = logged_desired_speed(self.log, self.valid, t, rows)
+        if self._logged is None:
+            # every step's logged desired speed at once, on the first call: the per-step window average was a
+            # per-agent cost of every env step (the same numbers, `logged_desired_speed` per step)
+            every = np.arange(len(self.log))
+            self._logged = np.stack([logged_desired_speed(self.log, self.valid, k, every)
+                                     for k in range(self.log.shape[1])], axis=1)
+        logged = self._logged[rows, t]
         out = np.where(np.isfinite(logged), logged, fixed)
         return np.where(self.speed_set[rows], fixed, out)
 

@@ -224,3 +224,21 @@ def reference_lane_excess(points: np.ndarray, road: RoadDescription) -> tuple[np
             better = ex < best_e
             best_e[better], best_q[better] = ex[better], q[better]
     return best_q, best_e
+
+
+def rapid_neighbor_features(cur: np.ndarray, rows: np.ndarray, nb_rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``[n, K, 8]`` neighbour inputs (agent frame: position / 30 m, velocity difference / 10 m/s, heading
+    difference cos / sin, length / 5 m, width / 2 m; zeros where ``nb_rows`` is -1) and the ``[n, K]`` mask."""
+    ok = nb_rows >= 0
+    other = cur[np.where(ok, nb_rows, 0)]
+    me = cur[rows]
+    c, s = np.cos(me[:, 2])[:, None], np.sin(me[:, 2])[:, None]
+    rxy = other[..., 0:2] - me[:, None, 0:2]
+    rv = other[..., 3:5] - me[:, None, 3:5]
+    dh = other[..., 2] - me[:, None, 2]
+    f = np.stack([
+        (c * rxy[..., 0] + s * rxy[..., 1]) / 30.0, (-s * rxy[..., 0] + c * rxy[..., 1]) / 30.0,
+        (c * rv[..., 0] + s * rv[..., 1]) / 10.0, (-s * rv[..., 0] + c * rv[..., 1]) / 10.0,
+        np.cos(dh), np.sin(dh), other[..., 5] / 5.0, other[..., 6] / 2.0,
+    ], axis=-1)
+    return np.where(ok[..., None], f, 0.0).astype(np.float32), ok.astype(np.float32)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scenario_factory as sf
 import torch
-from kernel_reference import rapid_neighbors, rapid_social_force
+from kernel_reference import rapid_neighbor_features, rapid_neighbors, rapid_social_force
 
 from seal.core import scenario as scn
 from seal.core.geometry import pairwise_overlaps
@@ -68,6 +68,13 @@ def test_pair_scan_matches_the_numpy_terms(seed: int) -> None:
     idx, dist = rapid_neighbors(cur, rows, N_NEIGHBORS, NEIGHBOR_RANGE_M)
     np.testing.assert_array_equal(scan.neighbor_rows, idx)
     np.testing.assert_allclose(scan.neighbor_dist, dist, rtol=1e-12)
+    nb_rows = scan.neighbor_rows.copy()
+    nb_rows[::3, -3:] = -1  # some agents with fewer than N_NEIGHBORS neighbours
+    feats, mask = K.neighbor_features(cur, rows.astype(np.int64), nb_rows)
+    ref_feats, ref_mask = rapid_neighbor_features(cur, rows, nb_rows)
+    assert 0 < mask.sum() < mask.size
+    np.testing.assert_array_equal(mask, ref_mask)
+    np.testing.assert_allclose(feats, ref_feats, rtol=1e-6, atol=1e-6)
 
 
 @pytest.mark.parametrize("seed", [0, 1])

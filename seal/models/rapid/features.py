@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from seal.core.road import RoadDescription
-from seal.core.scenario import DT_S, HEADING, LENGTH, VX, VY, WIDTH, X, Y
+from seal.core.scenario import DT_S, HEADING, VX, VY, X, Y
 from seal.envs.car_following import (
     CONTACT_HORIZON_S,
     CONTACT_MARGIN_M,
@@ -31,7 +31,7 @@ from seal.envs.car_following import (
     PATH_MARGIN_M,
 )
 from seal.envs.road_geometry import get_road_geometry
-from seal.models.rapid.kernels import closest_points_grid, pair_scan, segment_grid
+from seal.models.rapid.kernels import closest_points_grid, neighbor_features, pair_scan, segment_grid
 
 N_FREQ = 8
 """Fourier frequencies per axis, linearly spaced from 2 pi / 1 km to 2 pi / 0.5 m (paper 3.2)."""
@@ -217,24 +217,6 @@ def scan_pairs(cur: np.ndarray, rows: np.ndarray, logged: np.ndarray | None = No
     return PairScan(out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4:6], nb, nbd)
 
 
-def _neighbors(cur: np.ndarray, rows: np.ndarray, c: np.ndarray, s: np.ndarray, scan: PairScan
-               ) -> tuple[np.ndarray, np.ndarray]:
-    n = len(rows)
-    ok = scan.neighbor_rows >= 0
-    other = cur[np.where(ok, scan.neighbor_rows, 0)]
-    rxy = other[..., [X, Y]] - cur[rows][:, None, [X, Y]]
-    rv = other[..., [VX, VY]] - cur[rows][:, None, [VX, VY]]
-    cc, ss = c[:, None], s[:, None]
-    dh = other[..., HEADING] - cur[rows][:, None, HEADING]
-    f = np.stack([
-        (cc * rxy[..., 0] + ss * rxy[..., 1]) / 30.0, (-ss * rxy[..., 0] + cc * rxy[..., 1]) / 30.0,
-        (cc * rv[..., 0] + ss * rv[..., 1]) / 10.0, (-ss * rv[..., 0] + cc * rv[..., 1]) / 10.0,
-        np.cos(dh), np.sin(dh), other[..., LENGTH] / 5.0, other[..., WIDTH] / 2.0,
-    ], axis=-1)
-    feats = np.where(ok[..., None], f, 0.0).astype(np.float32).reshape(n, N_NEIGHBORS, NEIGHBOR_DIM)
-    return feats, ok.astype(np.float32)
-
-
 def agent_inputs(
     geo: MapGeometry, cur: np.ndarray, rows: np.ndarray, prev_vel: np.ndarray, prev_ok: np.ndarray,
     desired_speed: np.ndarray, destination: np.ndarray, scan: PairScan | None = None,
@@ -268,7 +250,8 @@ def agent_inputs(
     leader_mask = np.isfinite(gap)
     closing = np.where(leader_mask, speed - lead_v, 0.0)
     leader = np.column_stack([np.where(leader_mask, gap, 0.0) / 50.0, closing / 10.0])
-    neighbors, neighbor_mask = _neighbors(cur, rows, c, s, scan)
+    neighbors, neighbor_mask = neighbor_features(np.ascontiguousarray(cur, dtype=np.float64),
+                                                 np.ascontiguousarray(rows, dtype=np.int64), scan.neighbor_rows)
     f32 = np.float32
     return AgentInputs(
         own.astype(f32), np.where(prev_ok[:, None], prev_acc, 0.0).astype(f32), prev_mask,

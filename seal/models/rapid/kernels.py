@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import float64, int64, njit, types
+from numba import float32, float64, int64, njit, types
 
 
 @njit(types.Tuple((float64[:, ::1], int64[::1]))(float64[:, ::1], float64[::1], float64[:, ::1]),
@@ -414,3 +414,31 @@ def closest_points_grid(cols: np.ndarray, len2: np.ndarray, pts: np.ndarray, met
                     i += max(step, 1)
         idx[p] = max(best_k, 0)
     return out, idx
+
+
+@njit(types.Tuple((float32[:, :, ::1], float32[:, ::1]))(float64[:, ::1], int64[::1], int64[:, ::1]), cache=True,
+      nogil=True, error_model="numpy")
+def neighbor_features(cur: np.ndarray, rows: np.ndarray, nb_rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`seal.models.rapid.features` neighbour inputs in one compiled pass: for agent ``rows[r]`` and its neighbour
+    ``nb_rows[r, q]`` (-1: none), in the agent's frame: position / 30 m, velocity difference / 10 m/s, heading
+    difference cos / sin, length / 5 m, width / 2 m (``[n, K, 8]``, zeros where none) and the mask ``[n, K]``.
+    Why: the numpy form (fancy indexing and a stack of ``[n, K]`` tables) was a per-agent cost of every step."""
+    n, k = nb_rows.shape[0], nb_rows.shape[1]
+    out = np.zeros((n, k, 8), dtype=np.float32)
+    mask = np.zeros((n, k), dtype=np.float32)
+    for r in range(n):
+        i = rows[r]
+        c, s = math.cos(cur[i, _H]), math.sin(cur[i, _H])
+        for q in range(k):
+            j = nb_rows[r, q]
+            if j < 0:
+                continue
+            dx, dy = cur[j, _X] - cur[i, _X], cur[j, _Y] - cur[i, _Y]
+            dvx, dvy = cur[j, _VX] - cur[i, _VX], cur[j, _VY] - cur[i, _VY]
+            dh = cur[j, _H] - cur[i, _H]
+            out[r, q, 0], out[r, q, 1] = (c * dx + s * dy) / 30.0, (-s * dx + c * dy) / 30.0
+            out[r, q, 2], out[r, q, 3] = (c * dvx + s * dvy) / 10.0, (-s * dvx + c * dvy) / 10.0
+            out[r, q, 4], out[r, q, 5] = math.cos(dh), math.sin(dh)
+            out[r, q, 6], out[r, q, 7] = cur[j, _L] / 5.0, cur[j, _W] / 2.0
+            mask[r, q] = 1.0
+    return out, mask
