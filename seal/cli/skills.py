@@ -36,7 +36,9 @@ def register(tree: CommandTree) -> None:
         "state-conditioned RealNVP priors, each on its own windows. Writes vae.pt, prior_benign.pt, "
         "prior_adversarial.pt, metrics.json (held-out reconstruction error, prior NLL of both priors on both "
         "classes and their separation), embedding.png, config.yaml, demos_<source>.npz and CSV training logs to "
-        "--out.",
+        "--out. Preset ego (the ReSkill ego's skills): a decoder that ignores the previous action and benign "
+        "windows from the expert source instead (DART: the clean heuristic driver with noise on its applied "
+        "action, its clean action recorded).",
     )
     add_fit_job_options(p, "skills", "seal.experiments.fitting.skills.SkillsFitConfig", "vae_train.max_epochs=5",
                         "metrics", presets=SKILLS_PRESETS)
