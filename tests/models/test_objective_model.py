@@ -323,5 +323,7 @@ def test_fit_records_training_spearman_and_the_closeness_baseline_on_validation(
     model, fit = train_objective(labels, ObjectiveConfig(hidden=8), cfg)
     assert fit.val_closeness_spearman == pytest.approx(by_hand, abs=1e-9)
     assert model.info["fit"]["val_closeness_spearman"] == fit.val_closeness_spearman
+    assert fit.train_closeness_spearman == pytest.approx(closeness_spearman(labels, data.train_check_pairs), abs=1e-9)
+    assert fit.train_closeness_spearman != fit.val_closeness_spearman
     for row in fit.history:
         assert -1.0 <= row["train_spearman"] <= 1.0 and row["train_spearman"] != row["val_spearman"]

@@ -16,8 +16,8 @@ and 4 other roll-outs per validation scenario), with ``"mse"`` the one with the 
 
 To tell over- from under-fitting, every epoch also records the mean Spearman on as many training scenarios as there
 are validation scenarios (groups drawn the same way, with their own random stream so that training is unchanged),
-and the fit records closeness's Spearman on the validation groups once: the ranking pi_score starts from (with
-``zero_init``) and has to beat.
+and the fit records closeness's Spearman on both sets of groups once: the ranking pi_score starts from (with
+``zero_init``) and has to beat (the scenarios differ, so each Spearman is read against its own closeness).
 """
 
 from __future__ import annotations
@@ -122,13 +122,15 @@ class ObjectiveTrainConfig:
 class FitResult:
     """What `train_objective` did: per-epoch ``history`` rows (epoch, train_loss, val_loss = validation MSE,
     val_spearman, train_spearman = the same metric on training scenarios, seconds), the best epoch and its
-    validation MSE and Spearman, closeness's validation Spearman, why it stopped and the wall time."""
+    validation MSE and Spearman, closeness's Spearman on the validation and on those training scenarios, why it
+    stopped and the wall time."""
 
     history: list[dict[str, float]] = field(default_factory=list)
     best_epoch: int = -1
     best_val: float = float("inf")
     best_val_spearman: float = float("nan")
     val_closeness_spearman: float = float("nan")
+    train_closeness_spearman: float = float("nan")
     stop_reason: str = ""
     seconds: float = 0.0
 
@@ -394,6 +396,7 @@ def _fit_info(cfg: ObjectiveTrainConfig, result: FitResult, data: _FitData) -> d
     return {"train": cfg.to_dict(), "fit": {"best_epoch": result.best_epoch, "best_val_mse": result.best_val,
                                             "best_val_spearman": result.best_val_spearman,
                                             "val_closeness_spearman": result.val_closeness_spearman,
+                                            "train_closeness_spearman": result.train_closeness_spearman,
                                             "stop_reason": result.stop_reason, "seconds": result.seconds,
                                             "epochs": len(result.history)},
             "train_scenarios": int(data.train_s.size), "val_scenarios": int(data.val_s.size)}
@@ -432,6 +435,7 @@ def train_objective(
     start = time.perf_counter()
     bad = 0
     result.val_closeness_spearman = closeness_spearman(labels, data.val_pairs)
+    result.train_closeness_spearman = closeness_spearman(labels, data.train_check_pairs)
     for epoch in range(cfg.max_epochs):
         train_loss, out_of_time = _train_epoch(net, opt, sched, data, cfg, schedule, rng, epoch, on_step, start)
         net.eval()
@@ -441,8 +445,8 @@ def train_objective(
                "train_spearman": train_rho, "seconds": round(time.perf_counter() - start, 1)}
         result.history.append(row)
         logger.info(f"objective epoch {epoch}: train loss {row['train_loss']:.5f}, val MSE {val:.5f}, val Spearman "
-                    f"{val_rho:.4f} (closeness {result.val_closeness_spearman:.4f}), Spearman on training scenarios "
-                    f"{train_rho:.4f} ({row['seconds']} s)")
+                    f"{val_rho:.4f} (closeness {result.val_closeness_spearman:.4f}), on training scenarios "
+                    f"{train_rho:.4f} (closeness {result.train_closeness_spearman:.4f}) ({row['seconds']} s)")
         key = val_rho if cfg.select == "spearman" else -val
         if key > best_key:
             best_key, result.best_val, result.best_val_spearman, result.best_epoch, bad = key, val, val_rho, epoch, 0
