@@ -7,7 +7,7 @@ split,
 2. Training (`seal.models.objective.train`): MSE on [f_coll, f_diff] over groups of (previous roll-out, all candidates)
    pairs, plus a penalty keeping the logits near closeness (and optionally a listwise ranking loss); early stopping
    and model selection on the validation Spearman of a held-out share of the training scenarios
-   (``train_log.csv`` has it per epoch).
+   (``train_log.csv`` has it per epoch, next to the same metric on training scenarios: over- or under-fitting).
 3. Report on the held-out split (scenarios never trained on), ``report.json`` + ``report.md``:
 
    * MSE per head over all pairs and over the pairs whose previous roll-out is the logged-adversary episode;
@@ -279,7 +279,8 @@ def rank_latency_ms(model: Any, n_calls: int = LATENCY_CALLS, seed: int = 0) -> 
 
 def _write_log(path: Path, history: list[dict[str, float]]) -> None:
     buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=["epoch", "train_loss", "val_loss", "val_spearman", "seconds"])
+    writer = csv.DictWriter(buf, fieldnames=["epoch", "train_loss", "val_loss", "val_spearman", "train_spearman",
+                                              "seconds"])
     writer.writeheader()
     writer.writerows(history)
     atomic_write_bytes(path, buf.getvalue().encode())

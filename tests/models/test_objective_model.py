@@ -300,3 +300,30 @@ def test_selection_on_validation_spearman_and_correction_penalty_keeps_closeness
         for s in range(held_out.n_scenarios)
     ])
     assert spearman(pred[..., 0], held_out.f_coll).mean() > 0.95
+
+
+def test_fit_records_training_spearman_and_the_closeness_baseline_on_validation() -> None:
+    from seal.models.objective.train import _split, closeness_spearman
+
+    rng = np.random.default_rng(5)
+    labels = _synthetic_labels(rng, 20)
+    cfg = ObjectiveTrainConfig(batch_size=48, lr=3e-3, max_epochs=2, pairs_per_epoch=480, patience=3,
+                               max_minutes=1.0, prev="logged", seed=0)
+    data = _split(labels, cfg, np.random.default_rng(cfg.seed))
+    check_s = np.unique(data.train_check_pairs[:, 0])
+    # As many training scenarios as validation ones, none of them a validation scenario.
+    assert len(check_s) == len(data.val_s) == 2 and set(check_s) <= set(data.train_s)
+    # Closeness's Spearman on the logged-roll-out groups of the validation scenarios, by hand.
+    val_s = data.val_s
+    close = f_coll(labels.ego_xy[val_s, :1], labels.cand_xy[val_s])
+    by_hand = spearman(close, labels.f_coll[val_s] + labels.f_diff[val_s, 0]).mean()
+    assert closeness_spearman(labels, data.val_pairs) == pytest.approx(by_hand, abs=1e-9)
+    # f_coll is exactly closeness here: the baseline is below 1 only through f_diff, and not constant.
+    assert 0.3 < by_hand < 0.99
+    model, fit = train_objective(labels, ObjectiveConfig(hidden=8), cfg)
+    assert fit.val_closeness_spearman == pytest.approx(by_hand, abs=1e-9)
+    assert model.info["fit"]["val_closeness_spearman"] == fit.val_closeness_spearman
+    assert fit.train_closeness_spearman == pytest.approx(closeness_spearman(labels, data.train_check_pairs), abs=1e-9)
+    assert fit.train_closeness_spearman != fit.val_closeness_spearman
+    for row in fit.history:
+        assert -1.0 <= row["train_spearman"] <= 1.0 and row["train_spearman"] != row["val_spearman"]

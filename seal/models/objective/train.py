@@ -13,6 +13,11 @@ A share of the training scenarios (``val_fraction``) is held out by scenario for
 selection: with ``select="spearman"`` the kept state is the one with the best mean Spearman correlation of the
 predicted sum with the simulated sum over the candidates of the validation groups (the logged-adversary roll-out
 and 4 other roll-outs per validation scenario), with ``"mse"`` the one with the lowest validation MSE.
+
+To tell over- from under-fitting, every epoch also records the mean Spearman on as many training scenarios as there
+are validation scenarios (groups drawn the same way, with their own random stream so that training is unchanged),
+and the fit records closeness's Spearman on both sets of groups once: the ranking pi_score starts from (with
+``zero_init``) and has to beat (the scenarios differ, so each Spearman is read against its own closeness).
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ from seal.models.objective.labels import LOGGED_ROW, LabelSet
 from seal.models.objective.metrics import spearman
 from seal.models.objective.model import ObjectiveModel
 from seal.models.objective.network import ObjectiveConfig, ObjectiveNet
+from seal.scoring.criticality import f_coll
 
 logger = logging.getLogger(__name__)
 
@@ -115,12 +121,16 @@ class ObjectiveTrainConfig:
 @dataclass
 class FitResult:
     """What `train_objective` did: per-epoch ``history`` rows (epoch, train_loss, val_loss = validation MSE,
-    val_spearman, seconds), the best epoch and its validation MSE and Spearman, why it stopped and the wall time."""
+    val_spearman, train_spearman = the same metric on training scenarios, seconds), the best epoch and its
+    validation MSE and Spearman, closeness's Spearman on the validation and on those training scenarios, why it
+    stopped and the wall time."""
 
     history: list[dict[str, float]] = field(default_factory=list)
     best_epoch: int = -1
     best_val: float = float("inf")
     best_val_spearman: float = float("nan")
+    val_closeness_spearman: float = float("nan")
+    train_closeness_spearman: float = float("nan")
     stop_reason: str = ""
     seconds: float = 0.0
 
@@ -289,6 +299,7 @@ class _FitData:
     val_s: np.ndarray
     train_groups: np.ndarray
     val_pairs: np.ndarray
+    train_check_pairs: np.ndarray
 
 
 def _split(labels: LabelSet, cfg: ObjectiveTrainConfig, rng: np.random.Generator) -> _FitData:
@@ -300,7 +311,24 @@ def _split(labels: LabelSet, cfg: ObjectiveTrainConfig, rng: np.random.Generator
     prevs = np.arange(tensors.n_prev) if cfg.prev == "all" else np.array([LOGGED_ROW])
     train_groups = tensors.groups(train_s, prevs)
     val_pairs = tensors.group_pairs(validation_groups(tensors, val_s, cfg.prev, rng))
-    return _FitData(tensors, train_s, val_s, train_groups, val_pairs)
+    # Its own random stream: drawing these from ``rng`` would change every later draw, and so the fit.
+    check_rng = np.random.default_rng([cfg.seed, 1])
+    check_s = np.sort(check_rng.choice(train_s, min(len(train_s), len(val_s)), replace=False))
+    check_pairs = tensors.group_pairs(validation_groups(tensors, check_s, cfg.prev, check_rng))
+    return _FitData(tensors, train_s, val_s, train_groups, val_pairs, check_pairs)
+
+
+def closeness_spearman(labels: LabelSet, pairs: np.ndarray) -> float:
+    """Mean Spearman of closeness (``exp(-min_t d / 8)`` between candidate and previous roll-out: f_coll if the
+    ego did not react, `seal.scoring.criticality.f_coll`) with the simulated ``f_coll + f_diff``, over the groups of
+    ``pairs [G * N, 3]`` (whole groups, group by group, as `_validate`)."""
+    if len(pairs) == 0:
+        return float("nan")
+    s, i, j = (pairs[:, c] for c in range(3))
+    close = f_coll(labels.ego_xy[s, i], labels.cand_xy[s, j], valid=labels.ego_valid[s, i])
+    target = labels.f_coll[s, j] + labels.f_diff[s, i, j]
+    n = labels.n_candidates
+    return float(spearman(close.reshape(-1, n), target.reshape(-1, n)).mean())
 
 
 @dataclass(frozen=True)
@@ -367,6 +395,8 @@ def _fit_info(cfg: ObjectiveTrainConfig, result: FitResult, data: _FitData) -> d
     """The training record stored with the model."""
     return {"train": cfg.to_dict(), "fit": {"best_epoch": result.best_epoch, "best_val_mse": result.best_val,
                                             "best_val_spearman": result.best_val_spearman,
+                                            "val_closeness_spearman": result.val_closeness_spearman,
+                                            "train_closeness_spearman": result.train_closeness_spearman,
                                             "stop_reason": result.stop_reason, "seconds": result.seconds,
                                             "epochs": len(result.history)},
             "train_scenarios": int(data.train_s.size), "val_scenarios": int(data.val_s.size)}
@@ -404,15 +434,19 @@ def train_objective(
     best_key = -float("inf")
     start = time.perf_counter()
     bad = 0
+    result.val_closeness_spearman = closeness_spearman(labels, data.val_pairs)
+    result.train_closeness_spearman = closeness_spearman(labels, data.train_check_pairs)
     for epoch in range(cfg.max_epochs):
         train_loss, out_of_time = _train_epoch(net, opt, sched, data, cfg, schedule, rng, epoch, on_step, start)
         net.eval()
         val, val_rho = _validate(net, data.tensors, data.val_pairs)
+        _, train_rho = _validate(net, data.tensors, data.train_check_pairs)
         row = {"epoch": epoch, "train_loss": train_loss, "val_loss": val, "val_spearman": val_rho,
-               "seconds": round(time.perf_counter() - start, 1)}
+               "train_spearman": train_rho, "seconds": round(time.perf_counter() - start, 1)}
         result.history.append(row)
         logger.info(f"objective epoch {epoch}: train loss {row['train_loss']:.5f}, val MSE {val:.5f}, val Spearman "
-                    f"{val_rho:.4f} ({row['seconds']} s)")
+                    f"{val_rho:.4f} (closeness {result.val_closeness_spearman:.4f}), on training scenarios "
+                    f"{train_rho:.4f} (closeness {result.train_closeness_spearman:.4f}) ({row['seconds']} s)")
         key = val_rho if cfg.select == "spearman" else -val
         if key > best_key:
             best_key, result.best_val, result.best_val_spearman, result.best_epoch, bad = key, val, val_rho, epoch, 0
