@@ -313,15 +313,21 @@ def roll_out_demonstrations(scenario: Scenario, config: DemoConfig | None = None
     return _simulate(scenario, cfg, lambda idx, obs, _t: drivers.act(idx, obs), HEURISTIC, drivers.impaired)
 
 
+def _log_actions(scenario: Scenario) -> np.ndarray:
+    """``[A, T - 1, 2]`` normalised actions that make the bicycle model follow each agent's logged track
+    (`seal.envs.kinematics.recover_actions`; row ``t`` moves step ``t`` to ``t + 1``)."""
+    log = scenario.tracks.astype(np.float64)
+    return np.stack([recover_actions(log[i]) for i in range(scenario.n_agents)])
+
+
 def roll_out_log_demonstrations(scenario: Scenario, config: DemoConfig | None = None) -> Demonstrations:
     """The logged traffic's own drivers: every vehicle acts with the normalised actions that make the bicycle model
     follow its logged track (`seal.envs.kinematics.recover_actions`, row ``t`` moves step ``t`` to ``t + 1``), each
     from its own observation of the simulated scene. No noise: the actions are the log's, so the segments are clean
     driving (benign windows). An agent's segment is cut at its last logged step (afterwards it would only coast)."""
     cfg = config or DemoConfig(source="log")
-    log = scenario.tracks.astype(np.float64)
-    actions = np.stack([recover_actions(log[i]) for i in range(scenario.n_agents)])  # [A, T - 1, 2]
-    valid = log[:, :, VALID] > 0.5
+    actions = _log_actions(scenario)
+    valid = scenario.tracks[:, :, VALID] > 0.5
     last = valid.shape[1] - 1 - np.argmax(valid[:, ::-1], axis=1)
 
     def act(idx: np.ndarray, _obs: np.ndarray, t: int) -> np.ndarray:
@@ -337,8 +343,7 @@ def roll_out_expert_demonstrations(scenario: Scenario, config: DemoConfig | None
     the log (`roll_out_log_demonstrations`' actions). Deterministic for the config's seed and the scenario id."""
     cfg = config or DemoConfig(source="expert")
     rng = np.random.default_rng(scenario_seed(cfg.seed, scenario.scenario_id))
-    log = scenario.tracks.astype(np.float64)
-    log_actions = np.stack([recover_actions(log[i]) for i in range(scenario.n_agents)])  # [A, T - 1, 2]
+    log_actions = _log_actions(scenario)
     expert = rng.random(scenario.n_agents) < cfg.expert_share
     expert[scenario.ego_index] = True
     driver = HeuristicDriver()  # stateless between calls: one serves every expert vehicle
