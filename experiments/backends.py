@@ -103,38 +103,90 @@ class InlineBackend:
 
 
 class LocalBackend:
-    """A pool of ``workers`` spawned processes (default: the CPU count)."""
+    """A pool of ``workers`` spawned processes (default: the CPU count).
+
+    By default each `map` spawns its pool and closes it at the end. `start` spawns the workers at once instead
+    (each importing the ``warm`` modules as it starts) and keeps them for every later `map` until `close`: their
+    start-up (a fresh interpreter, seal's imports and compiled kernels, about a second of CPU each) then overlaps
+    what this process does before its first `map` (its own imports, planning the jobs) instead of following it.
+    """
 
     name = "local"
 
-    def __init__(self, workers: int | None = None) -> None:
+    def __init__(self, workers: int | None = None, warm: Sequence[str] = ()) -> None:
         self.workers = max(1, int(workers or os.cpu_count() or 1))
+        self.warm = tuple(warm)
+        self._pool: Any = None
+
+    def _new_pool(self, n_workers: int) -> Any:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        from seal.core.workers import initializer
+
+        # Job workers die with this process (no orphans after a kill); then they import the warm modules.
+        init, init_args = initializer(_import_modules, self.warm)
+        return ProcessPoolExecutor(n_workers, mp_context=mp.get_context("spawn"), initializer=init,
+                                   initargs=init_args)
+
+    def start(self) -> LocalBackend:
+        """Spawn all ``workers`` now (without waiting for them) and keep the pool for later `map` calls; returns
+        self. Idempotent."""
+        if self._pool is None:
+            self._pool = self._new_pool(self.workers)
+            # The executor spawns a worker per submitted job while none is idle: one no-op job per worker starts
+            # them all now rather than at the first `map`.
+            for _ in range(self.workers):
+                self._pool.submit(_noop)
+        return self
+
+    def close(self) -> None:
+        """Shut a `start`-ed pool down (waits for its workers to exit); a no-op otherwise."""
+        if self._pool is not None:
+            pool, self._pool = self._pool, None
+            pool.shutdown(wait=True)
 
     def map(
         self, fn: JobFn, jobs: Sequence[Job], desc: str = "jobs", unit: str = "job",
         sizes: Sequence[int] | None = None, progress: bool = True,
     ) -> list[JobResult]:
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-
         if not jobs:
             return []
-        results: list[JobResult | None] = [None] * len(jobs)
-        from seal.core.workers import initializer
+        if self._pool is not None:
+            return self._map(self._pool, fn, jobs, desc, unit, sizes, progress)
+        with self._new_pool(min(self.workers, len(jobs))) as pool:
+            return self._map(pool, fn, jobs, desc, unit, sizes, progress)
 
-        init, init_args = initializer()  # job workers die with this process (no orphans after a kill)
-        with ProcessPoolExecutor(min(self.workers, len(jobs)), mp_context=mp.get_context("spawn"), initializer=init,
-                                 initargs=init_args) as pool:
-            futures = {pool.submit(_worker_call, fn, job): i for i, job in enumerate(jobs)}
-            with _bar(jobs, desc, unit, sizes, progress) as bar:
-                for fut in as_completed(futures):
-                    i = futures[fut]
-                    try:
-                        results[i] = fut.result()
-                    except Exception as exc:  # the worker process died (e.g. out of memory)
-                        results[i] = JobResult(jobs[i], error=f"worker process failed: {type(exc).__name__}: {exc}")
-                    bar.update(_step(sizes, i))
+    @staticmethod
+    def _map(
+        pool: Any, fn: JobFn, jobs: Sequence[Job], desc: str, unit: str, sizes: Sequence[int] | None,
+        progress: bool,
+    ) -> list[JobResult]:
+        from concurrent.futures import as_completed
+
+        results: list[JobResult | None] = [None] * len(jobs)
+        futures = {pool.submit(_worker_call, fn, job): i for i, job in enumerate(jobs)}
+        with _bar(jobs, desc, unit, sizes, progress) as bar:
+            for fut in as_completed(futures):
+                i = futures[fut]
+                try:
+                    results[i] = fut.result()
+                except Exception as exc:  # the worker process died (e.g. out of memory)
+                    results[i] = JobResult(jobs[i], error=f"worker process failed: {type(exc).__name__}: {exc}")
+                bar.update(_step(sizes, i))
         return [r for r in results if r is not None]
+
+
+def _noop() -> None:
+    """The job that makes `LocalBackend.start` spawn a worker."""
+
+
+def _import_modules(modules: Sequence[str]) -> None:
+    """A worker's warm-up (`LocalBackend` ``warm``): import ``modules``."""
+    import importlib
+
+    for name in modules:
+        importlib.import_module(name)
 
 
 class RayBackend:

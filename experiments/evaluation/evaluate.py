@@ -380,9 +380,9 @@ def default_dataset(egos: Sequence[EgoSpec]) -> str | None:
 def evaluate_job(job: Mapping[str, Any]) -> dict[str, Any]:
     """One ego's evaluation as a picklable job for `seal.experiments.backends` (keys: ``store``, ``run``,
     ``settings`` (list of `Setting` fields), ``config``, ``progress``)."""
-    import torch
+    from seal.core.workers import torch_threads
 
-    torch.set_num_threads(1)
+    torch_threads(1)  # without importing torch where the ego and generators need none
     ego = read_run(job["run"], job.get("algo"))
     settings = [Setting(**s) for s in job["settings"]]
     with ResultsStore(job["store"]) as store:

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from seal.core.plugins import load_plugins, plugin_specs
+from seal.core.workers import torch_threads
 from seal.experiments.backends import Backend, InlineBackend, LocalBackend
 from seal.experiments.evaluation.evaluate import (
     EgoSpec,
@@ -41,9 +42,9 @@ def evaluate_chunk(job: Mapping[str, Any]) -> dict[str, Any]:
     """One chunk job (keys: ``store``, ``run``, ``algo``, ``settings`` (`Setting` fields), ``config``, ``items``
     (`WorkItem` lists), ``session``, ``plugins`` (the parent's ``--plugin`` modules)): plays the items and writes
     their rows; returns ``{"run", "written", "rows"}``."""
-    import torch
-
-    torch.set_num_threads(1)  # one core per worker: the workers are the parallelism
+    # One core per worker (the workers are the parallelism); torch is not imported for it: chunks whose egos and
+    # generators need no torch never load it (`torch_threads`).
+    torch_threads(1)
     load_plugins(job.get("plugins") or [])  # a Ray worker does not inherit this process's SEAL_PLUGINS
     use_session(str(job["session"]))
     ego = read_run(job["run"], job.get("algo"))
@@ -61,23 +62,36 @@ def chunk_jobs(
     """Plan every ego (records egos and settings in the store) and cut its missing scenarios into chunk jobs of at
     most ``chunk_size`` scenarios, egos in order; by default about eight chunks per worker for the largest ego
     plan, 1 to 20 scenarios each (small enough to balance the workers, large enough that job overhead stays
-    small)."""
+    small), and the last ``n_workers`` chunks cut in halves (`_halve_tail`)."""
     session = uuid.uuid4().hex
     with ResultsStore(store_path) as store:
         plans = [(ego, plan_ego(store, ego, settings, config)) for ego in egos]
+    auto = chunk_size is None
     if chunk_size is None:
         largest = max((len(items) for _, items in plans), default=1)
         chunk_size = max(1, min(20, -(-largest // (8 * max(1, n_workers)))))
-    jobs = []
-    for ego, items in plans:
-        for start in range(0, len(items), chunk_size):
-            chunk: list[WorkItem] = items[start : start + chunk_size]
-            jobs.append({
-                "store": store_path, "run": ego.ego if ego.path else ego.run, "algo": ego.algo,
-                "settings": [vars(s) for s in settings], "config": dict(config),
-                "items": [list(it) for it in chunk], "session": session, "plugins": plugin_specs(),
-            })
-    return jobs
+    chunks = [(ego, items[start : start + chunk_size]) for ego, items in plans
+              for start in range(0, len(items), chunk_size)]
+    if auto and n_workers > 1:
+        chunks = _halve_tail(chunks, n_workers)
+    return [{
+        "store": store_path, "run": ego.ego if ego.path else ego.run, "algo": ego.algo,
+        "settings": [vars(s) for s in settings], "config": dict(config),
+        "items": [list(it) for it in chunk], "session": session, "plugins": plugin_specs(),
+    } for ego, chunk in chunks]
+
+
+def _halve_tail(chunks: list[tuple[EgoSpec, list[WorkItem]]], n_workers: int) -> list[tuple[EgoSpec, list[WorkItem]]]:
+    """The last ``n_workers`` chunks (of more than one scenario) each cut in two halves, in order.
+
+    Workers take chunks in order, so the final round decides how long the others wait idle for the last one; half
+    as long a final round halves that wait, at the cost of ``n_workers`` more (cheap) jobs."""
+    head, tail = chunks[:-n_workers], chunks[-n_workers:]
+    out = list(head)
+    for ego, items in tail:
+        half = (len(items) + 1) // 2
+        out.extend([(ego, items[:half]), (ego, items[half:])] if len(items) > 1 else [(ego, items)])
+    return out
 
 
 def evaluate_parallel(

@@ -14,38 +14,49 @@ import os
 from seal.cli.args import CliError, add_plugin_option, add_set_option, positive_int
 from seal.cli.tree import CommandTree
 
+# What an evaluation worker imports before its first chunk: started with the pool (`LocalBackend.start`), so that
+# it overlaps this process's own imports and planning.
+WORKER_WARM_MODULES = ("seal.experiments.evaluation.parallel", "seal.experiments.evaluation.protocol",
+                       "seal.envs.scenario_env", "seal.envs.heuristic")
+
 
 def cmd_eval_runs(args: argparse.Namespace) -> int:
-    from seal.experiments.backends import make_backend
-    from seal.experiments.evaluation.evaluate import read_run, resolve_eval_config
-    from seal.experiments.evaluation.generators import apply_generator_options
-    from seal.experiments.evaluation.parallel import evaluate_runs
+    from seal.experiments.backends import Backend, LocalBackend, make_backend
 
-    runs = [*args.runs, *args.ego]
-    try:
-        egos = [read_run(r, args.algo) for r in runs]
-        config = resolve_eval_config(
-            args.config, run_configs=[e.config for e in egos], k=args.k, limit=args.limit, seed=args.seed,
-            prior=args.prior, candidates=args.candidates, sets=args.set,
-        )
-        for option in args.gen_opt:
-            name = option.partition(".")[0]
-            config["generators"].setdefault(name, {})
-        apply_generator_options(config["generators"], args.gen_opt)
-        backend = None
-        if args.backend == "ray":
-            backend = make_backend("ray", address=args.address, ray_local_cpus=args.ray_local_cpus)
-    except (ValueError, RuntimeError, FileNotFoundError) as exc:
-        raise CliError(str(exc)) from None
     workers = args.workers or os.cpu_count() or 1
+    backend: Backend | None = None
+    if args.backend != "ray" and workers > 1:
+        # Spawn the workers first: their start-up then runs while this process imports and plans.
+        backend = LocalBackend(workers, warm=WORKER_WARM_MODULES).start()
     try:
+        from seal.experiments.evaluation.evaluate import read_run, resolve_eval_config
+        from seal.experiments.evaluation.generators import apply_generator_options
+        from seal.experiments.evaluation.parallel import evaluate_runs
+
+        runs = [*args.runs, *args.ego]
+        try:
+            egos = [read_run(r, args.algo) for r in runs]
+            config = resolve_eval_config(
+                args.config, run_configs=[e.config for e in egos], k=args.k, limit=args.limit, seed=args.seed,
+                prior=args.prior, candidates=args.candidates, sets=args.set,
+            )
+            for option in args.gen_opt:
+                name = option.partition(".")[0]
+                config["generators"].setdefault(name, {})
+            apply_generator_options(config["generators"], args.gen_opt)
+            if args.backend == "ray":
+                backend = make_backend("ray", address=args.address, ray_local_cpus=args.ray_local_cpus)
+        except (ValueError, RuntimeError, FileNotFoundError) as exc:
+            raise CliError(str(exc)) from None
         results = evaluate_runs(
             runs, args.settings, args.store, dataset=args.dataset, config=config,
             replay_ego=not args.no_replay_ego, workers=workers, progress=not args.no_progress, backend=backend,
             algo=args.algo,
         )
     finally:
-        if backend is not None:
+        if isinstance(backend, LocalBackend):
+            backend.close()
+        elif backend is not None:
             backend.shutdown()  # type: ignore[attr-defined]
     for r in results:
         written = ", ".join(f"{s}: {n}" for s, n in r["written"].items())

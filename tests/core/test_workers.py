@@ -68,3 +68,26 @@ def test_workers_die_with_a_killed_parent(tmp_path: Path, context: str) -> None:
 def test_without_the_initializer_workers_are_orphaned(tmp_path: Path) -> None:
     """The check has teeth: a plain pool's workers outlive a killed parent."""
     assert len(_orphans_after_kill(tmp_path, "plain", "fork")) == 2
+
+
+TORCH_THREADS = """
+import sys
+from seal.core.workers import torch_threads
+
+torch_threads(3)
+torch_threads(1)  # replaces the pending count
+assert "torch" not in sys.modules
+import torch
+
+assert torch.get_num_threads() == 1, torch.get_num_threads()
+torch_threads(2)  # torch imported: set at once
+assert torch.get_num_threads() == 2
+print("ok")
+"""
+
+
+def test_torch_threads_applies_at_torch_import_without_importing_it() -> None:
+    """`torch_threads` before torch is imported: no import, and the count applies when torch is first imported."""
+    out = subprocess.run([sys.executable, "-c", TORCH_THREADS], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "ok"

@@ -36,6 +36,26 @@ def test_local_backend_runs_jobs_in_spawned_processes() -> None:
     assert all(r.value["pid"] != os.getpid() for r in results if r.ok)
 
 
+def loaded_modules(job) -> dict:
+    import sys
+
+    return {"pid": os.getpid(), "warm": job["module"] in sys.modules}
+
+
+def test_local_backend_start_spawns_warm_workers_once_for_every_map() -> None:
+    """`start`: the workers import the warm modules as they start and serve every `map` until `close`."""
+    backend = LocalBackend(2, warm=("json.tool",)).start()
+    try:
+        first = backend.map(loaded_modules, [{"module": "json.tool"} for _ in range(4)])
+        second = backend.map(square, [{"x": 3}])
+    finally:
+        backend.close()
+    assert all(r.ok and r.value["warm"] for r in first)
+    pids = {r.value["pid"] for r in first}
+    assert second[0].value["y"] == 9 and second[0].value["pid"] in pids and os.getpid() not in pids
+    backend.close()  # closing twice is harmless
+
+
 def test_make_backend() -> None:
     assert isinstance(make_backend("local", 0), InlineBackend)
     assert make_backend("local", 3).workers == 3

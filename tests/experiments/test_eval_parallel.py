@@ -70,6 +70,21 @@ def test_chunks_cover_every_missing_scenario_once(tmp_path: Path) -> None:
     assert chunk_jobs(store, egos, settings, config, n_workers=2) == []
 
 
+def test_automatic_chunks_end_in_halves(tmp_path: Path) -> None:
+    """Automatic sizes: the last ``n_workers`` chunks are cut in two (a shorter final round), every scenario once."""
+    data = _dataset(tmp_path / "data")
+    settings = parse_settings("normal,hard", data)
+    egos = [read_run("heuristic"), read_run("replay")]
+    from seal.experiments.evaluation import parallel
+
+    jobs = chunk_jobs(str(tmp_path / "r.sqlite"), egos, settings, resolve_eval_config(k=1), n_workers=1)
+    assert [len(j["items"]) for j in jobs] == [1] * 12  # one worker: as before, no halving
+    halves = parallel._halve_tail([(egos[0], [1, 2, 3]), (egos[0], [4, 5, 6]), (egos[1], [7, 8, 9]), (egos[1], [10])],
+                                  n_workers=2)
+    assert [(e.run, items) for e, items in halves] == [
+        ("heuristic", [1, 2, 3]), ("heuristic", [4, 5, 6]), ("replay", [7, 8]), ("replay", [9]), ("replay", [10])]
+
+
 def _chunk(job: dict) -> dict:
     from seal.experiments.evaluation.parallel import evaluate_chunk
 
