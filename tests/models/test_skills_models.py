@@ -220,6 +220,14 @@ def test_skill_policy_resamples_every_horizon_and_is_seeded() -> None:
     assert np.array_equal(policy.act(observations[0]), actions[0])
     policy.predict(observations[1], episode_start=np.array([True]))
     assert policy.steps == 1
+    # Any layout of the observation (float64, a strided or [1, D] view) acts like its contiguous float32 vector.
+    wide = np.zeros((25, 200))
+    wide[:, ::2] = observations
+    for view in (observations.astype(np.float64), wide[:, ::2], observations[:, None, :]):
+        policy.reset(7)
+        assert np.array_equal(np.stack([policy.act(o) for o in view]), np.stack(actions))
+    with pytest.raises(ValueError, match="100 entries"):
+        policy.act(observations[0, :99])
 
 
 def test_model_files_round_trip_and_errors(tmp_path) -> None:
