@@ -132,12 +132,14 @@ def social_force(cur: np.ndarray, rows: np.ndarray, g: Guidance) -> np.ndarray:
     return scan_pairs(cur, rows, None, social_constants(g)).social
 
 
-def map_force(geo: MapGeometry, cur: np.ndarray, rows: np.ndarray, g: Guidance) -> np.ndarray:
-    """Eq. 10 ``[n, 2]`` in the map frame (m/s^2): repulsion from the nearest road-edge point."""
+def map_force(geo: MapGeometry, cur: np.ndarray, rows: np.ndarray, g: Guidance, edge_xy: np.ndarray | None = None
+              ) -> np.ndarray:
+    """Eq. 10 ``[n, 2]`` in the map frame (m/s^2): repulsion from the nearest road-edge point (``edge_xy [n, 2]``
+    (m) where the caller has it: `seal.models.rapid.features.InputTables.edge_xy`, the same point)."""
     if not len(geo.edges.a):
         return np.zeros((rows.size, 2))
     xy = cur[rows][:, [X, Y]]
-    q, _ = geo.edges.nearest(xy)
+    q = geo.edges.nearest(xy)[0] if edge_xy is None else edge_xy
     away = xy - q
     dist = np.maximum(np.hypot(away[:, 0], away[:, 1]), 1e-6)
     clearance = np.maximum(dist - 0.5 * cur[rows, WIDTH], 0.0)
@@ -145,12 +147,13 @@ def map_force(geo: MapGeometry, cur: np.ndarray, rows: np.ndarray, g: Guidance) 
 
 
 def physics_targets(geo: MapGeometry, cur: np.ndarray, rows: np.ndarray, desired: np.ndarray, dest: np.ndarray,
-                    g: Guidance, logged: np.ndarray | None = None, scan: PairScan | None = None
-                    ) -> dict[str, np.ndarray]:
+                    g: Guidance, logged: np.ndarray | None = None, scan: PairScan | None = None,
+                    edge_xy: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Per term, the agent-frame force ``[n, 2]`` / `ACC_SCALE_MPS2` (model units); the repulsive ones are added
     to the model's estimate in `ddim_sample` (module docstring); ``logged [A, 8]``: the logged boxes of the step
     (`safety_bound`); ``scan``: `scan_pairs` of ``rows`` with ``logged`` and ``g``'s social constants (computed
-    here when not given): the social force and the obstacles come from it, one compiled pass."""
+    here when not given): the social force and the obstacles come from it, one compiled pass; ``edge_xy``: the
+    nearest road-edge points (`map_force`)."""
     if scan is None and (g.w_social or g.w_safety):
         scan = scan_pairs(cur, rows, logged, social_constants(g))
     c, s = np.cos(cur[rows, HEADING]), np.sin(cur[rows, HEADING])
@@ -165,7 +168,7 @@ def physics_targets(geo: MapGeometry, cur: np.ndarray, rows: np.ndarray, desired
         assert scan is not None
         out["social"] = local(scan.social)
     if g.w_map:
-        out["map"] = local(map_force(geo, cur, rows, g))
+        out["map"] = local(map_force(geo, cur, rows, g, edge_xy))
     if g.w_leader:
         out["leader"] = leader_target(cur, rows, desired)
     if g.w_safety:
