@@ -113,8 +113,9 @@ class RapidBackground(SimulatedBackground):
         tab = agent_input_tables(self._geo, cur, rows, prev_vel, prev_ok, desired, dest, scan)
         targets = physics_targets(self._geo, cur, rows, desired, dest, self.guidance, logged, scan, tab.edge_xy)
         with torch.inference_mode():
-            ctx = self._agent.tables(*(torch.from_numpy(a) for a in (tab.own, tab.opt, tab.masks, tab.neighbors,
-                                                                      tab.neighbor_mask)), self._kv)
+            as_t = torch.from_numpy  # no copy
+            ctx = self._agent.tables(as_t(tab.own), as_t(tab.opt), as_t(tab.masks), as_t(tab.neighbors),
+                                     as_t(tab.neighbor_mask), self._kv)
             acc = ddim_sample(self._denoiser, ctx, self.alpha_bar, self.ddim_steps, self._gen,
                               {k: torch.from_numpy(v.astype(np.float32)) for k, v in targets.items()},
                               self.guidance, self.temperature).numpy().astype(np.float64) * ACC_SCALE_MPS2
