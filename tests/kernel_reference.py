@@ -242,3 +242,55 @@ def rapid_neighbor_features(cur: np.ndarray, rows: np.ndarray, nb_rows: np.ndarr
         np.cos(dh), np.sin(dh), other[..., 5] / 5.0, other[..., 6] / 2.0,
     ], axis=-1)
     return np.where(ok[..., None], f, 0.0).astype(np.float32), ok.astype(np.float32)
+
+
+def _to_frame(vec: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Map-frame vectors ``[n, 2]`` in the frames of heading cos ``c`` / sin ``s`` ``[n]``."""
+    return np.column_stack([c * vec[:, 0] + s * vec[:, 1], -s * vec[:, 0] + c * vec[:, 1]])
+
+
+def rapid_local_map(geo: object, xy: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """``[n, 8]`` RAPID local map read-out: at the agent and 15 m ahead, the nearest lane centre's offset (agent
+    frame y, /4 m) and direction (cos, sin in the agent frame); the nearest edge point (agent frame, /10 m)."""
+    out = []
+    for ahead in (0.0, 15.0):
+        p = xy + ahead * np.column_stack([c, s])
+        q, d = geo.centres.nearest(p)  # type: ignore[attr-defined]
+        rel = _to_frame(q - xy, c, s)
+        out += [rel[:, 1:2] / 4.0, _to_frame(d, c, s)]
+    q, _ = geo.edges.nearest(xy) if len(geo.edges.a) else (xy + 50.0, None)  # type: ignore[attr-defined]
+    out.append(_to_frame(q - xy, c, s) / 10.0)
+    return np.concatenate(out, axis=1)
+
+
+def rapid_agent_inputs(geo: object, cur: np.ndarray, rows: np.ndarray, prev_vel: np.ndarray, prev_ok: np.ndarray,
+                       desired_speed: np.ndarray, destination: np.ndarray, leader_gap: np.ndarray,
+                       leader_v: np.ndarray) -> dict[str, np.ndarray]:
+    """The numpy `seal.models.rapid.features.agent_inputs` (all fields but the neighbours, float32) that
+    `seal.models.rapid.input_kernels.own_inputs` replaced."""
+    from seal.core.scenario import DT_S, HEADING, VX, VY, X, Y
+    from seal.models.rapid.features import ACC_SCALE_MPS2, fourier
+
+    me = cur[rows]
+    c, s = np.cos(me[:, HEADING]), np.sin(me[:, HEADING])
+    vel = me[:, [VX, VY]]
+    speed = np.hypot(vel[:, 0], vel[:, 1])
+    v_local = _to_frame(vel, c, s)
+    own = np.column_stack([speed / 20.0, v_local / 20.0, c, s, fourier(me[:, [X, Y]] - geo.origin_xy),  # type: ignore[attr-defined]
+                           rapid_local_map(geo, me[:, [X, Y]], c, s)])
+    prev_acc = _to_frame((vel - prev_vel) / DT_S, c, s) / ACC_SCALE_MPS2
+    speed_mask = np.isfinite(desired_speed)
+    speed_cmd = np.where(speed_mask, (np.nan_to_num(desired_speed) - speed) / 20.0, 0.0)[:, None]
+    dest_mask = np.isfinite(destination).all(axis=1)
+    rel = _to_frame(np.nan_to_num(destination) - me[:, [X, Y]], c, s)
+    dist = np.hypot(rel[:, 0], rel[:, 1])
+    dest = np.column_stack([rel / 100.0, np.log1p(dist) / 5.0])
+    dest[~dest_mask] = 0.0
+    leader_mask = np.isfinite(leader_gap)
+    closing = np.where(leader_mask, speed - leader_v, 0.0)
+    leader = np.column_stack([np.where(leader_mask, leader_gap, 0.0) / 50.0, closing / 10.0])
+    f32 = np.float32
+    return {"own": own.astype(f32), "prev_acc": np.where(prev_ok[:, None], prev_acc, 0.0).astype(f32),
+            "prev_mask": prev_ok.astype(f32), "speed_cmd": speed_cmd.astype(f32), "speed_mask": speed_mask.astype(f32),
+            "dest": dest.astype(f32), "dest_mask": dest_mask.astype(f32), "leader": leader.astype(f32),
+            "leader_mask": leader_mask.astype(f32)}

@@ -21,6 +21,7 @@ from seal.envs.car_following import (
     safety_obstacles,
 )
 from seal.models.rapid import Guidance, RapidBackground
+from seal.models.rapid import input_kernels as IK
 from seal.models.rapid import kernels as K
 from seal.models.rapid.fast import FastAgentEncoder, FastDenoiser
 from seal.models.rapid.features import N_NEIGHBORS, NEIGHBOR_DIM, NEIGHBOR_RANGE_M, OWN_DIM, scan_pairs
@@ -109,7 +110,7 @@ def test_segment_grid_gives_the_brute_force_closest_points() -> None:
     pts = np.ascontiguousarray(np.vstack([rng.uniform(-150, 150, (300, 2)), pts_line]))  # vertices: ties
     q1, k1 = K.closest_points(cols, len2, pts)
     for cell in (2.0, 10.0, 80.0):
-        q2, k2 = K.closest_points_grid(cols, len2, pts, *K.segment_grid(cols, cell), cell)
+        q2, k2 = IK.closest_points_grid(cols, len2, pts, *IK.segment_grid(cols, cell), cell)
         np.testing.assert_array_equal(k1, k2)
         np.testing.assert_array_equal(q1, q2)
 

@@ -1,6 +1,6 @@
 """`RapidBackground`: the learned background controller of ``ScenarioEnv(config={"background": "rapid"})``.
 
-Per env step, for all background agents at once: `agent_inputs` (numpy) -> agent encoder reading the scenario's
+Per env step, for all background agents at once: `agent_input_tables` (compiled) -> agent encoder reading the scenario's
 cached global map latents -> ``ddim_steps`` DDIM steps of the denoiser with physics guidance (eq. 7) -> the
 next-step acceleration, integrated by `SimulatedBackground` (the log's lifetime, `integrate_rows`).
 
@@ -22,8 +22,14 @@ from seal.core.road import RoadDescription
 from seal.core.scenario import HEADING, VALID, VX, VY, Scenario
 from seal.envs.background import SimulatedBackground
 from seal.models.rapid.fast import FastAgentEncoder, FastDenoiser
-from seal.models.rapid.features import ACC_SCALE_MPS2, MapGeometry, agent_inputs, build_map_geometry, scan_pairs
-from seal.models.rapid.network import Denoiser, RapidNet, anchor_encoding, inputs_to_torch
+from seal.models.rapid.features import (
+    ACC_SCALE_MPS2,
+    MapGeometry,
+    agent_input_tables,
+    build_map_geometry,
+    scan_pairs,
+)
+from seal.models.rapid.network import Denoiser, RapidNet, anchor_encoding
 from seal.models.rapid.sampler import Guidance, ddim_sample, physics_targets, schedule, social_constants
 from seal.models.rapid.train import load_rapid_net
 
@@ -104,10 +110,12 @@ class RapidBackground(SimulatedBackground):
         logged = self.log[:, t]
         # the logged tracks as routes: the safety bound's obstacles are `safety_obstacles` (issue 22 follow-up)
         scan = scan_pairs(cur, rows, logged, social_constants(self.guidance), self.log, t)
-        inp = agent_inputs(self._geo, cur, rows, prev_vel, prev_ok, desired, dest, scan)
-        targets = physics_targets(self._geo, cur, rows, desired, dest, self.guidance, logged, scan)
+        tab = agent_input_tables(self._geo, cur, rows, prev_vel, prev_ok, desired, dest, scan)
+        targets = physics_targets(self._geo, cur, rows, desired, dest, self.guidance, logged, scan, tab.edge_xy)
         with torch.inference_mode():
-            ctx = self._agent(inputs_to_torch(inp), self._kv)
+            as_t = torch.from_numpy  # no copy
+            ctx = self._agent.tables(as_t(tab.own), as_t(tab.opt), as_t(tab.masks), as_t(tab.neighbors),
+                                     as_t(tab.neighbor_mask), self._kv)
             acc = ddim_sample(self._denoiser, ctx, self.alpha_bar, self.ddim_steps, self._gen,
                               {k: torch.from_numpy(v.astype(np.float32)) for k, v in targets.items()},
                               self.guidance, self.temperature).numpy().astype(np.float64) * ACC_SCALE_MPS2

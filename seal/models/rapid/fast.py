@@ -66,16 +66,23 @@ class FastAgentEncoder:
     @torch.no_grad()
     def __call__(self, inp: dict[str, torch.Tensor], kv: tuple[torch.Tensor, torch.Tensor]) -> torch.Tensor:
         """``inp``: `AgentInputs` fields as tensors (masks 0 / 1); ``kv``: `AgentEncoder.latent_kv` -> ``[n, D]``."""
-        n = inp["own"].shape[0]
-        h_own = torch.nn.functional.silu(torch.addmm(self.own1[1], inp["own"], self.own1[0]), inplace=True)
-        masks = torch.stack([(inp[m] > 0.5).to(h_own.dtype) for _, _, m in OPTIONAL], dim=1)
+        masks = torch.stack([(inp[m] > 0.5).to(inp["own"].dtype) for _, _, m in OPTIONAL], dim=1)
         opt = torch.cat([inp[f] for _, f, _ in OPTIONAL], dim=1) * masks[:, self.mask_cols]
+        return self.tables(inp["own"], opt, masks, inp["neighbors"], inp["neighbor_mask"], kv)
+
+    @torch.no_grad()
+    def tables(self, own: torch.Tensor, opt: torch.Tensor, masks: torch.Tensor, neighbors: torch.Tensor,
+               neighbor_mask: torch.Tensor, kv: tuple[torch.Tensor, torch.Tensor]) -> torch.Tensor:
+        """The encoder on `seal.models.rapid.features.InputTables`' tables: ``opt [n, 8]`` the optional inputs in
+        `OPTIONAL`'s order, zero where absent, ``masks [n, 4]`` 0 / 1 (the per-step path: no per-field tensors)."""
+        n = own.shape[0]
+        h_own = torch.nn.functional.silu(torch.addmm(self.own1[1], own, self.own1[0]), inplace=True)
         h = torch.addmm(self.mid_b, torch.cat([h_own, opt, masks], dim=1), self.mid_w)
-        k_nb = inp["neighbors"].shape[1]
-        nb = torch.nn.functional.silu(torch.addmm(self.nb1[1], inp["neighbors"].reshape(n * k_nb, -1),
+        k_nb = neighbors.shape[1]
+        nb = torch.nn.functional.silu(torch.addmm(self.nb1[1], neighbors.reshape(n * k_nb, -1),
                                                   self.nb1[0]), inplace=True)
         nb = torch.addmm(self.nb2[1], nb, self.nb2[0]).reshape(n, k_nb, -1)
-        nmask = inp["neighbor_mask"] > 0.5
+        nmask = neighbor_mask > 0.5
         pooled = nb.masked_fill_(~nmask[..., None], -1e4).amax(dim=1)
         h += torch.where(nmask.any(dim=1, keepdim=True), pooled, self.nb_missing)
         h = self.norm(h)

@@ -9,7 +9,8 @@ Absent inputs carry a mask (the model swaps in a learned "missing" embedding, 3.
 of an agent that has just entered, the intent inputs a user has not set, no leader ahead, no neighbours.
 
 Map (3.3): `MapGeometry` holds, per road, the lane centre segments and road-edge segments (the local read-out:
-offset and heading to the nearest lane centre at the agent and 15 m ahead, the nearest edge point) and the map
+offset and heading to the nearest lane centre at the agent and 15 m ahead, the nearest edge point; compiled:
+`seal.models.rapid.input_kernels.own_inputs`) and the map
 tokens (points along the lane centres every few metres: Fourier position, direction, lane width) that the
 network compresses once per scenario into its global latents (`seal.models.rapid.network.MapEncoder`).
 """
@@ -22,7 +23,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from seal.core.road import RoadDescription
-from seal.core.scenario import DT_S, HEADING, VX, VY, X, Y
 from seal.envs.car_following import (
     CONTACT_HORIZON_S,
     CONTACT_MARGIN_M,
@@ -31,7 +31,8 @@ from seal.envs.car_following import (
     PATH_MARGIN_M,
 )
 from seal.envs.road_geometry import get_road_geometry
-from seal.models.rapid.kernels import closest_points_grid, neighbor_features, pair_scan, segment_grid
+from seal.models.rapid.input_kernels import closest_points_grid, own_inputs, segment_grid
+from seal.models.rapid.kernels import neighbor_features, pair_scan
 
 N_FREQ = 8
 """Fourier frequencies per axis, linearly spaced from 2 pi / 1 km to 2 pi / 0.5 m (paper 3.2)."""
@@ -84,7 +85,7 @@ class Segments:
 
     def nearest(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For points ``p [n, 2]``: (closest point on any segment ``[n, 2]``, that segment's direction (unit));
-        one compiled call through the grid (`seal.models.rapid.kernels.closest_points_grid`: the segments near
+        one compiled call through the grid (`seal.models.rapid.input_kernels.closest_points_grid`: the segments near
         each point only, the answer of the brute-force `closest_points`)."""
         pts = np.ascontiguousarray(p, dtype=np.float64)
         q, ks = closest_points_grid(self.cols, self.len2, pts, *self.grid, GRID_CELL_M)
@@ -131,25 +132,6 @@ def build_map_geometry(road: RoadDescription) -> MapGeometry:
         rows.append(np.column_stack([fourier(xy - origin), np.cos(ang), np.sin(ang), width]))
     tokens = np.concatenate(rows)[:MAX_TOKENS].astype(np.float32)
     return MapGeometry(origin, centres, edges, tokens)
-
-
-def _to_frame(vec: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """Map-frame vectors ``[n, 2]`` in the frames of heading cos ``c`` / sin ``s`` ``[n]``."""
-    return np.column_stack([c * vec[:, 0] + s * vec[:, 1], -s * vec[:, 0] + c * vec[:, 1]])
-
-
-def local_map(geo: MapGeometry, xy: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """``[n, 8]`` local read-out: at the agent and 15 m ahead, the nearest lane centre's offset (agent frame
-    y, /4 m) and direction (cos, sin in the agent frame); the nearest edge point (agent frame, /10 m)."""
-    out = []
-    for ahead in (0.0, 15.0):
-        p = xy + ahead * np.column_stack([c, s])
-        q, d = geo.centres.nearest(p)
-        rel = _to_frame(q - xy, c, s)
-        out += [rel[:, 1:2] / 4.0, _to_frame(d, c, s)]
-    q, _ = geo.edges.nearest(xy) if len(geo.edges.a) else (xy + 50.0, None)
-    out.append(_to_frame(q - xy, c, s) / 10.0)
-    return np.concatenate(out, axis=1)
 
 
 @dataclass
@@ -222,39 +204,54 @@ def agent_inputs(
     desired_speed: np.ndarray, destination: np.ndarray, scan: PairScan | None = None,
 ) -> AgentInputs:
     """`AgentInputs` of the agents ``rows`` of the box table ``cur [A, 8]`` (``scan``: their `scan_pairs`,
-    computed here when not given).
+    computed here when not given); `agent_input_tables` as named fields (views of its tables).
 
     Args:
         prev_vel: ``[n, 2]`` map-frame velocity of each agent one step before (m/s), read where ``prev_ok [n]``.
         desired_speed: ``[n]`` desired speed (m/s), NaN = not set; destination: ``[n, 2]`` (m), NaN = not set.
     """
-    me = cur[rows]
-    c, s = np.cos(me[:, HEADING]), np.sin(me[:, HEADING])
-    vel = me[:, [VX, VY]]
-    speed = np.hypot(vel[:, 0], vel[:, 1])
-    v_local = _to_frame(vel, c, s)
-    own = np.column_stack([speed / 20.0, v_local / 20.0, c, s, fourier(me[:, [X, Y]] - geo.origin_xy),
-                           local_map(geo, me[:, [X, Y]], c, s)])
-    prev_acc = _to_frame((vel - prev_vel) / DT_S, c, s) / ACC_SCALE_MPS2
-    prev_mask = prev_ok.astype(np.float32)
-    speed_mask = np.isfinite(desired_speed)
-    speed_cmd = np.where(speed_mask, (np.nan_to_num(desired_speed) - speed) / 20.0, 0.0)[:, None]
-    dest_mask = np.isfinite(destination).all(axis=1)
-    rel = _to_frame(np.nan_to_num(destination) - me[:, [X, Y]], c, s)
-    dist = np.hypot(rel[:, 0], rel[:, 1])
-    dest = np.column_stack([rel / 100.0, np.log1p(dist) / 5.0])
-    dest[~dest_mask] = 0.0
+    t = agent_input_tables(geo, cur, rows, prev_vel, prev_ok, desired_speed, destination, scan)
+    return AgentInputs(t.own, t.opt[:, 0:2], t.masks[:, 0], t.opt[:, 2:3], t.masks[:, 1], t.opt[:, 3:6],
+                       t.masks[:, 2], t.opt[:, 6:8], t.masks[:, 3], t.neighbors, t.neighbor_mask)
+
+
+@dataclass(frozen=True)
+class InputTables:
+    """The `AgentInputs` of ``n`` agents as the few float32 tables the per-step network path reads
+    (`seal.models.rapid.fast.FastAgentEncoder.tables`), and the nearest road-edge points.
+
+    Attributes:
+        own: ``[n, OWN_DIM]`` (`AgentInputs.own`).
+        opt: ``[n, 8]`` previous acceleration, desired speed, destination, leader (`AgentInputs` fields, zero
+            where absent); masks: ``[n, 4]`` their masks in that order (1 = present).
+        neighbors, neighbor_mask: `AgentInputs` fields.
+        edge_xy: ``[n, 2]`` float64: the nearest road-edge point of each agent (map frame, m), for `map_force`.
+    """
+
+    own: np.ndarray
+    opt: np.ndarray
+    masks: np.ndarray
+    neighbors: np.ndarray
+    neighbor_mask: np.ndarray
+    edge_xy: np.ndarray
+
+
+def agent_input_tables(
+    geo: MapGeometry, cur: np.ndarray, rows: np.ndarray, prev_vel: np.ndarray, prev_ok: np.ndarray,
+    desired_speed: np.ndarray, destination: np.ndarray, scan: PairScan | None = None,
+) -> InputTables:
+    """`InputTables` of the agents ``rows`` (arguments: `agent_inputs`): two compiled calls
+    (`seal.models.rapid.input_kernels.own_inputs`, `seal.models.rapid.kernels.neighbor_features`); their numpy
+    form is ``rapid_agent_inputs`` in ``tests/kernel_reference.py``."""
+    cur = np.ascontiguousarray(cur, dtype=np.float64)
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
     if scan is None:
         scan = scan_pairs(cur, rows)
-    gap, lead_v = scan.leader_gap, scan.leader_v
-    leader_mask = np.isfinite(gap)
-    closing = np.where(leader_mask, speed - lead_v, 0.0)
-    leader = np.column_stack([np.where(leader_mask, gap, 0.0) / 50.0, closing / 10.0])
-    neighbors, neighbor_mask = neighbor_features(np.ascontiguousarray(cur, dtype=np.float64),
-                                                 np.ascontiguousarray(rows, dtype=np.int64), scan.neighbor_rows)
-    f32 = np.float32
-    return AgentInputs(
-        own.astype(f32), np.where(prev_ok[:, None], prev_acc, 0.0).astype(f32), prev_mask,
-        speed_cmd.astype(f32), speed_mask.astype(f32), dest.astype(f32), dest_mask.astype(f32),
-        leader.astype(f32), leader_mask.astype(f32), neighbors, neighbor_mask,
-    )
+    c, e = geo.centres, geo.edges
+    own, opt, masks, edge = own_inputs(
+        cur, rows, geo.origin_xy, FREQS, c.cols, c.len2, *c.grid, e.cols, e.len2, *e.grid, GRID_CELL_M,
+        np.ascontiguousarray(prev_vel, dtype=np.float64), np.ascontiguousarray(prev_ok, dtype=np.bool_),
+        np.ascontiguousarray(desired_speed, dtype=np.float64), np.ascontiguousarray(destination, dtype=np.float64),
+        np.ascontiguousarray(scan.leader_gap), np.ascontiguousarray(scan.leader_v))
+    neighbors, neighbor_mask = neighbor_features(cur, rows, scan.neighbor_rows)
+    return InputTables(own, opt, masks, neighbors, neighbor_mask, edge)
