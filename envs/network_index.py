@@ -52,6 +52,10 @@ class FastLane:
         """World position (m) of local coordinates (s, r)."""
         raise NotImplementedError
 
+    def distance(self, x: float, y: float, heading: float) -> float:
+        """highway-env `AbstractLane.distance_with_heading` (m + rad) of the pose (x, y, heading)."""
+        return _lane_distance(self, x, y, heading)
+
 
 class FastStraight(FastLane):
     """Scalar-maths twin of a highway-env `StraightLane` (same local coordinates, heading and positions)."""
@@ -74,6 +78,15 @@ class FastStraight(FastLane):
     def position(self, s: float, r: float) -> tuple[float, float]:
         return self.sx + s * self.dx - r * self.dy, self.sy + s * self.dy + r * self.dx
 
+    def distance(self, x: float, y: float, heading: float) -> float:
+        # `_lane_distance` inlined (the closest-lane search calls it for every vehicle and step): same
+        # operations in the same order, so the same bits.
+        ex, ey = x - self.sx, y - self.sy
+        s = ex * self.dx + ey * self.dy
+        r = ey * self.dx - ex * self.dy
+        angle = abs((heading - self.heading + math.pi) % (2 * math.pi) - math.pi)
+        return abs(r) + max(s - self.length, 0.0) + max(-s, 0.0) + angle
+
 
 class FastSine(FastStraight):
     """Scalar-maths twin of a highway-env `SineLane`."""
@@ -93,6 +106,8 @@ class FastSine(FastStraight):
 
     def position(self, s: float, r: float) -> tuple[float, float]:
         return FastStraight.position(self, s, r + self.amp * math.sin(self.puls * s + self.phase))
+
+    distance = FastLane.distance  # not the straight shortcut: the heading varies along a sine lane
 
 
 class FastCircle(FastLane):
@@ -145,7 +160,9 @@ class NetworkIndex:
     def __init__(self, network: RoadNetwork) -> None:
         self.network = network
         self.indices = lane_indices(network)
-        self.lanes: dict[LaneIndex, FastLane] = {i: fast_lane(network.get_lane(i)) for i in self.indices}
+        self.hw_lanes: dict[LaneIndex, AbstractLane] = {i: network.get_lane(i) for i in self.indices}
+        """highway-env's lane objects (``network.get_lane`` without its per-call checks)."""
+        self.lanes: dict[LaneIndex, FastLane] = {i: fast_lane(self.hw_lanes[i]) for i in self.indices}
         self.succ = successor_map(network)
         self.pred = predecessor_map(self.succ)
         self.edges: dict[tuple[str, str], list[LaneIndex]] = {}
@@ -193,20 +210,18 @@ class NetworkIndex:
         leaving its start node, and lanes leaving its end node when the vehicle is near that end."""
         x, y = float(x), float(y)
         if current is None:
-            return min(self.all, key=lambda c: _lane_distance(c[1], x, y, heading))[0]
+            return min(self.all, key=lambda c: c[1].distance(x, y, heading))[0]
         best, best_d = current, math.inf
         for idx, lane in self.siblings[current]:
-            d = _lane_distance(lane, x, y, heading)
+            d = lane.distance(x, y, heading)
             if d < best_d:
                 best, best_d = idx, d
         lane = self.lanes[current]
         if lane.local(x, y)[0] > lane.length - 6.0:
             for idx, nxt in self.next_lanes[current]:
-                d = _lane_distance(nxt, x, y, heading)
+                d = nxt.distance(x, y, heading)
                 if d < best_d:
                     best, best_d = idx, d
         if best_d > 4.0:  # pushed off its roads (e.g. by a crash): search everything
             return self.closest_lane(x, y, heading, None)
         return best
-
-
