@@ -202,9 +202,19 @@ class Driver(IDMVehicle):
         operations are those of highway-env's array update, so the bits are the same.
         """
         self.timer += dt
-        self.clip_actions()
+        # highway-env's `Vehicle.clip_actions`, inlined (its dict round trips cost more than the step).
         action = self.action
-        beta = math.atan(0.5 * math.tan(action["steering"]))
+        if self.crashed:
+            action["steering"] = 0
+            action["acceleration"] = -1.0 * self.speed
+        action["steering"] = steering = float(action["steering"])
+        acc = float(action["acceleration"])
+        if self.speed > self.MAX_SPEED:
+            acc = min(acc, 1.0 * (self.MAX_SPEED - self.speed))
+        elif self.speed < self.MIN_SPEED:
+            acc = max(acc, 1.0 * (self.MIN_SPEED - self.speed))
+        action["acceleration"] = acc
+        beta = math.atan(0.5 * math.tan(steering))
         v, h = self.speed, self.heading
         pos = self.position
         x, y = pos.tolist()
@@ -219,7 +229,7 @@ class Driver(IDMVehicle):
         pos[0] = x
         pos[1] = y
         self.heading = h + v * math.sin(beta) / (self.LENGTH / 2) * dt
-        self.speed = max(0.0, v + action["acceleration"] * dt)  # IDM drivers never reverse
+        self.speed = max(0.0, v + acc * dt)  # IDM drivers never reverse
         if self.yield_distance is not None:
             self.yield_distance = max(0.0, self.yield_distance - v * dt)
             self.wait_s = self.wait_s + dt if v < 0.5 else 0.0
@@ -337,7 +347,7 @@ class Driver(IDMVehicle):
         lane = self.road.index.lanes[target]
         s, r = lane.local(*self.xy)
         v = self.speed
-        nz = v if abs(v) > 1e-2 else (1e-2 if v >= 0 else -1e-2)  # `_not_zero(v)`
+        nz = _not_zero(v)
         lane_heading = lane.heading_at(s + v * _TAU_PURSUIT)
         heading_cmd = math.asin(max(-1.0, min(1.0, -_KP_LATERAL * r / nz)))
         heading_ref = lane_heading + max(-math.pi / 4, min(math.pi / 4, heading_cmd))

@@ -178,6 +178,14 @@ class NetworkIndex:
         self.all = [(j, self.lanes[j]) for j in self.indices]
         self.ahead = {i: self._chain(i, self.succ, AHEAD_M, forward=True) for i in self.indices}
         self.behind = {i: self._chain(i, self.pred, BEHIND_M, forward=False) for i in self.indices}
+        self.search: dict[LaneIndex, list[tuple[LaneIndex, tuple[str, str], float, bool]]] = {
+            i: [(j, j[:2], off, k > 0) for k, (j, off, _) in enumerate(self.ahead[i])]
+            + [(j, j[:2], off, False) for j, off, _ in self.behind[i][1:]]
+            for i in self.indices
+        }
+        """The lanes a neighbour search from each lane visits, in order: ``(lane, its road, offset (m) of its
+        origin along the searched lane, searched only when on the searcher's route)``: the lane itself, the lanes
+        ahead (`ahead`, only those of the route), then the lanes behind (`behind`, without the lane itself)."""
 
     def _chain(
         self, start: LaneIndex, links: dict[LaneIndex, list[LaneIndex]], reach: float, forward: bool

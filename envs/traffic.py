@@ -94,27 +94,30 @@ class TrafficRoad(Road):
     ) -> tuple[Driver | None, float, Driver | None, float]:
         """(front, its centre distance ahead, rear, minus its centre distance behind) of ``vehicle`` along the
         lane ``lane_index``, its successors on the vehicle's route (up to `AHEAD_M`) and predecessors."""
-        s = self.index.lanes[lane_index].local(*vehicle.xy)[0]
+        index = self.index
+        s = index.lanes[lane_index].local(*vehicle.xy)[0]
         route_edges = vehicle.route_edges
         front = rear = None
         s_front, s_rear = math.inf, -math.inf
         seen: set[int] = {vehicle.vehicle_id}
-        for chain, forward in ((self.index.ahead[lane_index], True), (self.index.behind[lane_index], False)):
-            for k, (li, off, _) in enumerate(chain):
-                if k == 0 and not forward:
-                    continue  # the lane itself was searched with the forward chain
-                if forward and k and route_edges is not None and li[:2] not in route_edges:
+        cache = self._occupants
+        for li, edge, off, on_route_only in index.search[lane_index]:
+            if on_route_only and route_edges is not None and edge not in route_edges:
+                continue
+            occ = cache.get(li)
+            if occ is None:
+                occ = self.occupants(li)
+            for sv, v in occ:
+                vid = v.vehicle_id
+                if vid in seen:
                     continue
-                for sv, v in self.occupants(li):
-                    if v.vehicle_id in seen:
-                        continue
-                    seen.add(v.vehicle_id)
-                    sv += off
-                    if sv >= s:
-                        if sv < s_front:
-                            front, s_front = v, sv
-                    elif sv > s_rear:
-                        rear, s_rear = v, sv
+                seen.add(vid)
+                sv += off
+                if sv >= s:
+                    if sv < s_front:
+                        front, s_front = v, sv
+                elif sv > s_rear:
+                    rear, s_rear = v, sv
         return front, s_front - s, rear, s_rear - s
 
     # ------------------------------------------------------------------- act / step
