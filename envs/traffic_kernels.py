@@ -48,7 +48,7 @@ def _rects_overlap(a: np.ndarray, b: np.ndarray) -> bool:
     return True
 
 
-@njit(types.Tuple((int64[::1], int64[::1]))(float64[:, :, :, ::1], int64[::1], int64[::1], boolean[:, :, ::1]),
+@njit(types.Tuple((int64[::1], int64[::1]))(float64[:, :, :, ::1], int64[:], int64[:], boolean[:, :, ::1]),
       cache=True, nogil=True, error_model="numpy")
 def first_overlaps(
     corners: np.ndarray, ii: np.ndarray, jj: np.ndarray, close: np.ndarray
