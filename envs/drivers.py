@@ -196,7 +196,17 @@ class Driver(IDMVehicle):
 
     # ----------------------------------------------------------------------------------- kinematics
     def step(self, dt: float) -> None:
-        """highway-env's kinematic bicycle step (`Vehicle.step`) with scalar maths; then the lane lookup.
+        """highway-env's kinematic bicycle step (`Vehicle.step`): `move`, then the lane lookup (`TrafficRoad.step`
+        moves all vehicles first and looks their lanes up in one compiled call)."""
+        self.move(dt)
+        road = self.road
+        if road:
+            x, y = self.position.tolist()
+            self.lane_index = idx = road.index.closest_lane(x, y, self.heading, self.lane_index)
+            self.lane = road.index.hw_lanes[idx]
+
+    def move(self, dt: float) -> None:
+        """highway-env's kinematic bicycle step with scalar maths, without the lane lookup.
 
         The position is read and written as Python floats (numpy scalar arithmetic is several times slower); the
         operations are those of highway-env's array update, so the bits are the same.
@@ -238,10 +248,6 @@ class Driver(IDMVehicle):
         if self._stale is not None:
             g, vl, ll, travelled, elapsed = self._stale
             self._stale = (g, vl, ll, travelled + v * dt, elapsed + dt)
-        road = self.road
-        if road:
-            self.lane_index = idx = road.index.closest_lane(x, y, self.heading, self.lane_index)
-            self.lane = road.index.hw_lanes[idx]
 
     def on_state_update(self) -> None:
         """Closest lane among the current road's lanes and the roads it leads to (not all lanes)."""

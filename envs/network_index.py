@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from highway_env.road.lane import AbstractLane, CircularLane, SineLane, StraightLane
 from highway_env.road.road import LaneIndex, RoadNetwork
 
 from seal.core.geometry import wrap_angle_f
+from seal.envs import lane_kernels as lk
 from seal.envs.network_topology import lane_indices, predecessor_map, successor_map
 
 AHEAD_M = 80.0
@@ -154,6 +156,31 @@ def _lane_distance(lane: FastLane, x: float, y: float, heading: float) -> float:
     return abs(r) + max(s - lane.length, 0.0) + max(-s, 0.0) + angle
 
 
+def lane_table(lanes: list[FastLane]) -> np.ndarray:
+    """``[L, N_COLUMNS]`` rows of `seal.envs.lane_kernels` for the lanes (their attributes, copied exactly)."""
+    table = np.zeros((len(lanes), lk.N_COLUMNS))
+    for k, lane in enumerate(lanes):
+        row = table[k]
+        row[lk.LENGTH] = lane.length
+        if isinstance(lane, FastCircle):
+            row[lk.KIND] = lk.CIRCLE
+            row[[lk.CX, lk.CY, lk.RADIUS, lk.START, lk.DIR]] = lane.cx, lane.cy, lane.radius, lane.start, lane.dir
+            continue
+        assert isinstance(lane, FastStraight)
+        row[lk.KIND] = lk.SINE if isinstance(lane, FastSine) else lk.STRAIGHT
+        row[[lk.SX, lk.SY, lk.DX, lk.DY, lk.HEADING]] = lane.sx, lane.sy, lane.dx, lane.dy, lane.heading
+        if isinstance(lane, FastSine):
+            row[[lk.AMP, lk.PULS, lk.PHASE]] = lane.amp, lane.puls, lane.phase
+    return table
+
+
+def _csr(lists: list[list[int]]) -> tuple[np.ndarray, np.ndarray]:
+    """(pointers ``[len + 1]``, values) of a list of int lists."""
+    ptr = np.zeros(len(lists) + 1, dtype=np.int64)
+    ptr[1:] = np.cumsum([len(x) for x in lists])
+    return ptr, np.array([v for x in lists for v in x], dtype=np.int64)
+
+
 class NetworkIndex:
     """Precomputed topology and scalar lane geometry of a `RoadNetwork`."""
 
@@ -178,6 +205,12 @@ class NetworkIndex:
         self.all = [(j, self.lanes[j]) for j in self.indices]
         self.ahead = {i: self._chain(i, self.succ, AHEAD_M, forward=True) for i in self.indices}
         self.behind = {i: self._chain(i, self.pred, BEHIND_M, forward=False) for i in self.indices}
+        self.row = {i: k for k, i in enumerate(self.indices)}
+        """Row of each lane in `table` (and of `indices`)."""
+        self.table = lane_table([self.lanes[i] for i in self.indices])
+        """``[L, N_COLUMNS]`` the lanes for the compiled closest-lane lookup (`seal.envs.lane_kernels`)."""
+        self.sib_ptr, self.sib = _csr([[self.row[j] for j, _ in self.siblings[i]] for i in self.indices])
+        self.nxt_ptr, self.nxt = _csr([[self.row[j] for j, _ in self.next_lanes[i]] for i in self.indices])
         self.search: dict[LaneIndex, list[tuple[LaneIndex, tuple[str, str], float, bool]]] = {
             i: [(j, j[:2], off, k > 0) for k, (j, off, _) in enumerate(self.ahead[i])]
             + [(j, j[:2], off, False) for j, off, _ in self.behind[i][1:]]

@@ -24,6 +24,7 @@ from highway_env.road.road import LaneIndex, Road, RoadNetwork
 
 from seal.core.geometry import box_corners
 from seal.envs.drivers import Driver
+from seal.envs.lane_kernels import closest_lanes
 from seal.envs.network_index import NetworkIndex
 from seal.envs.traffic_kernels import contact_pairs, first_overlaps
 
@@ -130,11 +131,24 @@ class TrafficRoad(Road):
 
     def step(self, dt: float) -> None:
         """Step all vehicles, then highway-env's collision handling on the pairs that can touch."""
-        for vehicle in self.vehicles:
-            vehicle.step(dt)
         vs = self.vehicles
+        for vehicle in vs:
+            vehicle.move(dt)
+        if not vs:
+            self.steps += 1
+            return
+        state = np.array([(*v.position.tolist(), v.heading, v.LENGTH, v.WIDTH, v.speed) for v in vs])
+        # Each vehicle's closest lane (`Driver.step`'s lookup depends on its own pose only, so all at once).
+        index = self.index
+        x, y, heading = np.ascontiguousarray(state[:, :3].T)
+        rows = closest_lanes(
+            index.table, index.sib_ptr, index.sib, index.nxt_ptr, index.nxt, x, y, heading,
+            np.array([index.row[v.lane_index] for v in vs], dtype=np.int64),
+        )
+        for v, k in zip(vs, rows.tolist(), strict=True):
+            v.lane_index = idx = index.indices[k]
+            v.lane = index.hw_lanes[idx]
         if len(vs) > 1:
-            state = np.array([(*v.position.tolist(), v.heading, v.LENGTH, v.WIDTH, v.speed) for v in vs])
             # A superset of highway-env's spherical pre-check and of its polygon test (boxes separated by more
             # than their relative displacement in a step can neither intersect nor "will intersect"), so the
             # outcome is highway-env's; compiled (`contact_pairs`), it costs a few microseconds a step.
