@@ -31,10 +31,10 @@ from seal.envs.network_index import NetworkIndex
 DRIVER_KINDS = ("normal", "inattentive", "aggressive")
 
 # highway-env's steering-controller gains, read once (class attribute lookups cost more than the arithmetic).
-_TAU_PURSUIT = IDMVehicle.TAU_PURSUIT
-_KP_LATERAL = IDMVehicle.KP_LATERAL
-_KP_HEADING = IDMVehicle.KP_HEADING
-_MAX_STEERING = IDMVehicle.MAX_STEERING_ANGLE
+TAU_PURSUIT_S = IDMVehicle.TAU_PURSUIT
+KP_LATERAL_PER_S = IDMVehicle.KP_LATERAL
+KP_HEADING_PER_S = IDMVehicle.KP_HEADING
+MAX_STEERING_RAD = IDMVehicle.MAX_STEERING_ANGLE
 
 
 @dataclass(frozen=True, slots=True)
@@ -259,13 +259,23 @@ class Driver(IDMVehicle):
 
     # ----------------------------------------------------------------------------------- decisions
     def act(self, action: dict | str | None = None) -> None:
+        """Decide (`decide`), then steer towards the target lane. The steering reads only the vehicle's pose, speed
+        and target lane, which nothing after the lane-change decision changes, so steering last gives the command
+        of highway-env's order (steering, then acceleration)."""
+        if self.crashed:
+            return
+        self.decide()
+        self.action["steering"] = self._steering(self.target_lane_index)
+
+    def decide(self) -> None:
+        """`act` less the steering command: the lane decisions and the acceleration (``action["steering"]`` is
+        left to the caller; `seal.envs.traffic.TrafficRoad.act` computes every vehicle's at once, compiled)."""
         if self.crashed:
             return
         self._follow_road()
         self._update_distraction()
         if not self.distracted_s:
             self._lane_change_policy()
-        steering = self._steering(self.target_lane_index)
         acc = self._longitudinal(self.lane_index)
         if self.lane_index != self.target_lane_index:
             acc = min(acc, self._longitudinal(self.target_lane_index))
@@ -276,7 +286,7 @@ class Driver(IDMVehicle):
                 self.idm(self.speed, self.desired_speed(self.lane_index), self.yield_distance, self.speed),
             )
         acc = max(-self.p.max_brake, min(self.p.acc * 2.0, acc))
-        self.action = {"steering": steering, "acceleration": acc}
+        self.action = {"steering": 0.0, "acceleration": acc}
 
     # ----------------------------------------------------------------------------------- routes
     def set_route(self, start: LaneIndex, destination: str | None) -> None:
@@ -354,13 +364,13 @@ class Driver(IDMVehicle):
         s, r = lane.local(*self.xy)
         v = self.speed
         nz = _not_zero(v)
-        lane_heading = lane.heading_at(s + v * _TAU_PURSUIT)
-        heading_cmd = math.asin(max(-1.0, min(1.0, -_KP_LATERAL * r / nz)))
+        lane_heading = lane.heading_at(s + v * TAU_PURSUIT_S)
+        heading_cmd = math.asin(max(-1.0, min(1.0, -KP_LATERAL_PER_S * r / nz)))
         heading_ref = lane_heading + max(-math.pi / 4, min(math.pi / 4, heading_cmd))
-        rate_cmd = _KP_HEADING * ((heading_ref - self.heading + math.pi) % (2 * math.pi) - math.pi)
+        rate_cmd = KP_HEADING_PER_S * ((heading_ref - self.heading + math.pi) % (2 * math.pi) - math.pi)
         slip = math.asin(max(-1.0, min(1.0, self.LENGTH / 2 / nz * rate_cmd)))
         steer = math.atan(2 * math.tan(slip))
-        return max(-_MAX_STEERING, min(_MAX_STEERING, steer))
+        return max(-MAX_STEERING_RAD, min(MAX_STEERING_RAD, steer))
 
     def desired_speed(self, lane_index: LaneIndex) -> float:
         return self.p.speed_factor * self.road.index.lanes[lane_index].speed_limit

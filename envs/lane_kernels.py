@@ -169,3 +169,35 @@ def closest_lanes(
                     best, best_d = k, d
         out[v] = best
     return out
+
+
+@njit(float64[::1](float64[:, ::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1],
+                   float64[::1], float64, float64, float64, float64), cache=True, nogil=True, error_model="numpy")
+def steering_commands(
+    table: np.ndarray, target: np.ndarray, x: np.ndarray, y: np.ndarray, heading: np.ndarray, speed: np.ndarray,
+    length: np.ndarray, tau_pursuit: float, kp_lateral: float, kp_heading: float, max_steering: float,
+) -> np.ndarray:
+    """`seal.envs.drivers.Driver._steering` of every vehicle (highway-env's ``steering_control``): steering angles
+    ``[n]`` (rad).
+
+    Args:
+        table: ``[L, N_COLUMNS]`` the lanes.
+        target: ``[n]`` each vehicle's target lane row.
+        x, y, heading, speed, length: ``[n]`` the vehicles' poses (m, rad), speeds (m/s) and lengths (m).
+        tau_pursuit, kp_lateral, kp_heading, max_steering: highway-env's controller constants (s, 1/s, 1/s, rad).
+    """
+    n = x.shape[0]
+    out = np.empty(n)
+    for k in range(n):
+        lane = table[target[k]]
+        s, r = lane_local(lane, x[k], y[k])
+        v = speed[k]
+        nz = v if abs(v) > 1e-2 else (1e-2 if v >= 0 else -1e-2)  # highway-env's `not_zero`
+        lane_heading = lane_heading_at(lane, s + v * tau_pursuit)
+        heading_cmd = math.asin(max(-1.0, min(1.0, -kp_lateral * r / nz)))
+        heading_ref = lane_heading + max(-math.pi / 4, min(math.pi / 4, heading_cmd))
+        rate_cmd = kp_heading * ((heading_ref - heading[k] + math.pi) % _TWO_PI - math.pi)
+        slip = math.asin(max(-1.0, min(1.0, length[k] / 2 / nz * rate_cmd)))
+        steer = math.atan(2 * math.tan(slip))
+        out[k] = max(-max_steering, min(max_steering, steer))
+    return out

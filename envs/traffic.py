@@ -23,8 +23,8 @@ import numpy as np
 from highway_env.road.road import LaneIndex, Road, RoadNetwork
 
 from seal.core.geometry import box_corners
-from seal.envs.drivers import Driver
-from seal.envs.lane_kernels import closest_lanes
+from seal.envs.drivers import KP_HEADING_PER_S, KP_LATERAL_PER_S, MAX_STEERING_RAD, TAU_PURSUIT_S, Driver
+from seal.envs.lane_kernels import closest_lanes, steering_commands
 from seal.envs.network_index import NetworkIndex
 from seal.envs.traffic_kernels import contact_pairs, first_overlaps
 
@@ -126,8 +126,22 @@ class TrafficRoad(Road):
         self.rebuild_buckets()
         if self.regulated and self.steps % REGULATION_EVERY == 0:
             self.enforce_road_rules()
-        for vehicle in self.vehicles:
-            vehicle.act()
+        movers = [v for v in self.vehicles if not v.crashed]  # wrecks keep their last action
+        for v in movers:
+            v.decide()
+        if movers:
+            # Every mover's steering in one compiled call (`Driver._steering`, the same operations).
+            index = self.index
+            x, y, heading, speed, length = np.array(
+                [(*v.xy, v.heading, v.speed, v.LENGTH) for v in movers]
+            ).T.copy()
+            target = np.array([index.row[v.target_lane_index] for v in movers], dtype=np.int64)
+            steer = steering_commands(
+                index.table, target, x, y, heading, speed, length, TAU_PURSUIT_S, KP_LATERAL_PER_S, KP_HEADING_PER_S,
+                MAX_STEERING_RAD,
+            )
+            for v, sa in zip(movers, steer.tolist(), strict=True):
+                v.action["steering"] = sa
 
     def step(self, dt: float) -> None:
         """Step all vehicles, then highway-env's collision handling on the pairs that can touch."""
