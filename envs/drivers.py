@@ -159,6 +159,10 @@ class Driver(IDMVehicle):
     """Displacement (m) of a collision to apply at the next step."""
     target_lane_index: LaneIndex
     """The lane it is heading for (its own or the one of a lane change)."""
+    lane_index: LaneIndex
+    """The lane it is on (the closest, `seal.envs.network_index.NetworkIndex.closest_lane`)."""
+    crashed: bool
+    """It has hit another vehicle (it then brakes to a stop and decides nothing more)."""
 
     def __init__(
         self,
