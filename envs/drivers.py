@@ -25,11 +25,16 @@ import numpy as np
 from highway_env.road.road import LaneIndex, RoadNetwork
 from highway_env.vehicle.behavior import IDMVehicle
 
-from seal.core.geometry import wrap_angle_f
 from seal.core.scenario import DT_S
 from seal.envs.network_index import NetworkIndex
 
 DRIVER_KINDS = ("normal", "inattentive", "aggressive")
+
+# highway-env's steering-controller gains, read once (class attribute lookups cost more than the arithmetic).
+TAU_PURSUIT_S = IDMVehicle.TAU_PURSUIT
+KP_LATERAL_PER_S = IDMVehicle.KP_LATERAL
+KP_HEADING_PER_S = IDMVehicle.KP_HEADING
+MAX_STEERING_RAD = IDMVehicle.MAX_STEERING_ANGLE
 
 
 @dataclass(frozen=True, slots=True)
@@ -154,6 +159,10 @@ class Driver(IDMVehicle):
     """Displacement (m) of a collision to apply at the next step."""
     target_lane_index: LaneIndex
     """The lane it is heading for (its own or the one of a lane change)."""
+    lane_index: LaneIndex
+    """The lane it is on (the closest, `seal.envs.network_index.NetworkIndex.closest_lane`)."""
+    crashed: bool
+    """It has hit another vehicle (it then brakes to a stop and decides nothing more)."""
 
     def __init__(
         self,
@@ -191,21 +200,50 @@ class Driver(IDMVehicle):
 
     # ----------------------------------------------------------------------------------- kinematics
     def step(self, dt: float) -> None:
-        """highway-env's kinematic bicycle step (`Vehicle.step`) with scalar maths; then the lane lookup."""
+        """highway-env's kinematic bicycle step (`Vehicle.step`): `move`, then the lane lookup (`TrafficRoad.step`
+        moves all vehicles first and looks their lanes up in one compiled call)."""
+        self.move(dt)
+        road = self.road
+        if road:
+            x, y = self.position.tolist()
+            self.lane_index = idx = road.index.closest_lane(x, y, self.heading, self.lane_index)
+            self.lane = road.index.hw_lanes[idx]
+
+    def move(self, dt: float) -> None:
+        """highway-env's kinematic bicycle step with scalar maths, without the lane lookup.
+
+        The position is read and written as Python floats (numpy scalar arithmetic is several times slower); the
+        operations are those of highway-env's array update, so the bits are the same.
+        """
         self.timer += dt
-        self.clip_actions()
-        delta_f = self.action["steering"]
-        beta = math.atan(0.5 * math.tan(delta_f))
+        # highway-env's `Vehicle.clip_actions`, inlined (its dict round trips cost more than the step).
+        action = self.action
+        if self.crashed:
+            action["steering"] = 0
+            action["acceleration"] = -1.0 * self.speed
+        action["steering"] = steering = float(action["steering"])
+        acc = float(action["acceleration"])
+        if self.speed > self.MAX_SPEED:
+            acc = min(acc, 1.0 * (self.MAX_SPEED - self.speed))
+        elif self.speed < self.MIN_SPEED:
+            acc = max(acc, 1.0 * (self.MIN_SPEED - self.speed))
+        action["acceleration"] = acc
+        beta = math.atan(0.5 * math.tan(steering))
         v, h = self.speed, self.heading
         pos = self.position
-        pos[0] += v * math.cos(h + beta) * dt
-        pos[1] += v * math.sin(h + beta) * dt
+        x, y = pos.tolist()
+        x += v * math.cos(h + beta) * dt
+        y += v * math.sin(h + beta) * dt
         if self.impact is not None:
-            pos += self.impact
+            ix, iy = self.impact.tolist()
+            x += ix
+            y += iy
             self.crashed = True
             self.impact = None
+        pos[0] = x
+        pos[1] = y
         self.heading = h + v * math.sin(beta) / (self.LENGTH / 2) * dt
-        self.speed = max(0.0, v + self.action["acceleration"] * dt)  # IDM drivers never reverse
+        self.speed = max(0.0, v + acc * dt)  # IDM drivers never reverse
         if self.yield_distance is not None:
             self.yield_distance = max(0.0, self.yield_distance - v * dt)
             self.wait_s = self.wait_s + dt if v < 0.5 else 0.0
@@ -214,7 +252,6 @@ class Driver(IDMVehicle):
         if self._stale is not None:
             g, vl, ll, travelled, elapsed = self._stale
             self._stale = (g, vl, ll, travelled + v * dt, elapsed + dt)
-        self.on_state_update()
 
     def on_state_update(self) -> None:
         """Closest lane among the current road's lanes and the roads it leads to (not all lanes)."""
@@ -226,13 +263,23 @@ class Driver(IDMVehicle):
 
     # ----------------------------------------------------------------------------------- decisions
     def act(self, action: dict | str | None = None) -> None:
+        """Decide (`decide`), then steer towards the target lane. The steering reads only the vehicle's pose, speed
+        and target lane, which nothing after the lane-change decision changes, so steering last gives the command
+        of highway-env's order (steering, then acceleration)."""
+        if self.crashed:
+            return
+        self.decide()
+        self.action["steering"] = self._steering(self.target_lane_index)
+
+    def decide(self) -> None:
+        """`act` less the steering command: the lane decisions and the acceleration (``action["steering"]`` is
+        left to the caller; `seal.envs.traffic.TrafficRoad.act` computes every vehicle's at once, compiled)."""
         if self.crashed:
             return
         self._follow_road()
         self._update_distraction()
         if not self.distracted_s:
             self._lane_change_policy()
-        steering = self._steering(self.target_lane_index)
         acc = self._longitudinal(self.lane_index)
         if self.lane_index != self.target_lane_index:
             acc = min(acc, self._longitudinal(self.target_lane_index))
@@ -243,7 +290,7 @@ class Driver(IDMVehicle):
                 self.idm(self.speed, self.desired_speed(self.lane_index), self.yield_distance, self.speed),
             )
         acc = max(-self.p.max_brake, min(self.p.acc * 2.0, acc))
-        self.action = {"steering": steering, "acceleration": acc}
+        self.action = {"steering": 0.0, "acceleration": acc}
 
     # ----------------------------------------------------------------------------------- routes
     def set_route(self, start: LaneIndex, destination: str | None) -> None:
@@ -276,7 +323,7 @@ class Driver(IDMVehicle):
         target = self.target_lane_index
         index = self.road.index
         lane = index.lanes[target]
-        s, _ = lane.local(*self.position.tolist())
+        s, _ = lane.local(*self.xy)
         if s > lane.length - 2.5:
             succ = index.succ[target]
             if succ:
@@ -315,17 +362,19 @@ class Driver(IDMVehicle):
                 self._stale = (math.inf, 0.0, 0.0, 0.0, 0.0)
 
     def _steering(self, target: LaneIndex) -> float:
-        """highway-env `ControlledVehicle.steering_control` with scalar maths."""
+        """highway-env `ControlledVehicle.steering_control` with scalar maths (on the floats of ``xy``, fixed
+        while vehicles decide)."""
         lane = self.road.index.lanes[target]
-        s, r = lane.local(self.position[0], self.position[1])
+        s, r = lane.local(*self.xy)
         v = self.speed
-        lane_heading = lane.heading_at(s + v * self.TAU_PURSUIT)
-        heading_cmd = math.asin(max(-1.0, min(1.0, -self.KP_LATERAL * r / _not_zero(v))))
+        nz = _not_zero(v)
+        lane_heading = lane.heading_at(s + v * TAU_PURSUIT_S)
+        heading_cmd = math.asin(max(-1.0, min(1.0, -KP_LATERAL_PER_S * r / nz)))
         heading_ref = lane_heading + max(-math.pi / 4, min(math.pi / 4, heading_cmd))
-        rate_cmd = self.KP_HEADING * wrap_angle_f(heading_ref - self.heading)
-        slip = math.asin(max(-1.0, min(1.0, self.LENGTH / 2 / _not_zero(v) * rate_cmd)))
+        rate_cmd = KP_HEADING_PER_S * ((heading_ref - self.heading + math.pi) % (2 * math.pi) - math.pi)
+        slip = math.asin(max(-1.0, min(1.0, self.LENGTH / 2 / nz * rate_cmd)))
         steer = math.atan(2 * math.tan(slip))
-        return max(-self.MAX_STEERING_ANGLE, min(self.MAX_STEERING_ANGLE, steer))
+        return max(-MAX_STEERING_RAD, min(MAX_STEERING_RAD, steer))
 
     def desired_speed(self, lane_index: LaneIndex) -> float:
         return self.p.speed_factor * self.road.index.lanes[lane_index].speed_limit
@@ -355,7 +404,7 @@ class Driver(IDMVehicle):
         lane = self.road.index.lanes[lane_index]
         if lane.forbidden and not self.road.index.succ[lane_index]:
             # An acceleration lane that ends: its end is a standing obstacle until the driver has merged.
-            s = lane.local(*self.position.tolist())[0]
+            s = lane.local(*self.xy)[0]
             acc = min(
                 acc,
                 self.idm(
@@ -386,7 +435,7 @@ class Driver(IDMVehicle):
                         and getattr(v, "target_lane_index", None) == self.target_lane_index
                     ):
                         lane = self.road.index.lanes[self.lane_index]
-                        d = lane.local(v.position[0], v.position[1])[0] - lane.local(*self.position)[0]
+                        d = lane.local(*v.xy)[0] - lane.local(*self.xy)[0]
                         d_star = self.p.min_gap + self.LENGTH + self.speed * self.p.time_gap
                         if 0 < d < d_star:
                             self.target_lane_index = self.lane_index
@@ -402,7 +451,7 @@ class Driver(IDMVehicle):
             lane = self.road.index.lanes[lane_index]
             if lane.forbidden or ((self.exit_requested or leads_now) and not self.leads(lane_index)):
                 continue
-            s, r = lane.local(self.position[0], self.position[1])
+            s, r = lane.local(*self.xy)
             if not (abs(r) <= 2 * lane.width and 0 <= s < lane.length + 5.0):
                 continue
             if self._mobil(lane_index):

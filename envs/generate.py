@@ -162,17 +162,26 @@ def assign_layouts(
 
 
 def _map_runs(tasks: list[RunTask], pool: Any) -> Iterator[list[Scenario]]:
-    """Results in task order; the pool gets the slow layouts first so both cores stay busy to the end."""
+    """Results in task order; the pool gets the slow layouts first so both cores stay busy to the end.
+
+    With a pool the runs are handed to the workers at once (not when the results are first asked for), so a
+    chunk can be started before the parent writes the previous shard (`_build_chunks`).
+    """
     if pool is None:
-        yield from map(simulate_run, tasks)
-        return
+        return map(simulate_run, tasks)
     cost = {"merge": 0, "highway": 1, "roundabout": 2, "intersection": 3}
     order = sorted(range(len(tasks)), key=lambda k: (cost.get(tasks[k].layout, 9), k))
-    results: dict[int, list[Scenario]] = {}
-    for k, res in zip(order, pool.imap(simulate_run, [tasks[k] for k in order]), strict=True):
-        results[k] = res
-    for k in range(len(tasks)):
-        yield results[k]
+    running = pool.imap(simulate_run, [tasks[k] for k in order])
+    return _in_task_order(order, running)
+
+
+def _in_task_order(order: list[int], results: Iterator[list[Scenario]]) -> Iterator[list[Scenario]]:
+    """``results`` (of the tasks in ``order``) in task order."""
+    out: dict[int, list[Scenario]] = {}
+    for k, res in zip(order, results, strict=True):
+        out[k] = res
+    for k in range(len(order)):
+        yield out[k]
 
 
 def _make_pool(workers: int) -> Any:
@@ -270,6 +279,7 @@ def _build_chunks(
     pool = None
     bar = None
     ok = False
+    started: tuple[list[RunTask], Iterator[list[Scenario]]] | None = None  # the next chunk, already running
     try:
         while total < n:
             if builder.is_done(chunk):
@@ -288,13 +298,20 @@ def _build_chunks(
                 bar = tqdm(
                     total=n, initial=min(total, n), unit="scenario", desc="generate", disable=not progress
                 )
-            plan = assign_layouts(layouts, counts, runs, chunk_runs)
-            tasks = [RunTask(chunk * chunk_runs + k, layout, seed, shares) for k, layout in enumerate(plan)]
-            chunk_counts = _build_chunk(builder, chunk, tasks, pool, bar, n, layouts)
+            tasks, results = started or _start_chunk(chunk, chunk_runs, seed, layouts, shares, counts, runs, pool)
+            started = None
+            scenarios, info = _collect_chunk(tasks, results, bar, n, layouts)
             for x in layouts:
-                counts[x] += chunk_counts[x]
-                runs[x] += plan.count(x)
-            total += sum(chunk_counts.values())
+                counts[x] += info["scenarios_per_layout"][x]
+                runs[x] += info["runs_per_layout"][x]
+            total += len(scenarios)
+            if pool is not None and total < n and not builder.is_done(chunk + 1) and (
+                stop_after_chunks is None or built + 1 < stop_after_chunks
+            ):
+                # The next chunk's layouts follow from the counts so far: start its runs now, so the workers
+                # simulate while this process compresses and writes the shard.
+                started = _start_chunk(chunk + 1, chunk_runs, seed, layouts, shares, counts, runs, pool)
+            builder.write_shard(chunk, scenarios, info)
             chunk += 1
             built += 1
             if chunk >= 50 and total == 0:
@@ -312,13 +329,25 @@ def _build_chunks(
     return chunk
 
 
-def _build_chunk(
-    builder: DatasetBuilder, chunk: int, tasks: list[RunTask], pool: Any, bar: Any, n: int, layouts: tuple[str, ...]
-) -> dict[str, int]:
-    """Simulate the runs of one chunk and write its shard; returns its scenarios per layout."""
+def _start_chunk(
+    chunk: int, chunk_runs: int, seed: int, layouts: tuple[str, ...], shares: tuple[float, float, float],
+    counts: dict[str, int], runs: dict[str, int], pool: Any,
+) -> tuple[list[RunTask], Iterator[list[Scenario]]]:
+    """The runs of chunk ``chunk`` (layouts by `assign_layouts` from the counts so far) and their results, which
+    the pool starts computing at once."""
+    plan = assign_layouts(layouts, counts, runs, chunk_runs)
+    tasks = [RunTask(chunk * chunk_runs + k, layout, seed, shares) for k, layout in enumerate(plan)]
+    return tasks, _map_runs(tasks, pool)
+
+
+def _collect_chunk(
+    tasks: list[RunTask], results: Iterator[list[Scenario]], bar: Any, n: int, layouts: tuple[str, ...]
+) -> tuple[list[Scenario], dict[str, Any]]:
+    """The scenarios of one chunk's runs, in run order, and the shard's info (runs, runs and scenarios per
+    layout)."""
     scenarios: list[Scenario] = []
     chunk_counts = dict.fromkeys(layouts, 0)
-    for task, result in zip(tasks, _map_runs(tasks, pool), strict=True):
+    for task, result in zip(tasks, results, strict=True):
         scenarios.extend(result)
         chunk_counts[task.layout] += len(result)
         bar.update(max(0, min(len(result), n - bar.n)))
@@ -327,5 +356,4 @@ def _build_chunk(
         "runs_per_layout": {x: sum(t.layout == x for t in tasks) for x in layouts},
         "scenarios_per_layout": chunk_counts,
     }
-    builder.write_shard(chunk, scenarios, info)
-    return chunk_counts
+    return scenarios, info

@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from highway_env.road.lane import AbstractLane, CircularLane, SineLane, StraightLane
 from highway_env.road.road import LaneIndex, RoadNetwork
 
 from seal.core.geometry import wrap_angle_f
+from seal.envs import lane_kernels as lk
 from seal.envs.network_topology import lane_indices, predecessor_map, successor_map
 
 AHEAD_M = 80.0
@@ -52,6 +54,10 @@ class FastLane:
         """World position (m) of local coordinates (s, r)."""
         raise NotImplementedError
 
+    def distance(self, x: float, y: float, heading: float) -> float:
+        """highway-env `AbstractLane.distance_with_heading` (m + rad) of the pose (x, y, heading)."""
+        return _lane_distance(self, x, y, heading)
+
 
 class FastStraight(FastLane):
     """Scalar-maths twin of a highway-env `StraightLane` (same local coordinates, heading and positions)."""
@@ -74,6 +80,15 @@ class FastStraight(FastLane):
     def position(self, s: float, r: float) -> tuple[float, float]:
         return self.sx + s * self.dx - r * self.dy, self.sy + s * self.dy + r * self.dx
 
+    def distance(self, x: float, y: float, heading: float) -> float:
+        # `_lane_distance` inlined (the closest-lane search calls it for every vehicle and step): same
+        # operations in the same order, so the same bits.
+        ex, ey = x - self.sx, y - self.sy
+        s = ex * self.dx + ey * self.dy
+        r = ey * self.dx - ex * self.dy
+        angle = abs((heading - self.heading + math.pi) % (2 * math.pi) - math.pi)
+        return abs(r) + max(s - self.length, 0.0) + max(-s, 0.0) + angle
+
 
 class FastSine(FastStraight):
     """Scalar-maths twin of a highway-env `SineLane`."""
@@ -93,6 +108,8 @@ class FastSine(FastStraight):
 
     def position(self, s: float, r: float) -> tuple[float, float]:
         return FastStraight.position(self, s, r + self.amp * math.sin(self.puls * s + self.phase))
+
+    distance = FastLane.distance  # not the straight shortcut: the heading varies along a sine lane
 
 
 class FastCircle(FastLane):
@@ -139,13 +156,40 @@ def _lane_distance(lane: FastLane, x: float, y: float, heading: float) -> float:
     return abs(r) + max(s - lane.length, 0.0) + max(-s, 0.0) + angle
 
 
+def lane_table(lanes: list[FastLane]) -> np.ndarray:
+    """``[L, N_COLUMNS]`` rows of `seal.envs.lane_kernels` for the lanes (their attributes, copied exactly)."""
+    table = np.zeros((len(lanes), lk.N_COLUMNS))
+    for k, lane in enumerate(lanes):
+        row = table[k]
+        row[lk.LENGTH] = lane.length
+        if isinstance(lane, FastCircle):
+            row[lk.KIND] = lk.CIRCLE
+            row[[lk.CX, lk.CY, lk.RADIUS, lk.START, lk.DIR]] = lane.cx, lane.cy, lane.radius, lane.start, lane.dir
+            continue
+        assert isinstance(lane, FastStraight)
+        row[lk.KIND] = lk.SINE if isinstance(lane, FastSine) else lk.STRAIGHT
+        row[[lk.SX, lk.SY, lk.DX, lk.DY, lk.HEADING]] = lane.sx, lane.sy, lane.dx, lane.dy, lane.heading
+        if isinstance(lane, FastSine):
+            row[[lk.AMP, lk.PULS, lk.PHASE]] = lane.amp, lane.puls, lane.phase
+    return table
+
+
+def _csr(lists: list[list[int]]) -> tuple[np.ndarray, np.ndarray]:
+    """(pointers ``[len + 1]``, values) of a list of int lists."""
+    ptr = np.zeros(len(lists) + 1, dtype=np.int64)
+    ptr[1:] = np.cumsum([len(x) for x in lists])
+    return ptr, np.array([v for x in lists for v in x], dtype=np.int64)
+
+
 class NetworkIndex:
     """Precomputed topology and scalar lane geometry of a `RoadNetwork`."""
 
     def __init__(self, network: RoadNetwork) -> None:
         self.network = network
         self.indices = lane_indices(network)
-        self.lanes: dict[LaneIndex, FastLane] = {i: fast_lane(network.get_lane(i)) for i in self.indices}
+        self.hw_lanes: dict[LaneIndex, AbstractLane] = {i: network.get_lane(i) for i in self.indices}
+        """highway-env's lane objects (``network.get_lane`` without its per-call checks)."""
+        self.lanes: dict[LaneIndex, FastLane] = {i: fast_lane(self.hw_lanes[i]) for i in self.indices}
         self.succ = successor_map(network)
         self.pred = predecessor_map(self.succ)
         self.edges: dict[tuple[str, str], list[LaneIndex]] = {}
@@ -161,6 +205,20 @@ class NetworkIndex:
         self.all = [(j, self.lanes[j]) for j in self.indices]
         self.ahead = {i: self._chain(i, self.succ, AHEAD_M, forward=True) for i in self.indices}
         self.behind = {i: self._chain(i, self.pred, BEHIND_M, forward=False) for i in self.indices}
+        self.row = {i: k for k, i in enumerate(self.indices)}
+        """Row of each lane in `table` (and of `indices`)."""
+        self.table = lane_table([self.lanes[i] for i in self.indices])
+        """``[L, N_COLUMNS]`` the lanes for the compiled closest-lane lookup (`seal.envs.lane_kernels`)."""
+        self.sib_ptr, self.sib = _csr([[self.row[j] for j, _ in self.siblings[i]] for i in self.indices])
+        self.nxt_ptr, self.nxt = _csr([[self.row[j] for j, _ in self.next_lanes[i]] for i in self.indices])
+        self.search: dict[LaneIndex, list[tuple[LaneIndex, tuple[str, str], float, bool]]] = {
+            i: [(j, j[:2], off, k > 0) for k, (j, off, _) in enumerate(self.ahead[i])]
+            + [(j, j[:2], off, False) for j, off, _ in self.behind[i][1:]]
+            for i in self.indices
+        }
+        """The lanes a neighbour search from each lane visits, in order: ``(lane, its road, offset (m) of its
+        origin along the searched lane, searched only when on the searcher's route)``: the lane itself, the lanes
+        ahead (`ahead`, only those of the route), then the lanes behind (`behind`, without the lane itself)."""
 
     def _chain(
         self, start: LaneIndex, links: dict[LaneIndex, list[LaneIndex]], reach: float, forward: bool
@@ -193,20 +251,18 @@ class NetworkIndex:
         leaving its start node, and lanes leaving its end node when the vehicle is near that end."""
         x, y = float(x), float(y)
         if current is None:
-            return min(self.all, key=lambda c: _lane_distance(c[1], x, y, heading))[0]
+            return min(self.all, key=lambda c: c[1].distance(x, y, heading))[0]
         best, best_d = current, math.inf
         for idx, lane in self.siblings[current]:
-            d = _lane_distance(lane, x, y, heading)
+            d = lane.distance(x, y, heading)
             if d < best_d:
                 best, best_d = idx, d
         lane = self.lanes[current]
         if lane.local(x, y)[0] > lane.length - 6.0:
             for idx, nxt in self.next_lanes[current]:
-                d = _lane_distance(nxt, x, y, heading)
+                d = nxt.distance(x, y, heading)
                 if d < best_d:
                     best, best_d = idx, d
         if best_d > 4.0:  # pushed off its roads (e.g. by a crash): search everything
             return self.closest_lane(x, y, heading, None)
         return best
-
-

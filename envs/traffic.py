@@ -22,9 +22,11 @@ import math
 import numpy as np
 from highway_env.road.road import LaneIndex, Road, RoadNetwork
 
-from seal.core.geometry import box_corners, boxes_overlap
-from seal.envs.drivers import Driver
+from seal.core.geometry import box_corners
+from seal.envs.drivers import KP_HEADING_PER_S, KP_LATERAL_PER_S, MAX_STEERING_RAD, TAU_PURSUIT_S, Driver
+from seal.envs.lane_kernels import closest_lanes, steering_commands
 from seal.envs.network_index import NetworkIndex
+from seal.envs.traffic_kernels import contact_pairs, first_overlaps
 
 CRASH_REMOVE_STEPS = 80
 """Crashed vehicles stay (stopped) for 8 s, long enough for a window to show the crash and its aftermath."""
@@ -36,16 +38,6 @@ CONFLICT_MARGIN_S = 1.0
 MAX_WAIT_S = 4.0
 """Two vehicles conflict when they would occupy the same place less than this many seconds apart."""
 
-
-
-def _separation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Largest gap (m) between the projections of rectangles ``[..., 4, 2]`` on their edge normals: a lower
-    bound of their distance (<= 0 when they overlap)."""
-    axes = np.concatenate([a[..., 1:3, :] - a[..., 0:2, :], b[..., 1:3, :] - b[..., 0:2, :]], axis=-2)
-    axes = axes / np.linalg.norm(axes, axis=-1, keepdims=True)
-    pa = np.einsum("...kd,...cd->...kc", axes, a)
-    pb = np.einsum("...kd,...cd->...kc", axes, b)
-    return np.maximum(pb.min(-1) - pa.max(-1), pa.min(-1) - pb.max(-1)).max(-1)
 
 
 _RuleRow = tuple[Driver, float, bool]
@@ -103,27 +95,30 @@ class TrafficRoad(Road):
     ) -> tuple[Driver | None, float, Driver | None, float]:
         """(front, its centre distance ahead, rear, minus its centre distance behind) of ``vehicle`` along the
         lane ``lane_index``, its successors on the vehicle's route (up to `AHEAD_M`) and predecessors."""
-        s = self.index.lanes[lane_index].local(*vehicle.xy)[0]
+        index = self.index
+        s = index.lanes[lane_index].local(*vehicle.xy)[0]
         route_edges = vehicle.route_edges
         front = rear = None
         s_front, s_rear = math.inf, -math.inf
         seen: set[int] = {vehicle.vehicle_id}
-        for chain, forward in ((self.index.ahead[lane_index], True), (self.index.behind[lane_index], False)):
-            for k, (li, off, _) in enumerate(chain):
-                if k == 0 and not forward:
-                    continue  # the lane itself was searched with the forward chain
-                if forward and k and route_edges is not None and li[:2] not in route_edges:
+        cache = self._occupants
+        for li, edge, off, on_route_only in index.search[lane_index]:
+            if on_route_only and route_edges is not None and edge not in route_edges:
+                continue
+            occ = cache.get(li)
+            if occ is None:
+                occ = self.occupants(li)
+            for sv, v in occ:
+                vid = v.vehicle_id
+                if vid in seen:
                     continue
-                for sv, v in self.occupants(li):
-                    if v.vehicle_id in seen:
-                        continue
-                    seen.add(v.vehicle_id)
-                    sv += off
-                    if sv >= s:
-                        if sv < s_front:
-                            front, s_front = v, sv
-                    elif sv > s_rear:
-                        rear, s_rear = v, sv
+                seen.add(vid)
+                sv += off
+                if sv >= s:
+                    if sv < s_front:
+                        front, s_front = v, sv
+                elif sv > s_rear:
+                    rear, s_rear = v, sv
         return front, s_front - s, rear, s_rear - s
 
     # ------------------------------------------------------------------- act / step
@@ -131,29 +126,49 @@ class TrafficRoad(Road):
         self.rebuild_buckets()
         if self.regulated and self.steps % REGULATION_EVERY == 0:
             self.enforce_road_rules()
-        for vehicle in self.vehicles:
-            vehicle.act()
+        movers = [v for v in self.vehicles if not v.crashed]  # wrecks keep their last action
+        for v in movers:
+            v.decide()
+        if movers:
+            # Every mover's steering in one compiled call (`Driver._steering`, the same operations).
+            index = self.index
+            x, y, heading, speed, length = np.array(
+                [(*v.xy, v.heading, v.speed, v.LENGTH) for v in movers]
+            ).T.copy()
+            target = np.array([index.row[v.target_lane_index] for v in movers], dtype=np.int64)
+            steer = steering_commands(
+                index.table, target, x, y, heading, speed, length, TAU_PURSUIT_S, KP_LATERAL_PER_S, KP_HEADING_PER_S,
+                MAX_STEERING_RAD,
+            )
+            for v, sa in zip(movers, steer.tolist(), strict=True):
+                v.action["steering"] = sa
 
     def step(self, dt: float) -> None:
         """Step all vehicles, then highway-env's collision handling on the pairs that can touch."""
-        for vehicle in self.vehicles:
-            vehicle.step(dt)
         vs = self.vehicles
+        for vehicle in vs:
+            vehicle.move(dt)
+        if not vs:
+            self.steps += 1
+            return
+        state = np.array([(*v.position.tolist(), v.heading, v.LENGTH, v.WIDTH, v.speed) for v in vs])
+        # Each vehicle's closest lane (`Driver.step`'s lookup depends on its own pose only, so all at once).
+        index = self.index
+        x, y, heading = np.ascontiguousarray(state[:, :3].T)
+        rows = closest_lanes(
+            index.table, index.sib_ptr, index.sib, index.nxt_ptr, index.nxt, x, y, heading,
+            np.array([index.row[v.lane_index] for v in vs], dtype=np.int64),
+        )
+        for v, k in zip(vs, rows.tolist(), strict=True):
+            v.lane_index = idx = index.indices[k]
+            v.lane = index.hw_lanes[idx]
         if len(vs) > 1:
-            state = np.array([(*v.position, v.heading, v.LENGTH, v.WIDTH, v.speed) for v in vs])
-            reach = np.hypot(state[:, 3], state[:, 4]) / 2 + np.abs(state[:, 5]) * dt
-            d = np.linalg.norm(state[:, None, :2] - state[None, :, :2], axis=-1)
-            # Superset of highway-env's own spherical pre-check, so the outcome is unchanged ...
-            ii, jj = np.nonzero(np.triu(d <= reach[:, None] + reach[None] + 0.5, 1))
-            if ii.size:
-                # ... and of its polygon test: boxes separated by more than their relative displacement in a
-                # step can neither intersect nor "will intersect".
-                corners = box_corners(state[:, 0], state[:, 1], state[:, 2], state[:, 3], state[:, 4])
-                vel = state[:, 5:6] * np.stack([np.cos(state[:, 2]), np.sin(state[:, 2])], axis=1)
-                rel = np.linalg.norm(vel[ii] - vel[jj], axis=1) * dt
-                touch = _separation(corners[ii], corners[jj]) <= rel + 0.1
-                for i, j in zip(ii[touch], jj[touch], strict=True):
-                    self._collide(vs[int(i)], vs[int(j)], dt)
+            # A superset of highway-env's spherical pre-check and of its polygon test (boxes separated by more
+            # than their relative displacement in a step can neither intersect nor "will intersect"), so the
+            # outcome is highway-env's; compiled (`contact_pairs`), it costs a few microseconds a step.
+            ii, jj = contact_pairs(state, dt)
+            for i, j in zip(ii.tolist(), jj.tolist(), strict=True):
+                self._collide(vs[i], vs[j], dt)
         self.steps += 1
 
     def _collide(self, a: Driver, b: Driver, dt: float) -> None:
@@ -178,12 +193,12 @@ class TrafficRoad(Road):
         """Positions [K, 2] and headings [K] along the vehicle's route lanes at constant ``speed``."""
         lane_idx = v.lane_index
         lane = self.index.lanes[lane_idx]
-        s0 = lane.local(*v.position.tolist())[0]
-        pos = np.empty((len(times), 2))
-        head = np.empty(len(times))
+        s0 = lane.local(*v.xy)[0]
+        pos: list[tuple[float, float]] = []
+        head: list[float] = []
         offset = 0.0
-        for k, t in enumerate(times):
-            s = s0 + speed * float(t) - offset
+        for t in times.tolist():  # Python floats and lists: the loop runs ~10^5 times a run
+            s = s0 + speed * t - offset
             while s > lane.length:
                 nxt = self._next_on_route(v, lane_idx)
                 if nxt is None:
@@ -191,9 +206,9 @@ class TrafficRoad(Road):
                 s -= lane.length
                 offset += lane.length
                 lane_idx, lane = nxt, self.index.lanes[nxt]
-            pos[k] = lane.position(s, 0.0)
-            head[k] = lane.heading_at(s)
-        return pos, head
+            pos.append(lane.position(s, 0.0))
+            head.append(lane.heading_at(s))
+        return np.array(pos), np.array(head)
 
     @staticmethod
     def _predict_wreck(v: Driver, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -265,15 +280,11 @@ class TrafficRoad(Road):
             return
         ii, jj, close, corners = found
         entry: dict[int, float | None] = {}
-        for p in np.flatnonzero(close.any(axis=(1, 2))):
-            i, j = int(ii[p]), int(jj[p])
-            ka, kb = np.nonzero(close[p])
-            overlap = boxes_overlap(corners[i][ka], corners[j][kb])
-            if not overlap.any():
-                continue
-            # When each one first enters the conflict.
-            t_a, t_b = float(times[ka[overlap].min()]), float(times[kb[overlap].min()])
-            self._resolve(rows[i], rows[j], t_a, t_b, entry)
+        # When each one first enters the conflict (-1: the boxes never overlap), one compiled pass over the pairs.
+        first_a, first_b = first_overlaps(corners, ii, jj, close)
+        for i, j, ka, kb in zip(ii.tolist(), jj.tolist(), first_a.tolist(), first_b.tolist(), strict=True):
+            if ka >= 0:
+                self._resolve(rows[i], rows[j], float(times[ka]), float(times[kb]), entry)
 
     def _rule_rows(self) -> list[_RuleRow]:
         """(vehicle, predicted speed, inside the junction) per prediction: wrecks standing, slow vehicles twice

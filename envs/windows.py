@@ -26,12 +26,12 @@ from seal.core.interaction import (
     EVENT_GAP_M,
     MAX_PER_AGENT,
     context_rows,
-    crossing_hits,
     is_moving,
     near_pair_distances,
 )
 from seal.core.interaction import in_own_lanes as own_lanes
 from seal.core.scenario import CURRENT_STEP, N_STEPS
+from seal.envs.traffic_kernels import path_crossings
 from seal.envs.traffic_run import RunLog
 
 EVENT_STEPS = (25, 75)
@@ -91,27 +91,28 @@ def _pair_gaps(log: RunLog, pairs: _Pairs) -> dict[tuple[int, int], np.ndarray]:
     diag = np.hypot(log.states[..., 4], log.states[..., 5])
     diag = np.nanmax(np.where(log.valid, diag, np.nan), axis=1)
     close = pairs.dist < ((diag[pairs.i] + diag[pairs.j]) / 2 + EVENT_GAP_M)[:, None]
-    out: dict[tuple[int, int], np.ndarray] = {}
-    for p in np.flatnonzero(close.any(axis=1)):
-        i, j = int(pairs.i[p]), int(pairs.j[p])
-        steps = np.flatnonzero(close[p])
-        g = np.full(t, np.inf)
-        g[steps] = interaction_gap(log, i, j, steps)
-        out[(i, j)] = g
-    return out
+    sel = np.flatnonzero(close.any(axis=1))
+    # All pairs' close steps in one `interaction_gap` call (its operations are elementwise, so batching changes
+    # no bit; one call per pair was most of the window finder's time).
+    pp, steps = np.nonzero(close[sel])
+    rows_i, rows_j = pairs.i[sel][pp], pairs.j[sel][pp]
+    si, sj = log.states[rows_i, steps], log.states[rows_j, steps]
+    g_all = box_gap(
+        box_corners(si[:, 0], si[:, 1], si[:, 2], si[:, 4], si[:, 5]),
+        box_corners(sj[:, 0], sj[:, 1], sj[:, 2], sj[:, 4], sj[:, 5]),
+    )
+    own = own_lanes(si[:, :2], si[:, 2], si[:, 5], sj[:, :2], sj[:, 2], sj[:, 5])
+    g_all = np.where(own, np.inf, g_all)
+    gaps = np.full((len(sel), t), np.inf)
+    gaps[pp, steps] = g_all
+    return {(int(pairs.i[p]), int(pairs.j[p])): gaps[k] for k, p in enumerate(sel.tolist())}
 
 
 def _conflicts(log: RunLog, i: int, j: int, lo: int, hi: int) -> list[tuple[int, float]]:
-    """Path crossings of ``i`` and ``j`` in steps ``lo..hi-1``: (step when the second passes, dt in s)."""
-    stride = 2
-    steps = np.arange(lo, hi, stride)
-    vi, vj = log.valid[i, steps], log.valid[j, steps]
-    if not vi.any() or not vj.any():
-        return []
-    si, sj = log.states[i, steps], log.states[j, steps]
-    hit, dt = crossing_hits(si[:, :2], steps, si[:, 2], sj[:, :2], steps, sj[:, 2])
-    hit &= vi[:, None] & vj[None]
-    return [(int(max(steps[a], steps[b])), float(dt[a, b])) for a, b in zip(*np.nonzero(hit), strict=True)]
+    """Path crossings of ``i`` and ``j`` in steps ``lo..hi-1`` (every 2nd step): (step when the second passes, dt
+    in s), in row-major order of the two vehicles' steps (`seal.core.interaction.crossing_hits`, compiled)."""
+    steps, dts = path_crossings(log.states, log.valid, i, j, lo, hi)
+    return list(zip(steps.tolist(), dts.tolist(), strict=True))
 
 
 def _events(log: RunLog, gaps: dict[tuple[int, int], np.ndarray], pairs: _Pairs) -> list[tuple[int, int, int]]:
@@ -127,16 +128,17 @@ def _events(log: RunLog, gaps: dict[tuple[int, int], np.ndarray], pairs: _Pairs)
             events.append((i, j, int(a + np.argmin(g[a:b]))))
     for step, i, j in log.collisions:
         events.append((min(i, j), max(i, j), int(step)))
-    # Path conflicts among the other near pairs while they head different ways.
+    # Path conflicts among the other near pairs while they head different ways (the heading test for all pairs
+    # at once: elementwise, so the same bits as pair by pair).
     head = log.states[..., 2]
-    for p in range(len(pairs.i)):
+    finite = np.isfinite(pairs.dist)
+    with np.errstate(invalid="ignore"):  # NaN headings where a vehicle does not exist; masked by `finite`
+        turning = ((np.abs(wrap_angle(head[pairs.i] - head[pairs.j])) > CROSSING_TURN_RAD) & finite).any(axis=1)
+    for p in np.flatnonzero(turning).tolist():
         i, j = int(pairs.i[p]), int(pairs.j[p])
         if (i, j) in gaps and (gaps[(i, j)] < EVENT_GAP_M).any():
             continue  # already an event pair
-        common = np.flatnonzero(np.isfinite(pairs.dist[p]))
-        turn = np.abs(wrap_angle(head[i, common] - head[j, common]))
-        if not (turn > CROSSING_TURN_RAD).any():
-            continue
+        common = np.flatnonzero(finite[p])
         hits = _conflicts(log, i, j, int(common[0]), int(common[-1]) + 1)
         if hits:
             events.append((i, j, min(hits, key=lambda h: h[1])[0]))
