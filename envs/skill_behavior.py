@@ -114,9 +114,7 @@ class SkillSwitchBehavior(AdversaryBehavior):
         if t >= self.switch_step:
             if observation is None:
                 raise RuntimeError("SkillSwitchBehavior: the env passed no observation after the switch")
-            # `tolist` gives Python floats already: the output is built directly (no `BehaviorOutput.act`
-            # conversions on this every-step path).
             steering, acceleration = self.policy.act(observation).tolist()
-            return BehaviorOutput(action=(steering, acceleration))
+            return BehaviorOutput.act(steering, acceleration)
         assert self._follower is not None, "reset() first"
         return self._follower.step(t, state, observation)

@@ -20,32 +20,10 @@ import numpy as np
 from numba import boolean, float64, int64, njit, types
 
 from seal.core.interaction import CONFLICT_DIST_M, CONFLICT_DT_S, CROSSING_TURN_RAD
+from seal.core.kernels import corner_boxes_overlap
 from seal.core.scenario import DT_S
 
 _TWO_PI = 2 * math.pi
-
-
-@njit(boolean(float64[:, ::1], float64[:, ::1]), cache=True, nogil=True, error_model="numpy")
-def _rects_overlap(a: np.ndarray, b: np.ndarray) -> bool:
-    """`seal.core.geometry.boxes_overlap` of two rectangles ``[4, 2]`` (corners in cyclic order, m): the
-    separating-axis test on the two edge normals of each (unnormalised edges, as there)."""
-    for k in range(4):
-        src = a if k < 2 else b
-        e = k % 2
-        ax = src[e + 1, 0] - src[e, 0]
-        ay = src[e + 1, 1] - src[e, 1]
-        a_min = a_max = ax * a[0, 0] + ay * a[0, 1]
-        b_min = b_max = ax * b[0, 0] + ay * b[0, 1]
-        for c in range(1, 4):
-            pa = ax * a[c, 0] + ay * a[c, 1]
-            pb = ax * b[c, 0] + ay * b[c, 1]
-            a_min = min(a_min, pa)
-            a_max = max(a_max, pa)
-            b_min = min(b_min, pb)
-            b_max = max(b_max, pb)
-        if a_max < b_min or b_max < a_min:
-            return False
-    return True
 
 
 @njit(types.Tuple((int64[::1], int64[::1]))(float64[:, :, :, ::1], int64[:], int64[:], boolean[:, :, ::1]),
@@ -76,7 +54,7 @@ def first_overlaps(
         best_b = n_k
         for ka in range(n_k):
             for kb in range(n_k):
-                if close[p, ka, kb] and (ka < best_a or kb < best_b) and _rects_overlap(ca[ka], cb[kb]):
+                if close[p, ka, kb] and (ka < best_a or kb < best_b) and corner_boxes_overlap(ca[ka], cb[kb]):
                     best_a = min(best_a, ka)
                     best_b = min(best_b, kb)
         if best_a < n_k:

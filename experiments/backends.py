@@ -106,9 +106,10 @@ class LocalBackend:
     """A pool of ``workers`` spawned processes (default: the CPU count).
 
     By default each `map` spawns its pool and closes it at the end. `start` spawns the workers at once instead
-    (each importing the ``warm`` modules as it starts) and keeps them for every later `map` until `close`: their
-    start-up (a fresh interpreter, seal's imports and compiled kernels, about a second of CPU each) then overlaps
-    what this process does before its first `map` (its own imports, planning the jobs) instead of following it.
+    (each importing the ``warm`` modules as it starts) and keeps them for every later `map` until `shutdown` (as
+    `RayBackend`): their start-up (a fresh interpreter, seal's imports and compiled kernels, about a second of CPU
+    each) then overlaps what this process does before its first `map` (its own imports, planning the jobs) instead
+    of following it.
     """
 
     name = "local"
@@ -140,7 +141,7 @@ class LocalBackend:
                 self._pool.submit(_noop)
         return self
 
-    def close(self) -> None:
+    def shutdown(self) -> None:
         """Shut a `start`-ed pool down (waits for its workers to exit); a no-op otherwise."""
         if self._pool is not None:
             pool, self._pool = self._pool, None

@@ -17,6 +17,8 @@ import math
 import numpy as np
 from numba import float64, int64, njit, types
 
+from seal.core.kernels import corner_boxes_overlap
+
 
 @njit(types.UniTuple(float64, 3)(float64[:, ::1], float64[::1], float64[:, ::1], float64[::1], float64, float64),
       cache=True, nogil=True, error_model="numpy")
@@ -302,28 +304,6 @@ def _corners(x: float, y: float, heading: float, length: float, width: float, ou
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _boxes_overlap(a: np.ndarray, b: np.ndarray) -> bool:
-    """Separating-axis test of two rectangles given by corners ``[4, 2]`` (`seal.core.geometry.boxes_overlap`)."""
-    for k in range(4):
-        box = a if k < 2 else b
-        e = k % 2
-        ax = box[e + 1, 0] - box[e, 0]
-        ay = box[e + 1, 1] - box[e, 1]
-        lo_a = hi_a = ax * a[0, 0] + ay * a[0, 1]
-        lo_b = hi_b = ax * b[0, 0] + ay * b[0, 1]
-        for c in range(1, 4):
-            pa = ax * a[c, 0] + ay * a[c, 1]
-            pb = ax * b[c, 0] + ay * b[c, 1]
-            lo_a = min(lo_a, pa)
-            hi_a = max(hi_a, pa)
-            lo_b = min(lo_b, pb)
-            hi_b = max(hi_b, pb)
-        if hi_a < lo_b or hi_b < lo_a:
-            return False
-    return True
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
 def _orient(ax: float, ay: float, bx: float, by: float, cx: float, cy: float) -> float:
     return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
 
@@ -387,7 +367,7 @@ def pair_contacts(
             if not hit and dist <= reach_box:
                 _corners(ax[i, t], ay[i, t], ah[i, t], alen[i], awid[i], box_a)
                 _corners(bx[j, t], by[j, t], bh[j, t], blen[j], bwid[j], box_b)
-                hit = _boxes_overlap(box_a, box_b)
+                hit = corner_boxes_overlap(box_a, box_b)
             if not hit and t > 0 and mask[p, t - 1]:
                 # Motion segments can only cross if the centres are closer than the two step lengths together.
                 step_i = math.hypot(ax[i, t] - ax[i, t - 1], ay[i, t] - ay[i, t - 1])

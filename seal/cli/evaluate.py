@@ -54,9 +54,7 @@ def cmd_eval_runs(args: argparse.Namespace) -> int:
             algo=args.algo,
         )
     finally:
-        if isinstance(backend, LocalBackend):
-            backend.close()
-        elif backend is not None:
+        if backend is not None:
             backend.shutdown()  # type: ignore[attr-defined]
     for r in results:
         written = ", ".join(f"{s}: {n}" for s, n in r["written"].items())

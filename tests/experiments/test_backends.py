@@ -43,17 +43,17 @@ def loaded_modules(job) -> dict:
 
 
 def test_local_backend_start_spawns_warm_workers_once_for_every_map() -> None:
-    """`start`: the workers import the warm modules as they start and serve every `map` until `close`."""
+    """`start`: the workers import the warm modules as they start and serve every `map` until `shutdown`."""
     backend = LocalBackend(2, warm=("json.tool",)).start()
     try:
         first = backend.map(loaded_modules, [{"module": "json.tool"} for _ in range(4)])
         second = backend.map(square, [{"x": 3}])
     finally:
-        backend.close()
+        backend.shutdown()
     assert all(r.ok and r.value["warm"] for r in first)
     pids = {r.value["pid"] for r in first}
     assert second[0].value["y"] == 9 and second[0].value["pid"] in pids and os.getpid() not in pids
-    backend.close()  # closing twice is harmless
+    backend.shutdown()  # shutting down twice is harmless
 
 
 def test_make_backend() -> None:

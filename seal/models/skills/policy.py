@@ -18,8 +18,6 @@ from seal.models.skills.fast import FastDecoder, FastPriorSampler
 from seal.models.skills.realnvp import ConditionalRealNVP
 from seal.models.skills.vae import SkillVAE
 
-_F32 = np.dtype(np.float32)
-
 
 class SkillPolicy:
     """Sample a skill every ``horizon`` steps, decode actions every step (see the module docstring).
@@ -82,11 +80,8 @@ class SkillPolicy:
 
     def act(self, observation: np.ndarray) -> np.ndarray:
         """Normalised action ``[steering, acceleration]`` ``[2]`` float32 for one observation ``[obs_dim]``."""
-        # The env's observations (contiguous float32 rows) go to the compiled decoder as they are; anything else is
-        # converted to the contiguous float32 vector it needs.
-        obs = observation
-        if type(obs) is not np.ndarray or obs.dtype != _F32 or obs.ndim != 1 or not obs.flags.c_contiguous:
-            obs = np.ascontiguousarray(observation, dtype=np.float32).reshape(-1)
+        # No copy for the env's float32 rows; the compiled decoder needs a contiguous vector.
+        obs = np.ascontiguousarray(observation, dtype=np.float32).reshape(-1)
         if obs.shape[0] != self.obs_dim:
             raise ValueError(f"SkillPolicy.act: observation must have {self.obs_dim} entries, got {obs.shape[0]}")
         if self.steps % self.horizon == 0:
