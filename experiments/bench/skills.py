@@ -94,10 +94,20 @@ def run_skill_bench(
                 round(r[name]["wall"] / r["replay"]["wall"], 3) for r in runs]
     worst = result["skill_from_start_cost_ratio"]
     policy_us = _policy_step_us(policy)
+    parts = _floor_parts_us(envs["skill_from_start"], policy.clone(), seed)
+    replay_step_us = best["replay"]["wall"] / n_steps * 1e6
     result.update({
         "meets_target": bool(worst <= TARGET_COST_RATIO),
         "target": f"skill-adversary step cost <= {TARGET_COST_RATIO} x replayed-adversary step (skill from start)",
         "skill_policy_step_us": round(policy_us, 1),
+        "replay_step_us": round(replay_step_us, 1),
+        "adversary_observation_us": round(parts["observation_us"], 1),
+        "skill_policy_step_on_recorded_obs_us": round(parts["policy_us"], 1),
+        # The adversary's two irreducible parts alone (its observation: the policy's input, the same kernel as the
+        # ego's; and the compiled policy step), everything else it adds (its bicycle step, collision checks,
+        # Python glue) taken as free: no implementation with these models and this observation goes below it.
+        "floor_cost_ratio": round((replay_step_us + parts["observation_us"] + parts["policy_us"]) / replay_step_us,
+                                  3),
         "n_steps": n_steps,
         "repeats": repeats,
         "models": models,
@@ -145,6 +155,44 @@ def _timed_repeat(envs: dict[str, Any], n_steps: int, seed: int, block: int) -> 
                 st["obs"] = obs
                 st["steps"] += 1
     return state
+
+
+def _floor_parts_us(env: Any, policy: Any, seed: int, n_states: int = 400, repeats: int = 5) -> dict[str, float]:
+    """Mean microseconds of the adversary's observation (the second viewer of `ObservationBuilder.build_many`,
+    i.e. two viewers minus one) and of `SkillPolicy.act` on that observation, each alone, on ``n_states`` states
+    recorded from ``env`` (skill adversary from the start, heuristic ego); fastest of ``repeats``."""
+    from seal.envs.heuristic import HeuristicDriver
+
+    driver = HeuristicDriver()
+    obs, _ = env.reset(seed=seed)
+    states = []
+    while len(states) < n_states:
+        obs, _, terminated, truncated, _ = env.step(driver.predict(obs)[0])
+        if terminated or truncated:
+            obs, _ = env.reset()
+            continue
+        adv, adv_route = env._adv, env._adv_route  # this bench's own env: read the state `_observe` reads
+        if adv is None or adv_route is None:
+            continue
+        proj = adv_route.project(adv.x, adv.y, None)
+        states.append(((env._ego, adv), (env._route, adv_route), (env._proj, proj), env._cur.copy(),
+                       (env._ego_idx, env._adv_idx)))
+    builder = env._builder
+    adv_obs = [builder.build_many(*s)[1] for s in states]
+
+    def best_us(fn: Any) -> float:
+        times = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - t0)
+        return min(times) / len(states) * 1e6
+
+    one = best_us(lambda: [builder.build_many(v[:1], r[:1], p[:1], cur, i[:1]) for v, r, p, cur, i in states])
+    two = best_us(lambda: [builder.build_many(*s) for s in states])
+    policy.reset(seed)
+    act = best_us(lambda: [policy.act(o) for o in adv_obs])
+    return {"observation_us": max(0.0, two - one), "policy_us": act}
 
 
 def _policy_step_us(policy: Any, n: int = 2000) -> float:

@@ -97,6 +97,10 @@ SETTING_COLUMNS: dict[str, str] = {
 }
 
 
+TIMING_COLUMNS = ("created_at", "generation_ms_mean", "generation_ms_max")
+"""Episode columns that hold wall-clock times: the only ones two evaluations of the same work may differ in."""
+
+
 class StoreError(SealError, RuntimeError):
     """A results store that cannot be used (wrong schema version, not a results store)."""
 
@@ -266,6 +270,14 @@ class ResultsStore:
 
     def count(self) -> int:
         return int(self._conn.execute("SELECT COUNT(*) FROM episodes").fetchone()[0])
+
+
+def comparable_rows(store_path: str | Path) -> dict[tuple[str, str, str, str], dict[str, Any]]:
+    """Every episode row of a results store keyed by (run, dataset, setting, scenario), without the timing columns
+    (the only columns two evaluations of the same work may differ in)."""
+    with ResultsStore(store_path) as store:
+        return {(r["run"], r["dataset"], r["setting"], r["scenario_id"]):
+                {k: v for k, v in r.items() if k not in TIMING_COLUMNS} for r in store.episodes()}
 
 
 def _encode(column: str, value: Any) -> Any:

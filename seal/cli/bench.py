@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from seal.cli.args import add_set_option, pipeline_choices, positive_int, print_result
+from seal.cli.args import CliError, add_set_option, pipeline_choices, positive_int, print_result
 from seal.cli.tree import CommandTree
 
 
@@ -69,6 +69,19 @@ def cmd_bench_training(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_eval(args: argparse.Namespace) -> int:
+    from seal.experiments.bench.evaluation import run_eval_bench
+
+    try:
+        result = run_eval_bench(args.dataset, runs=args.runs or ["heuristic"], settings=args.settings,
+                                limit=args.limit, workers=args.workers, repeats=args.repeats,
+                                candidates=args.candidates, k=args.k)
+    except (ValueError, FileNotFoundError) as exc:
+        raise CliError(str(exc)) from None
+    print_result(result, args.json)
+    return 0
+
+
 def register(tree: CommandTree) -> None:
     bench_sub = tree.group("bench")
     btrain = bench_sub.add_parser(
@@ -113,6 +126,32 @@ def register(tree: CommandTree) -> None:
                       help="with --adversary seal: identical measurements; each variant's fastest counts (default 3)")
     benv.add_argument("--json", action="store_true", help="print JSON")
     benv.set_defaults(func=cmd_bench_env)
+    beval = bench_sub.add_parser(
+        "eval",
+        help="seal eval runs episodes/s on N worker processes vs one process, identical rows (target >= 1.8x)",
+        description="Evaluate the same egos, settings and scenarios with 1 worker (this process) and with --workers "
+        "local worker processes, interleaved --repeats times, each into a fresh results store; print each "
+        "variant's episodes/s (rows over the whole evaluation call, the workers' start-up included; and the "
+        "steady rate between the first and last row), the speedup and whether the rows are identical.",
+    )
+    beval.add_argument("runs", nargs="*", help="egos: run folders or built-in egos (default: heuristic); the Replay "
+                       "ego is added as by seal eval runs")
+    beval.add_argument("--dataset", default=None,
+                       help="dataset directory (default: 100 scenarios generated into a temporary folder)")
+    beval.add_argument("--settings", default="normal,rule,cat", help="seal eval runs --settings (default: "
+                       "normal,rule,cat)")
+    beval.add_argument("--limit", type=positive_int("--limit"), default=80, help="scenarios per setting (default 80)")
+    beval.add_argument("--workers", type=positive_int("--workers"), default=2,
+                       help="worker processes of the parallel variant (default 2)")
+    beval.add_argument("--repeats", type=positive_int("--repeats"), default=2,
+                       help="measurements per variant, interleaved; the fastest counts (default 2)")
+    beval.add_argument("--candidates", choices=("lanes", "constant_velocity"), default="lanes",
+                       help="built-in candidate source of candidate-based generators (default lanes: no trained "
+                       "prior needed)")
+    beval.add_argument("--k", type=positive_int("--k"), default=None,
+                       help="perturbation passes of generator settings (default: the eval config's)")
+    beval.add_argument("--json", action="store_true", help="print JSON")
+    beval.set_defaults(func=cmd_bench_eval)
     bdata = bench_sub.add_parser(
         "data",
         help="time to open a dataset and load (and validate) N scenarios",

@@ -51,3 +51,7 @@ def test_skill_bench_repeats_play_the_same_episodes(tmp_path: Path, highway: lis
     ratio = result["replay_steps_per_s"] / result["skill_from_start_steps_per_s"]
     assert abs(result["skill_from_start_cost_ratio"] - ratio) < 0.01
     assert isinstance(result["meets_target"], bool)
+    # The floor: the replayed step plus the adversary's observation and policy step, each measured alone.
+    parts = result["adversary_observation_us"] + result["skill_policy_step_on_recorded_obs_us"]
+    assert result["adversary_observation_us"] > 0 and result["skill_policy_step_on_recorded_obs_us"] > 0
+    assert abs(result["floor_cost_ratio"] - (result["replay_step_us"] + parts) / result["replay_step_us"]) < 0.01

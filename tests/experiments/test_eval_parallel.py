@@ -11,16 +11,7 @@ from seal.core.dataset import Dataset, write_dataset
 from seal.experiments.backends import InlineBackend
 from seal.experiments.evaluation.evaluate import parse_settings, read_run, resolve_eval_config
 from seal.experiments.evaluation.parallel import chunk_jobs, evaluate_runs
-from seal.experiments.evaluation.results_store import ResultsStore
-
-TIMING = ("created_at", "generation_ms_mean", "generation_ms_max")
-"""Columns that hold wall-clock times: the only ones allowed to differ between two evaluations."""
-
-
-def _rows(store_path: Path) -> dict[tuple[str, str, str], dict]:
-    with ResultsStore(store_path) as store:
-        return {(r["run"], r["setting"], r["scenario_id"]): {k: v for k, v in r.items() if k not in TIMING}
-                for r in store.episodes()}
+from seal.experiments.evaluation.results_store import comparable_rows
 
 
 def _dataset(root: Path) -> Path:
@@ -41,11 +32,12 @@ def test_two_workers_write_the_rows_of_one_process(tmp_path: Path) -> None:
                         workers=2, progress=False, chunk_size=1)
     assert one == two
     assert one[0]["written"] == {"normal": 4, "hard": 2, "rule": 4, "cat": 4}
-    rows_one, rows_two = _rows(tmp_path / "one.sqlite"), _rows(tmp_path / "two.sqlite")
+    rows_one, rows_two = comparable_rows(tmp_path / "one.sqlite"), comparable_rows(tmp_path / "two.sqlite")
     assert len(rows_one) == 2 * 14  # heuristic + replay egos, 14 rows each
     assert rows_one == rows_two
     # the generator settings really perturbed something: not every cat row equals its normal row
-    outcomes = {k: (r["outcome"], round(r["route_completion"], 6), r["min_gap_m"]) for k, r in rows_one.items()}
+    outcomes = {(run, s, sid): (r["outcome"], round(r["route_completion"], 6), r["min_gap_m"])
+                for (run, _, s, sid), r in rows_one.items()}
     assert any(outcomes[(run, "cat", sid)] != outcomes[(run, "normal", sid)] for run, s, sid in outcomes
                if s == "cat")
 
@@ -107,4 +99,19 @@ def test_ray_backend_writes_the_same_rows(tmp_path: Path) -> None:
                       backend=backend, progress=False, chunk_size=1)
     finally:
         backend.shutdown()
-    assert _rows(tmp_path / "one.sqlite") == _rows(tmp_path / "ray.sqlite")
+    assert comparable_rows(tmp_path / "one.sqlite") == comparable_rows(tmp_path / "ray.sqlite")
+
+
+def test_eval_bench_measures_both_variants_on_the_same_rows(tmp_path: Path) -> None:
+    from seal.experiments.bench.evaluation import run_eval_bench
+
+    data = _dataset(tmp_path / "data")
+    result = run_eval_bench(data, settings="normal,cat", limit=3, workers=2, repeats=1, k=1)
+    assert result["identical_rows"] is True
+    for variant, workers in (("one_worker", 1), ("n_workers", 2)):
+        assert result[variant]["workers"] == workers
+        assert result[variant]["episodes"] == 2 * 2 * 3  # heuristic + replay egos x 2 settings x 3 scenarios
+        assert len(result[variant]["seconds"]) == 1 and result[variant]["episodes_per_s"] > 0
+    expected = result["n_workers"]["episodes_per_s"] / result["one_worker"]["episodes_per_s"]
+    assert abs(result["speedup"] - expected) < 1e-2
+    assert result["meets_target"] == (result["speedup"] >= 1.8)
