@@ -43,15 +43,15 @@ def bench_dataset(out: Path, n: int, seed: int = 0) -> Path:
     benchmark without ``--dataset``."""
     from seal.envs.generate import generate_dataset
 
-    ds = generate_dataset(out, n=n, seed=seed, workers=1, progress=False)
+    ds = generate_dataset(out, n=n, seed=seed, progress=False)
     ds.update_manifest(splits={"train": [], "eval": [s.scenario_id for s in ds.load()], "hard": []})
     return out
 
 
 def run_eval_bench(
     dataset: str | Path | None = None, runs: Sequence[str] = ("heuristic",), settings: str = "normal,rule,cat",
-    limit: int = 80, workers: int = 2, repeats: int = 2, candidates: str = "lanes", k: int | None = None,
-    n_generated: int = 100, seed: int = 0,
+    limit: int = 300, workers: int = 2, repeats: int = 2, candidates: str = "lanes", k: int | None = None,
+    n_generated: int | None = None, seed: int = 0,
 ) -> dict[str, Any]:
     """Measure `evaluate_runs` with 1 and with ``workers`` local worker processes on the same work.
 
@@ -59,12 +59,12 @@ def run_eval_bench(
         dataset: dataset directory (default: ``n_generated`` scenarios generated into a temporary folder).
         runs: egos (run folders or built-in egos); the Replay ego is added as by ``seal eval runs``.
         settings: ``seal eval runs --settings``.
-        limit: scenarios per setting.
+        limit: scenarios per setting (default 300: the decisive protocol's Normal eval and Hard splits).
         workers: worker processes of the parallel variant (>= 2).
         repeats: measurements per variant, interleaved; the fastest counts.
         candidates: the CAT generator's candidate source (``lanes``: no trained prior needed).
         k: perturbation passes of generator settings (default: the evaluation config's).
-        n_generated: scenarios of the generated dataset.
+        n_generated: scenarios of the generated dataset (default: ``limit``).
         seed: generation seed of that dataset and the evaluation seed.
 
     Returns:
@@ -82,6 +82,7 @@ def run_eval_bench(
         tmp = Path(tmp_dir)
         source = f"dataset {dataset}"
         if dataset is None:
+            n_generated = int(n_generated or limit)
             dataset = bench_dataset(tmp / "data", n_generated, seed)
             source = f"{n_generated} generated scenarios (seed {seed})"
         egos = [read_run(r) for r in runs]

@@ -137,10 +137,11 @@ def register(tree: CommandTree) -> None:
     beval.add_argument("runs", nargs="*", help="egos: run folders or built-in egos (default: heuristic); the Replay "
                        "ego is added as by seal eval runs")
     beval.add_argument("--dataset", default=None,
-                       help="dataset directory (default: 100 scenarios generated into a temporary folder)")
+                       help="dataset directory (default: --limit scenarios generated into a temporary folder)")
     beval.add_argument("--settings", default="normal,rule,cat", help="seal eval runs --settings (default: "
                        "normal,rule,cat)")
-    beval.add_argument("--limit", type=positive_int("--limit"), default=80, help="scenarios per setting (default 80)")
+    beval.add_argument("--limit", type=positive_int("--limit"), default=300,
+                       help="scenarios per setting (default 300: the decisive protocol's Normal eval and Hard sizes)")
     beval.add_argument("--workers", type=positive_int("--workers"), default=2,
                        help="worker processes of the parallel variant (default 2)")
     beval.add_argument("--repeats", type=positive_int("--repeats"), default=2,
