@@ -10,7 +10,10 @@
    ``cache_max``) and of the crash set's unsafe agents; saved in the model file.
 4. Analysis on the held-out samples: per-class k-means sub-clustering silhouette and Davies-Bouldin (averaged over
    N_km = 3..6) and a linear probe of the safety labels fitted on training embeddings; per variant, mean and
-   standard deviation over the seeds.
+   standard deviation over the seeds. The same metrics on the crash set of the held-out split (its collisions and
+   near misses, labelled striker / reacting / non-reacting as the fine-tuning data; the probe fitted on the
+   training crash set): what fine-tuning trains for, on pairs it has not seen (``crash_table``; None when the
+   held-out split has no crash pair).
 
 Outputs in ``--out``: ``behavior.pt`` (the full variant of the first seed: what ``cat-rcg`` / ``seal-rcg`` load),
 ``variants/<variant>-s<seed>.pt``, ``report.json``, ``report.md``, ``train_log.csv``, ``config.yaml``.
@@ -139,6 +142,8 @@ class Data:
     crash: SampleSet
     delta: float
     crash_summary: dict[str, Any]
+    held_out_crash: SampleSet | None = None
+    """The held-out split's crash set (None: no pair there collides or comes close)."""
 
 
 def load_data(dataset: str | Path, config: BehaviorFitConfig) -> Data:
@@ -147,11 +152,15 @@ def load_data(dataset: str | Path, config: BehaviorFitConfig) -> Data:
     feats = config.network().features
     train, scenarios = everyday_samples(dataset, config.split, config.limit, feats, config.min_valid_rows,
                                         config.max_samples, config.seeds[0])
-    held_out, _ = everyday_samples(dataset, config.eval_split, config.eval_limit, feats, config.min_valid_rows,
-                                   None, config.seeds[0])
+    held_out, held_scenarios = everyday_samples(dataset, config.eval_split, config.eval_limit, feats,
+                                                config.min_valid_rows, None, config.seeds[0])
     delta = label_everyday(train, held_out)
     crash, summary = crash_set(scenarios, config.crash_datasets, feats, config.crash_config())
-    return Data(train, held_out, crash, delta, summary)
+    try:
+        held_crash, _ = crash_set(held_scenarios, (), feats, config.crash_config())
+    except ValueError:  # no crash pair in the held-out split: that analysis is left out
+        held_crash = None
+    return Data(train, held_out, crash, delta, summary, held_crash)
 
 
 def _unsafe_cache(model: BehaviorModel, data: Data, cache_max: int, seed: int) -> dict[str, int]:
@@ -225,6 +234,21 @@ def analyse(model: BehaviorModel, data: Data, config: BehaviorFitConfig, seed: i
     return {**quality, "probe_accuracy": probe}
 
 
+def analyse_crash(model: BehaviorModel, data: Data, seed: int) -> dict[str, float] | None:
+    """Table 7.5's metrics on the held-out crash set (its crash roles as classes; the probe fitted on the training
+    crash set), and the share of its majority class (a probe's floor); None without a held-out crash set."""
+    from seal.models.behavior.analysis import cluster_quality, linear_probe
+
+    held = data.held_out_crash
+    if held is None:
+        return None
+    v_held = model.embed(held.inputs)
+    quality = cluster_quality(v_held, held.labels, seed=seed)
+    probe = linear_probe(model.embed(data.crash.inputs), data.crash.labels, v_held, held.labels, seed=seed)
+    majority = float(np.bincount(held.labels).max() / len(held))
+    return {**quality, "probe_accuracy": probe, "majority_share": majority}
+
+
 def fit_behavior(dataset: str | Path, out: str | Path, config: BehaviorFitConfig, progress: bool = False
                  ) -> dict[str, Any]:
     """Run the whole job (see the module docstring); returns the report. ``progress``: a bar over the training
@@ -239,6 +263,7 @@ def fit_behavior(dataset: str | Path, out: str | Path, config: BehaviorFitConfig
     logger.info("samples: train %d, held-out %d, crash %d (delta %.3f)", len(data.train), len(data.held_out),
                 len(data.crash), data.delta)
     metrics: dict[str, list[dict[str, float]]] = {v: [] for v in VARIANTS}
+    crash_metrics: dict[str, list[dict[str, float]]] = {v: [] for v in VARIANTS}
     log: list[dict] = []
     bar = tqdm(total=8 * len(config.seeds), desc="fit behavior", unit="stage", disable=not progress)
     for seed in config.seeds:
@@ -247,6 +272,9 @@ def fit_behavior(dataset: str | Path, out: str | Path, config: BehaviorFitConfig
         for name, model in models.items():
             model.save(out / "variants" / f"{name}-s{seed}.pt")
             metrics[name].append(analyse(model, data, config, seed))
+            on_crash = analyse_crash(model, data, seed)
+            if on_crash is not None:
+                crash_metrics[name].append(on_crash)
             bar.update()
             logger.info("seed %d %s: %s", seed, name, metrics[name][-1])
         if seed == config.seeds[0]:
@@ -256,14 +284,19 @@ def fit_behavior(dataset: str | Path, out: str | Path, config: BehaviorFitConfig
     report: dict[str, Any] = {
         "dataset": str(dataset), "seeds": list(config.seeds), "delta": data.delta,
         "samples": {"train": data.train.summary(), "held_out": data.held_out.summary(),
-                    "crash": data.crash.summary()},
+                    "crash": data.crash.summary(),
+                    "held_out_crash": None if data.held_out_crash is None else data.held_out_crash.summary()},
         "crash_sources": data.crash_summary,
         "table_7_5": table,
         "per_seed": metrics,
+        "crash_table": ({v: _mean_std(crash_metrics[v]) for v in VARIANTS}
+                        if data.held_out_crash is not None else None),
         "seconds": round(time.monotonic() - start, 1),
         "model": str(out / MODEL_FILE),
     }
     report["full_beats"] = _full_beats(table)
+    if report["crash_table"] is not None:
+        report["full_beats_on_crash"] = _full_beats(report["crash_table"])
     atomic_write_json(out / "report.json", report)
     atomic_write_bytes(out / "report.md", format_summary(report).encode())
     _write_log(out / "train_log.csv", log)
@@ -305,12 +338,24 @@ def format_summary(report: dict[str, Any]) -> str:
         f"# Behaviour embedding ({report['dataset']}, seeds {report['seeds']})", "",
         f"delta = {report['delta']:.4f}; samples: train {s['train']}, held-out {s['held_out']}, crash {s['crash']}",
         "", f"crash set sources: {report['crash_sources']}", "",
-        "| variant | silhouette (up) | Davies-Bouldin (down) | linear probe acc. (up) |", "|---|---|---|---|",
+        "Held-out everyday behaviours, SafeShift safety classes (Table 7.5):", "",
+        *_metric_table(report["table_7_5"]),
+        "", f"full beats: {report['full_beats']}",
     ]
+    if report.get("crash_table") is not None:
+        lines += ["", f"Held-out crash set ({s['held_out_crash']}), crash roles as classes (what fine-tuning trains "
+                  "for; the probe is fitted on the training crash set):", "",
+                  *_metric_table(report["crash_table"]),
+                  "", f"full beats on the held-out crash set: {report['full_beats_on_crash']}"]
+    lines += [f"seconds: {report['seconds']}", ""]
+    return "\n".join(lines)
+
+
+def _metric_table(table: dict[str, dict[str, float]]) -> list[str]:
+    lines = ["| variant | silhouette (up) | Davies-Bouldin (down) | linear probe acc. (up) |", "|---|---|---|---|"]
     for v in VARIANTS:
-        r = report["table_7_5"][v]
+        r = table[v]
         lines.append(f"| {VARIANT_TITLES[v]} | {r['silhouette']:.3f} +- {r['silhouette_std']:.3f} | "
                      f"{r['davies_bouldin']:.3f} +- {r['davies_bouldin_std']:.3f} | "
                      f"{100 * r['probe_accuracy']:.1f} % +- {100 * r['probe_accuracy_std']:.1f} |")
-    lines += ["", f"full beats: {report['full_beats']}", f"seconds: {report['seconds']}", ""]
-    return "\n".join(lines)
+    return lines

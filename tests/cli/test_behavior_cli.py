@@ -30,10 +30,10 @@ def _rear_end(i: int):
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("behavior_cli") / "ds"
-    scenarios = [sf.highway_scenario(i, scenario_id=f"h{i}") for i in range(5)] + [_rear_end(i) for i in range(2)]
+    scenarios = [sf.highway_scenario(i, scenario_id=f"h{i}") for i in range(5)] + [_rear_end(i) for i in range(3)]
     write_dataset(root, scenarios)
-    Dataset.open(root).update_manifest(splits={"train": ["h0", "h1", "h2", "crash0", "crash1"], "eval": ["h3", "h4"],
-                                               "hard": []})
+    Dataset.open(root).update_manifest(splits={"train": ["h0", "h1", "h2", "crash0", "crash1"],
+                                               "eval": ["h3", "h4", "crash2"], "hard": []})
     score_dataset(root, workers=1, progress=False)
     return root
 
@@ -48,6 +48,13 @@ def test_fit_behavior_writes_models_report_and_cache(dataset: Path, tmp_path: Pa
     for row in report["table_7_5"].values():
         assert -1.0 <= row["silhouette"] <= 1.0 and row["davies_bouldin"] > 0 and 0.0 <= row["probe_accuracy"] <= 1.0
     assert {p.name for p in (out / "variants").glob("*.pt")} == {f"{v}-s0.pt" for v in report["table_7_5"]}
+    # The held-out split's own crash pair (crash2: both agents) is analysed apart, with the crash roles as classes.
+    assert report["samples"]["held_out_crash"]["samples"] == 2
+    assert set(report["crash_table"]) == set(report["table_7_5"])
+    for row in report["crash_table"].values():
+        assert -1.0 <= row["silhouette"] <= 1.0 and 0.0 <= row["probe_accuracy"] <= 1.0
+        assert row["majority_share"] == 0.5  # one striker, one recipient
+    assert set(report["full_beats_on_crash"]) == {"no_cl", "no_cl_ft", "cl"}
     for name in ("report.md", "train_log.csv", "config.yaml", "behavior.json"):
         assert (out / name).is_file()
     from seal.models.behavior.model import BehaviorModel
