@@ -268,8 +268,16 @@ class ResultsStore:
             r["kwargs"] = json.loads(r["kwargs"])
         return rows
 
-    def count(self) -> int:
-        return int(self._conn.execute("SELECT COUNT(*) FROM episodes").fetchone()[0])
+    def count(self, run: str | Iterable[str] | None = None, setting: str | Iterable[str] | None = None) -> int:
+        """Episode rows, of the given runs and settings only if given."""
+        where, params = [], []
+        for col, value in (("run", run), ("setting", setting)):
+            values = _as_list(value)
+            if values is not None:
+                where.append(f"{col} IN ({', '.join('?' * len(values))})")
+                params.extend(values)
+        sql = "SELECT COUNT(*) FROM episodes" + (f" WHERE {' AND '.join(where)}" if where else "")
+        return int(self._conn.execute(sql, params).fetchone()[0])
 
 
 def comparable_rows(store_path: str | Path) -> dict[tuple[str, str, str, str], dict[str, Any]]:

@@ -9,7 +9,8 @@ Read top to bottom, the steps are:
 3. train    one job per pipeline x seed (`seal.experiments.training.train.train_run`) into OUT/runs/<pipeline>-s<seed>
             (x algorithm with ``algos``: OUT/runs/<pipeline>-<algo>-s<seed>)
 4. eval     one job per trained ego, plus the Replay ego (`seal.experiments.evaluation.evaluate.evaluate_job`) into
-            OUT/results.sqlite
+            OUT/results.sqlite; the progress bar counts the episodes in the store as the jobs write them
+            (`seal.experiments.evaluation.store_progress`)
 5. report   `seal.experiments.report.write.write_report` into OUT/report
 
 Each step leaves a marker ``OUT/steps/<step>.json`` holding a hash of its parameters; a step whose marker
@@ -390,7 +391,14 @@ def _eval_step(run: _Run, dataset: str, generators: Mapping[str, Any], trained: 
              "config": eval_config, "progress": False} for e in egos]
 
     def evaluate() -> bool:
-        failed = _failures("eval", run.backend.map(run.eval_fn, jobs, desc="eval"))
+        from seal.experiments.evaluation.store_progress import StoreProgress, expected_rows
+
+        # The jobs (one per ego) write rows as they go: the bar counts those, not finished egos (minutes apart).
+        total = expected_rows(egos, settings, eval_config.get("limit"))
+        with StoreProgress(store, egos, [s.name for s in settings], total, desc=f"eval ({len(egos)} egos)",
+                           disable=not run.progress):
+            results = run.backend.map(run.eval_fn, jobs, desc="eval", progress=False)
+        failed = _failures("eval", results)
         run.errors.extend(failed)  # reported at the end; the report covers what was evaluated
         return not failed
 
