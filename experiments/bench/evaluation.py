@@ -72,7 +72,6 @@ def run_eval_bench(
         repeat's seconds, ``speedup`` (N workers over 1, whole calls), ``steady_speedup``, ``identical_rows``,
         the target and whether it is met.
     """
-    from seal.experiments.backends import LocalBackend
     from seal.experiments.evaluation.evaluate import read_run, resolve_eval_config
     from seal.experiments.evaluation.parallel import evaluate_runs
 
@@ -93,33 +92,7 @@ def run_eval_bench(
         warm = dict(config, limit=1)
         evaluate_runs(list(runs), settings, tmp / "warm.sqlite", dataset=dataset, config=warm, workers=1,
                       progress=False)
-        seconds: dict[int, list[float]] = {1: [], workers: []}
-        spans: dict[int, list[float]] = {1: [], workers: []}
-        rows: dict[int, int] = {}
-        stores: dict[int, Path] = {}
-        for rep in range(repeats):
-            for w in (1, workers):
-                store = tmp / f"w{w}_r{rep}.sqlite"
-                backend = LocalBackend(w) if w > 1 else None
-                start = time.perf_counter()
-                evaluate_runs(list(runs), settings, store, dataset=dataset, config=config, workers=w,
-                              backend=backend, progress=False)
-                seconds[w].append(time.perf_counter() - start)
-                spans[w].append(_row_span_s(store))
-                with ResultsStore(store) as s:
-                    rows[w] = s.count()
-                stores[w] = store
-        identical = comparable_rows(stores[1]) == comparable_rows(stores[workers])
-
-    def variant(w: int) -> dict[str, Any]:
-        best, best_span = min(seconds[w]), min(spans[w])
-        return {
-            "workers": w, "episodes": rows[w], "seconds": [round(s, 3) for s in seconds[w]],
-            "episodes_per_s": round(rows[w] / best, 2),
-            "steady_episodes_per_s": round(rows[w] / best_span, 2) if best_span > 0 else None,
-        }
-
-    one, many = variant(1), variant(workers)
+        one, many, identical = _measure(tmp, list(runs), settings, dataset, config, workers, repeats)
     speedup = many["episodes_per_s"] / one["episodes_per_s"]
     steady = (many["steady_episodes_per_s"] / one["steady_episodes_per_s"]
               if many["steady_episodes_per_s"] and one["steady_episodes_per_s"] else None)
@@ -132,3 +105,38 @@ def run_eval_bench(
         "target": f">= {TARGET_SPEEDUP}x episodes/s on {workers} workers, identical rows",
         "meets_target": bool(identical and speedup >= TARGET_SPEEDUP),
     }
+
+
+def _measure(tmp: Path, runs: list[str], settings: str, dataset: str | Path, config: dict[str, Any], workers: int,
+             repeats: int) -> tuple[dict[str, Any], dict[str, Any], bool]:
+    """The interleaved repeats (1 worker, ``workers``, 1 worker, ...), each into a fresh store under ``tmp``: each
+    variant's figures (`run_eval_bench`) and whether the last stores of the two hold the same rows."""
+    from seal.experiments.backends import LocalBackend
+    from seal.experiments.evaluation.parallel import evaluate_runs
+
+    seconds: dict[int, list[float]] = {1: [], workers: []}
+    spans: dict[int, list[float]] = {1: [], workers: []}
+    rows: dict[int, int] = {}
+    stores: dict[int, Path] = {}
+    for rep in range(repeats):
+        for w in (1, workers):
+            store = tmp / f"w{w}_r{rep}.sqlite"
+            backend = LocalBackend(w) if w > 1 else None
+            start = time.perf_counter()
+            evaluate_runs(runs, settings, store, dataset=dataset, config=config, workers=w, backend=backend,
+                          progress=False)
+            seconds[w].append(time.perf_counter() - start)
+            spans[w].append(_row_span_s(store))
+            with ResultsStore(store) as s:
+                rows[w] = s.count()
+            stores[w] = store
+
+    def variant(w: int) -> dict[str, Any]:
+        best, best_span = min(seconds[w]), min(spans[w])
+        return {
+            "workers": w, "episodes": rows[w], "seconds": [round(s, 3) for s in seconds[w]],
+            "episodes_per_s": round(rows[w] / best, 2),
+            "steady_episodes_per_s": round(rows[w] / best_span, 2) if best_span > 0 else None,
+        }
+
+    return variant(1), variant(workers), comparable_rows(stores[1]) == comparable_rows(stores[workers])

@@ -165,7 +165,7 @@ def _floor_parts_us(env: Any, policy: Any, seed: int, n_states: int = 400, repea
 
     driver = HeuristicDriver()
     obs, _ = env.reset(seed=seed)
-    states = []
+    states: list[tuple[Any, ...]] = []
     while len(states) < n_states:
         obs, _, terminated, truncated, _ = env.step(driver.predict(obs)[0])
         if terminated or truncated:

@@ -126,6 +126,29 @@ def register(tree: CommandTree) -> None:
                       help="with --adversary seal: identical measurements; each variant's fastest counts (default 3)")
     benv.add_argument("--json", action="store_true", help="print JSON")
     benv.set_defaults(func=cmd_bench_env)
+    _register_eval(bench_sub)
+    bdata = bench_sub.add_parser(
+        "data",
+        help="time to open a dataset and load (and validate) N scenarios",
+        description="Open a dataset and load its first --n scenarios (checksums and validation included).",
+    )
+    bdata.add_argument("dir", help="dataset directory")
+    bdata.add_argument("--n", type=positive_int("--n"), default=500, help="scenarios to load (default 500)")
+    bdata.add_argument("--json", action="store_true", help="print JSON")
+    bdata.set_defaults(func=cmd_bench_data)
+    bscore = bench_sub.add_parser(
+        "scoring",
+        help="time to score a dataset with SafeShift (all variants)",
+        description="Score a dataset (default: every scenario) without writing anything and print the time per "
+        "scenario and in total.",
+    )
+    bscore.add_argument("dataset", help="dataset directory")
+    bscore.add_argument("--workers", type=positive_int("--workers"), default=None, help="processes")
+    bscore.add_argument("--limit", type=positive_int("--limit"), default=None, help="score only the first N")
+    bscore.add_argument("--json", action="store_true", help="print JSON")
+    bscore.set_defaults(func=cmd_bench_scoring)
+
+def _register_eval(bench_sub: argparse._SubParsersAction) -> None:
     beval = bench_sub.add_parser(
         "eval",
         help="seal eval runs episodes/s on N worker processes vs one process, identical rows (target >= 1.8x)",
@@ -153,23 +176,3 @@ def register(tree: CommandTree) -> None:
                        help="perturbation passes of generator settings (default: the eval config's)")
     beval.add_argument("--json", action="store_true", help="print JSON")
     beval.set_defaults(func=cmd_bench_eval)
-    bdata = bench_sub.add_parser(
-        "data",
-        help="time to open a dataset and load (and validate) N scenarios",
-        description="Open a dataset and load its first --n scenarios (checksums and validation included).",
-    )
-    bdata.add_argument("dir", help="dataset directory")
-    bdata.add_argument("--n", type=positive_int("--n"), default=500, help="scenarios to load (default 500)")
-    bdata.add_argument("--json", action="store_true", help="print JSON")
-    bdata.set_defaults(func=cmd_bench_data)
-    bscore = bench_sub.add_parser(
-        "scoring",
-        help="time to score a dataset with SafeShift (all variants)",
-        description="Score a dataset (default: every scenario) without writing anything and print the time per "
-        "scenario and in total.",
-    )
-    bscore.add_argument("dataset", help="dataset directory")
-    bscore.add_argument("--workers", type=positive_int("--workers"), default=None, help="processes")
-    bscore.add_argument("--limit", type=positive_int("--limit"), default=None, help="score only the first N")
-    bscore.add_argument("--json", action="store_true", help="print JSON")
-    bscore.set_defaults(func=cmd_bench_scoring)
