@@ -148,6 +148,7 @@ def register(tree: CommandTree) -> None:
     bscore.add_argument("--json", action="store_true", help="print JSON")
     bscore.set_defaults(func=cmd_bench_scoring)
 
+
 def _register_eval(bench_sub: argparse._SubParsersAction) -> None:
     beval = bench_sub.add_parser(
         "eval",
