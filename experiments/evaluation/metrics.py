@@ -56,27 +56,46 @@ def wasserstein_from_counts(a: np.ndarray, b: np.ndarray, bins: np.ndarray) -> f
     return float(np.sum(np.abs(cdf_gap) * np.diff(centres)))
 
 
+REALISM_COUNT_KEYS = ("adv_yaw", "log_yaw", "adv_acc", "log_acc", "adv_road", "log_road")
+"""The histograms behind the set-level realism distances, in the order `realism_counts` stacks them."""
+
+
+def realism_counts(rows: Sequence[dict[str, Any]]) -> np.ndarray:
+    """The summed histogram counts of `REALISM_COUNT_KEYS` of episode rows (histogram columns decoded to int lists),
+    concatenated into one vector: counts of a union of row sets are the sum of their vectors, so a bootstrap can sum
+    precomputed per-group vectors instead of re-reading every row."""
+    yaw_n, acc_n, road_n = len(YAW_RATE_BINS) - 1, len(ACC_BINS) - 1, len(OFFROAD_BINS) - 1
+    if not rows:
+        return np.zeros(2 * (yaw_n + acc_n + road_n), dtype=np.float64)
+    parts = [
+        np.sum([r["adv_yaw_hist"] for r in rows], axis=0), np.sum([r["log_yaw_hist"] for r in rows], axis=0),
+        np.sum([r["adv_acc_hist"] for r in rows], axis=0), np.sum([r["log_acc_hist"] for r in rows], axis=0),
+        histogram_counts(np.array([r["adv_offroad_share"] for r in rows]), OFFROAD_BINS),
+        histogram_counts(np.array([r["log_offroad_share"] for r in rows]), OFFROAD_BINS),
+    ]
+    return np.concatenate([np.asarray(p, dtype=np.float64) for p in parts])
+
+
+def realism_from_counts(counts: np.ndarray) -> dict[str, float]:
+    """``yaw_wd``, ``acc_wd``, ``road_wd`` and their mean ``realism`` from a `realism_counts` vector (NaN where a
+    histogram is empty)."""
+    yaw_n, acc_n, road_n = len(YAW_RATE_BINS) - 1, len(ACC_BINS) - 1, len(OFFROAD_BINS) - 1
+    ends = np.cumsum([yaw_n, yaw_n, acc_n, acc_n, road_n, road_n])
+    ay, ly, aa, la, ar, lr = np.split(np.asarray(counts, dtype=np.float64), ends[:-1])
+    yaw = wasserstein_from_counts(ay, ly, YAW_RATE_BINS)
+    acc = wasserstein_from_counts(aa, la, ACC_BINS)
+    road = wasserstein_from_counts(ar, lr, OFFROAD_BINS)
+    finite = [v for v in (yaw, acc, road) if np.isfinite(v)]
+    return {"yaw_wd": yaw, "acc_wd": acc, "road_wd": road, "realism": float(np.mean(finite)) if finite else np.nan}
+
+
 def pooled_realism(rows: Sequence[dict[str, Any]]) -> dict[str, float]:
     """Set-level ``yaw_wd``, ``acc_wd``, ``road_wd`` and their mean ``realism`` over episode rows (histogram
     columns decoded to int lists), generated vs logged adversaries."""
     if not rows:
         nan = float("nan")
         return {"yaw_wd": nan, "acc_wd": nan, "road_wd": nan, "realism": nan}
-    yaw = wasserstein_from_counts(
-        np.sum([r["adv_yaw_hist"] for r in rows], axis=0), np.sum([r["log_yaw_hist"] for r in rows], axis=0),
-        YAW_RATE_BINS,
-    )
-    acc = wasserstein_from_counts(
-        np.sum([r["adv_acc_hist"] for r in rows], axis=0), np.sum([r["log_acc_hist"] for r in rows], axis=0),
-        ACC_BINS,
-    )
-    road = wasserstein_from_counts(
-        histogram_counts(np.array([r["adv_offroad_share"] for r in rows]), OFFROAD_BINS),
-        histogram_counts(np.array([r["log_offroad_share"] for r in rows]), OFFROAD_BINS),
-        OFFROAD_BINS,
-    )
-    finite = [v for v in (yaw, acc, road) if np.isfinite(v)]
-    return {"yaw_wd": yaw, "acc_wd": acc, "road_wd": road, "realism": float(np.mean(finite)) if finite else np.nan}
+    return realism_from_counts(realism_counts(rows))
 
 
 def min_body_gap(ego_track: np.ndarray, adv_track: np.ndarray) -> float | None:

@@ -12,12 +12,12 @@ acceleration alone) and the mean collision speed along the contact normal over t
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
-from seal.experiments.evaluation.metrics import pooled_realism
+from seal.experiments.evaluation.metrics import realism_counts, realism_from_counts
 from seal.experiments.report.compare import ordered_settings, setting_label
 from seal.experiments.report.stats import CONFIDENCE, ci_cell, seeded
 
@@ -35,33 +35,36 @@ def _speed(e: Mapping[str, Any]) -> float | None:
     return float(v) if v is not None and math.isfinite(float(v)) else None
 
 
-def _realism(episodes: Sequence[Mapping[str, Any]]) -> np.ndarray:
-    """``[realism, realism_yaw_acc]`` of a set of episode rows, as Table 6.2 computes them."""
-    realism = pooled_realism([dict(e) for e in episodes])
+def _realism(summed_counts: np.ndarray) -> np.ndarray:
+    """``[realism, realism_yaw_acc]`` from the summed `realism_counts` of a set of episodes, as Table 6.2 computes
+    them."""
+    realism = realism_from_counts(summed_counts)
     return np.array([realism["realism"], float(np.nanmean([realism["yaw_wd"], realism["acc_wd"]]))])
 
 
-def _mean_speed(episodes: Sequence[Mapping[str, Any]]) -> np.ndarray:
-    speeds = [v for e in episodes if (v := _speed(e)) is not None]
-    return np.array([float(np.mean(speeds)) if speeds else math.nan])
+def _mean_speed(summed: np.ndarray) -> np.ndarray:
+    """``[mean collision speed]`` from the summed ``[speed sum, contact count]`` of a set of episodes."""
+    return np.array([summed[0] / summed[1] if summed[1] > 0 else math.nan])
 
 
-def _by_scenario_interval(groups: Sequence[Sequence[Mapping[str, Any]]], statistic: Any, n_boot: int, seed: int
-                          ) -> list[tuple[float, float, float]]:
-    """``(estimate, low, high)`` per output of ``statistic(episodes)``, the ``groups`` (a scenario's episodes)
-    resampled with rliable's bootstrap; NaN bounds with fewer than `MIN_SCENARIOS` groups."""
+def _by_scenario_interval(per_group: np.ndarray, statistic: Callable[[np.ndarray], np.ndarray], n_boot: int,
+                          seed: int) -> list[tuple[float, float, float]]:
+    """``(estimate, low, high)`` per output of ``statistic`` applied to the sum of ``per_group`` rows ``[G, D]`` (a
+    scenario's additive summary: histogram counts, sums), the groups resampled with rliable's bootstrap (a resample's
+    summary is the sum of its groups' rows, so no episode is re-read); NaN bounds with fewer than `MIN_SCENARIOS`
+    groups."""
     from rliable import library as rly
 
-    if len(groups) < MIN_SCENARIOS:
-        estimate = statistic([e for g in groups for e in g])
+    if len(per_group) < MIN_SCENARIOS:
+        estimate = statistic(per_group.sum(axis=0)) if len(per_group) else statistic(np.zeros(per_group.shape[1]))
         return [(float(p), math.nan, math.nan) for p in estimate]
 
     def on_index(index: np.ndarray) -> np.ndarray:
-        return statistic([e for i in index[:, 0] for e in groups[int(i)]])
+        return statistic(per_group[index[:, 0].astype(np.int64)].sum(axis=0))
 
     with seeded(seed), np.errstate(all="ignore"):
         points, intervals = rly.get_interval_estimates(
-            {"x": np.arange(len(groups), dtype=np.float64)[:, None]}, on_index, reps=n_boot,
+            {"x": np.arange(len(per_group), dtype=np.float64)[:, None]}, on_index, reps=n_boot,
             confidence_interval_size=CONFIDENCE)
     return [(float(p), float(intervals["x"][0, i]), float(intervals["x"][1, i])) for i, p in enumerate(points["x"])]
 
@@ -75,9 +78,11 @@ def generator_intervals(episodes: Sequence[Mapping[str, Any]], n_boot: int = N_B
     for e in episodes:
         by_scenario.setdefault(str(e["scenario_id"]), []).append(e)
     groups = list(by_scenario.values())
-    with_contact = [g for g in groups if any(_speed(e) is not None for e in g)]
-    realism = _by_scenario_interval(groups, _realism, n_boot, seed)
-    speed = _by_scenario_interval(with_contact, _mean_speed, n_boot, seed)
+    counts = np.stack([realism_counts([dict(e) for e in g]) for g in groups]) if groups else np.zeros((0, 1))
+    speeds = [[v for e in g if (v := _speed(e)) is not None] for g in groups]
+    contact = np.array([[sum(v), len(v)] for v in speeds if v], dtype=np.float64).reshape(-1, 2)
+    realism = _by_scenario_interval(counts, _realism, n_boot, seed)
+    speed = _by_scenario_interval(contact, _mean_speed, n_boot, seed)
     return dict(zip(STATISTICS, [*realism, *speed], strict=True))
 
 

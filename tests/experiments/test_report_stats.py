@@ -270,3 +270,37 @@ def test_thesis_claims_read_the_intervals() -> None:
     unbounded = [{**g("seal", 0.1, 0.2), "realism_low": math.nan}, g("cat", 0.3, 0.4)]
     assert generator_claims(unbounded)[0]["verdict"] == "too few scenarios"
     assert "seal 0.150 [no interval]" in claims_markdown(poi, unbounded)
+
+
+def test_generator_intervals_equal_resampling_the_episodes_themselves() -> None:
+    """The bootstrap sums per-scenario histogram vectors; its intervals equal recomputing Table 6.2's pooled
+    statistics from the resampled scenarios' episodes (same rliable resamples)."""
+    from results_builders import episode, hist
+    from rliable import library as rly
+
+    from seal.experiments.evaluation.metrics import pooled_realism
+    from seal.experiments.report.generator_stats import CONFIDENCE, generator_intervals
+    from seal.experiments.report.stats import seeded
+    from seal.scoring.realism import ACC_BINS
+
+    rng = np.random.default_rng(4)
+    rows = [episode(run=f"r{k}", setting="seal", scenario_id=f"s{i}",
+                    collision_speed_mps=float(rng.uniform(1, 8)) if rng.random() < 0.5 else None,
+                    adv_acc_hist=hist(rng.normal(-0.3 * (i % 4), 1.0 + 0.2 * k, 30), ACC_BINS))
+            for i in range(9) for k in range(2)]
+    groups: dict[str, list[dict]] = {}
+    for r in rows:
+        groups.setdefault(r["scenario_id"], []).append(r)
+    scenarios = list(groups.values())
+
+    def episodes_realism(index: np.ndarray) -> np.ndarray:
+        pooled = pooled_realism([e for i in index[:, 0] for e in scenarios[int(i)]])
+        return np.array([pooled["realism"], (pooled["yaw_wd"] + pooled["acc_wd"]) / 2])
+
+    with seeded(3), np.errstate(all="ignore"):
+        points, intervals = rly.get_interval_estimates(
+            {"x": np.arange(len(scenarios), dtype=np.float64)[:, None]}, episodes_realism, reps=120,
+            confidence_interval_size=CONFIDENCE)
+    got = generator_intervals(rows, n_boot=120, seed=3)
+    for i, name in enumerate(("realism", "realism_yaw_acc")):
+        assert got[name] == pytest.approx((points["x"][i], intervals["x"][0, i], intervals["x"][1, i]), abs=1e-12)
