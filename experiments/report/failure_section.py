@@ -14,7 +14,9 @@ from seal.experiments.report.compare import to_csv
 from seal.experiments.report.eval_curves import plot_eval_curves
 from seal.experiments.report.failure_videos import render_failure_videos
 from seal.experiments.report.failures import (
+    INLINE_FAILURE_EGOS,
     fact,
+    failure_summary_markdown,
     failure_list,
     failures_markdown,
     load_facts,
@@ -37,7 +39,8 @@ def write_failure_section(
     plots: bool = True, progress: bool = True,
 ) -> dict[str, Any]:
     """Write ``outcomes.csv``, ``outcomes_by_layout.csv``, ``outcomes_by_source.csv`` (imported data only),
-    ``failures.csv``, the failure videos (``videos_per_kind`` per ego, setting and kind, under
+    ``failures.csv``, ``failures.md`` (the per-ego listing; in report.md too for at most `INLINE_FAILURE_EGOS`
+    egos), the failure videos (``videos_per_kind`` per ego, setting and kind, under
     ``failure_videos/``) and ``eval_curves.png`` into ``out``; returns ``{"markdown", "outcomes", "by_layout",
     "by_source", "failures", "videos", "figures"}``."""
     facts = load_facts(rows)
@@ -68,13 +71,17 @@ def write_failure_section(
     ]
     if by_source:
         md += ["### Per source (imported recordings)\n", outcome_markdown(by_source, "source")]
-    md += [
-        "## Failures\n",
-        "Scenarios each ego failed in each setting, with the reason (failures.csv lists them all)"
-        + (f"; videos: up to {videos_per_kind} of each kind (crash, out-of-road, timeout) per ego and setting, "
-           "played again with the evaluation's seeds" if videos_per_kind > 0 else "") + ".\n",
-        failures_markdown(failures, rows, videos=videos),
-    ]
+    intro = ("Scenarios each ego failed in each setting, with the reason (failures.csv lists them all)"
+             + (f"; videos: up to {videos_per_kind} of each kind (crash, out-of-road, timeout) per ego and setting, "
+                "played again with the evaluation's seeds" if videos_per_kind > 0 else "") + ".\n")
+    listing = failures_markdown(failures, rows, videos=videos)
+    atomic_write_bytes(out / "failures.md", ("# Failures per ego and setting\n\n" + intro + "\n" + listing).encode())
+    md += ["## Failures\n", "Failed episodes per pipeline and setting (seeds pooled).\n",
+           failure_summary_markdown(failures, rows)]
+    egos = {str(f["run"]) for f in failures}
+    md += ([intro, listing] if len(egos) <= INLINE_FAILURE_EGOS else
+           [f"Per ego and setting, with the reason of each failure{' and videos' if videos else ''}: "
+            f"[failures.md](failures.md) ({len(egos)} egos).\n"])
     if figures:
         md += ["## Periodic evaluations during training\n",
                "Normal-eval rates of each run's periodic evaluations (eval/evaluations.csv, the eval/* curves of "

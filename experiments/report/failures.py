@@ -21,7 +21,10 @@ from seal.experiments.evaluation.generator_metrics import format_markdown_table
 OUTCOMES = ("success", "crash", "out_of_road", "timeout")
 FAILURE_KINDS = ("crash", "out_of_road", "timeout")
 FAILURES_SHOWN = 10
-"""Failed scenarios listed in report.md per ego and setting (failures.csv has them all)."""
+"""Failed scenarios listed per ego and setting in the failure listing (failures.csv has them all)."""
+INLINE_FAILURE_EGOS = 6
+"""Egos up to which report.md lists each ego's failures itself; above, report.md has the per-pipeline summary and
+the listing goes to failures.md (57 egos x 10 settings would be ~6,000 table lines on the report's page)."""
 
 Facts = Mapping[str, Mapping[str, Mapping[str, str]]]
 """dataset path -> scenario id -> {"layout", "source"}."""
@@ -111,6 +114,7 @@ def failure_list(rows: Sequence[Mapping[str, Any]], facts: Facts | None = None) 
         "source": fact(facts or {}, r, "source"), "outcome": r["outcome"], "dataset": r["dataset"],
         "setting_name": r.get("setting_name", r["setting"]),
         "route_completion": float(r["route_completion"]), "reason": reason(r),
+        "crashed_into": ("adversary" if r.get("adv_collision") else "other") if r["outcome"] == "crash" else "",
     } for r in failed]
 
 
@@ -148,3 +152,28 @@ def failures_markdown(failures: Sequence[Mapping[str, Any]], rows: Sequence[Mapp
             out.append(f"\n... and {len(items) - shown} more (failures.csv)")
         out.append("")
     return "\n".join(out) if out else "(no failures)\n"
+
+
+def failure_summary_markdown(failures: Sequence[Mapping[str, Any]], rows: Sequence[Mapping[str, Any]]) -> str:
+    """Per pipeline and setting (seeds pooled): failed episodes of all scored ones, split into crashes into the
+    adversary, crashes into other traffic, out-of-road and timeouts (counts)."""
+    from seal.experiments.report.compare import ordered_pipelines, setting_label
+
+    totals: dict[tuple[str, str], int] = {}
+    for r in rows:
+        key = (r["pipeline"], setting_label(r["setting"]))
+        totals[key] = totals.get(key, 0) + 1
+    counts: dict[tuple[str, str], dict[str, int]] = {}
+    for f in failures:
+        kind = f"crash-{f['crashed_into']}" if f["outcome"] == "crash" else f["outcome"].replace("_", "-")
+        cell = counts.setdefault((f["pipeline"], f["setting"]), {})
+        cell[kind] = cell.get(kind, 0) + 1
+    kinds = ("crash-adversary", "crash-other", "out-of-road", "timeout")
+    out = ["| pipeline | setting | failed / episodes | " + " | ".join(kinds) + " |", "|---|---|---:|" + "---:|" * 4]
+    for pipeline in ordered_pipelines({p for p, _ in totals}):
+        for (p, setting), n in totals.items():
+            if p == pipeline:
+                c = counts.get((p, setting), {})
+                out.append(f"| {p} | {setting} | {sum(c.values())} / {n} | "
+                           + " | ".join(str(c.get(k, 0)) for k in kinds) + " |")
+    return "\n".join(out) + "\n"

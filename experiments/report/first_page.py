@@ -18,6 +18,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from seal.experiments.report.generator_stats import generator_rows
 from seal.experiments.report.grouping import algo_of, is_trained
 from seal.experiments.report.stats import MIN_SEEDS_FOR_POI, enough_seeds
 from seal.experiments.report.thesis_claims import claims_markdown
@@ -134,7 +135,7 @@ def generator_lines(gen_ci: Sequence[Mapping[str, Any]]) -> list[str]:
     """The most realistic generator (lowest mean Wasserstein distance) and the lowest collision speed, with their
     intervals (`seal.experiments.report.generator_stats`); the leader is *lowest* when its interval lies below the
     next one's, else not separated."""
-    gens = [r for r in gen_ci if r["setting"] != "normal"]
+    gens = generator_rows(gen_ci)
     lines = []
     for key, what, unit in GENERATOR_CLAIMS:
         ranked = sorted((r for r in gens if math.isfinite(r.get(key, math.nan))), key=lambda r: r[key])

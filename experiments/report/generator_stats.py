@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from seal.experiments.evaluation.evaluate import REPLAY_SETTINGS
 from seal.experiments.evaluation.metrics import realism_counts, realism_from_counts
 from seal.experiments.report.compare import ordered_settings, setting_label
 from seal.experiments.report.stats import CONFIDENCE, ci_cell, seeded
@@ -27,6 +28,13 @@ MIN_SCENARIOS = 5
 """Scenarios (with a contact, for the collision speed) below which an interval is not given (NaN bounds): from one
 scenario the bootstrap returns a zero-width interval whatever the data."""
 STATISTICS = ("realism", "realism_yaw_acc", "collision_speed_mps")
+
+
+def generator_rows(gen_ci: Sequence[Mapping[str, Any]]) -> list[Mapping[str, Any]]:
+    """The rows of generated adversaries: without the settings whose adversary is the logged one replayed
+    (``normal``, ``normal-reactive``: Table 6.2's reference rows, near zero by construction), which no generator
+    claim may be ranked against."""
+    return [r for r in gen_ci if r["setting"] not in REPLAY_SETTINGS]
 
 
 def _speed(e: Mapping[str, Any]) -> float | None:

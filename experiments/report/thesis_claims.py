@@ -16,6 +16,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from seal.experiments.report.generator_stats import generator_rows
 from seal.experiments.report.grouping import algo_of, base_pipeline
 from seal.experiments.report.stats import MIN_SEEDS_FOR_POI, ci_cell, enough_seeds
 
@@ -44,7 +45,7 @@ def ego_claims(poi: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
 
 def generator_claims(gen_ci: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     """One row per generator claim: ``claim``, ``verdict`` and the ``seal`` / best-other rows it rests on."""
-    gens = {r["setting"]: r for r in gen_ci if r["setting"] != "normal"}
+    gens = {r["setting"]: r for r in generator_rows(gen_ci)}
     out = []
     for key, claim in GENERATOR_CLAIMS:
         seal = gens.get("seal")

@@ -64,7 +64,8 @@ def write_report(
         video_files = [str(p.relative_to(out)) for p in render_generator_videos(
             rows, runs, settings_info, out / "videos", per_generator=videos, fmt=video_format, progress=progress
         )]
-    where = write_failure_section(rows, runs, settings_info, out, failure_videos, video_format, plots, progress)
+    # Labelled rows: the outcome shares keep egos of different algorithms apart, as the ego tables do.
+    where = write_failure_section(ego_rows, runs, settings_info, out, failure_videos, video_format, plots, progress)
     figures += where["figures"]
     n_runs = len({r["run"] for r in rows})
     md = [

@@ -75,8 +75,9 @@ def register(tree: CommandTree) -> None:
         "bars_<metric>.png (median with IQR per setting); training_curves.png (from each run's progress.csv); "
         "and with --videos N, N videos per generator against one ego; outcomes.csv / outcomes_by_layout.csv / "
         "outcomes_by_source.csv (success, crash, out-of-road, timeout shares with n and route completion), "
-        "failures.csv (every failed scenario per ego and setting with the reason), with --failure-videos N videos "
-        "of N failures of each kind per ego and setting, eval_curves.png (the runs' periodic evaluations). "
+        "failures.csv (every failed scenario per ego and setting with the reason; failures.md lists them per ego "
+        "and setting, report.md sums them per pipeline), with --failure-videos N videos of N failures of each kind "
+        "per ego and setting, eval_curves.png (the runs' periodic evaluations). "
         "Datasets are kept apart (settings read normal@DATASET when the store holds several) and egos without a "
         "pipeline are never grouped as seeds of one; egos of several algorithms read '<pipeline> (<algo>)' and are "
         "compared only within their algorithm.",

@@ -103,6 +103,27 @@ def test_outcomes_layouts_and_failures_with_videos(store: tuple[Path, Path, Path
     assert any("rule" in v for v in videos)  # generator settings get videos too
     md = (out / "report.md").read_text()
     assert "## Failures" in md and "| timeout |" in md and "(failure_videos/" in md
+    assert "| pipeline | setting | failed / episodes | crash-adversary |" in md  # the summary, then the listing
+    assert "(failure_videos/" in (out / "failures.md").read_text()
+
+
+def test_failure_summary_counts_and_many_egos_listed_apart(tmp_path: Path) -> None:
+    from seal.experiments.report.failure_section import write_failure_section
+    from seal.experiments.report.failures import INLINE_FAILURE_EGOS, failure_list, failure_summary_markdown
+
+    def row(run: int, outcome: str, adv: int = 0) -> dict:
+        return {"pipeline": "cat (td3)", "run": f"/r/cat-td3-s{run}", "setting": "cat", "scenario_id": f"s{run}",
+                "dataset": "d", "outcome": outcome, "adv_collision": adv, "route_completion": 0.5,
+                "min_gap_m": 1.0}
+
+    rows = [row(0, "crash", 1), row(0, "crash", 0), row(1, "crash", 1), row(1, "timeout"), row(1, "success"),
+            row(2, "out_of_road")]
+    md = failure_summary_markdown(failure_list(rows), rows)
+    assert "| cat (td3) | cat | 5 / 6 | 2 | 1 | 1 | 1 |" in md
+    many = [row(i, "crash", 1) for i in range(INLINE_FAILURE_EGOS + 1)]
+    section = write_failure_section(many, [], [], tmp_path, plots=False, progress=False)["markdown"]
+    assert "[failures.md](failures.md) (7 egos)" in section and "crashed into the adversary" not in section
+    assert (tmp_path / "failures.md").read_text().count("crashed into the adversary") == INLINE_FAILURE_EGOS + 1
 
 
 def test_reason_words() -> None:

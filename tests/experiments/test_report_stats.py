@@ -270,6 +270,12 @@ def test_thesis_claims_read_the_intervals() -> None:
     unbounded = [{**g("seal", 0.1, 0.2), "realism_low": math.nan}, g("cat", 0.3, 0.4)]
     assert generator_claims(unbounded)[0]["verdict"] == "too few scenarios"
     assert "seal 0.150 [no interval]" in claims_markdown(poi, unbounded)
+    # The replayed-adversary rows (normal, normal-reactive: realism ~0 by construction) are no rival generator.
+    replayed = [g("normal", 0.0, 0.01), g("normal-reactive", 0.0, 0.02), g("seal", 0.1, 0.2), g("cat", 0.3, 0.4)]
+    assert generator_claims(replayed)[0]["verdict"] == "holds"
+    from seal.experiments.report.first_page import generator_lines
+    assert generator_lines(replayed)[0].startswith("- The most realistic generator (lowest mean WD to the logged "
+                                                   "adversaries): **seal 0.15 [0.1-0.2]** (then cat 0.35")
 
 
 def test_generator_intervals_equal_resampling_the_episodes_themselves() -> None:
