@@ -16,8 +16,8 @@ from seal.experiments.report.failure_videos import render_failure_videos
 from seal.experiments.report.failures import (
     INLINE_FAILURE_EGOS,
     fact,
-    failure_summary_markdown,
     failure_list,
+    failure_summary_markdown,
     failures_markdown,
     load_facts,
     outcome_markdown,
