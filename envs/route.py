@@ -103,6 +103,9 @@ class Route:
         self._seg_heading = np.arctan2(seg[:, 1], seg[:, 0]).tolist()
         self.length = float(cum[-2])
         """Length of the route polyline without extensions (m)."""
+        self.input_s = cum[np.cumsum(keep)]  # kept point j is extended vertex j + 1
+        """``[len(points)]`` arc length (m) of every given point: that of the last kept point at or before it
+        (repeated points, dropped above, sit within 5 cm of it); for a track's route, the logged schedule."""
         self.start_s = float(cum[start_kept + 1])
         """Arc length of the episode start point (m)."""
         self.start_segment = start_kept + 1

@@ -180,8 +180,10 @@ def unguided(ctrl: Any) -> Any:
 
 
 def build_controllers(kinds: Sequence[str], rapid: Any) -> dict[str, BackgroundController]:
-    """Controllers of the open-loop table: ``constant_velocity``, ``idm``, ``rapid`` (guided, as configured)
-    and ``rapid_unguided`` (the same model, guidance weights 0) where a RAPID model is given."""
+    """Controllers of the open-loop table: ``constant_velocity``, ``idm`` (the env's, with its schedule
+    correction) and ``idm_unscheduled`` (without it: no logged position is read, only the logged route and
+    desired speed, the same information the RAPID model gets), ``rapid`` (guided, as configured) and
+    ``rapid_unguided`` (the same model, guidance weights 0) where a RAPID model is given."""
     from seal.envs.background import ConstantVelocityBackground, IDMBackground
 
     out: dict[str, BackgroundController] = {}
@@ -190,6 +192,7 @@ def build_controllers(kinds: Sequence[str], rapid: Any) -> dict[str, BackgroundC
             out[kind] = ConstantVelocityBackground()
         elif kind == "idm":
             out[kind] = IDMBackground()
+            out["idm_unscheduled"] = IDMBackground(schedule_gain_per_s=0.0)
         elif kind == "rapid":
             out["rapid"] = rapid
             out["rapid_unguided"] = unguided(rapid)

@@ -4,6 +4,7 @@ encounters), IDM+, the logged headway, the Gipps bound, the step-wise logged des
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -201,3 +202,31 @@ def test_a_slower_simulated_crosser_yields_to_a_faster_simulated_agent_but_a_slo
     assert only[0] == pytest.approx(30.0 - 2.5 - 1.0)  # agent 1 not simulated (ego-like): agent 0 yields to it
     led, _ = safety_obstacles(cur[[0, 2]], np.array([0, 1]), None, None, horizon_s=4.0)
     assert led[0] == pytest.approx(50.0 - 5.0)  # a slower simulated car in the path stays an obstacle
+
+
+def test_idm_background_catches_up_with_its_logged_schedule_once_the_way_is_clear() -> None:
+    """The logged ego cuts in front of a background car, drives slower and leaves the lane again 1.2 s later: the
+    car brakes for it and falls ~20 m behind its logged position; with the schedule correction it then closes
+    the lag (it shrinks over the last 3 s), without it (gain 0) the lag keeps growing; a commanded speed is never
+    corrected."""
+    road = sf.straight_road(2)
+    lane0, lane1 = road.lanes[0].centerline, road.lanes[1].centerline
+    dy = -road.lanes[1].centerline[0, 1]
+    cut_in, back = sf._smoothstep(1.2, 1.0, dy), sf._smoothstep(2.4, 1.0, -dy)
+    ego = sf.simulate_track(lane1, 100.0, 14.0, offset_fn=lambda t: cut_in(t) + back(t))
+    adv = sf.simulate_track(lane1, 400.0, 14.0)
+    follower = sf.simulate_track(lane0, 100.0 - 17.0 + 1.2 * 14.0 - 1.2 * 20.0, 20.0)
+    sc = sf.make_scenario(road, [ego, adv, follower], "cut_in_and_out")
+
+    def lag(controller: IDMBackground, setup: Any = None) -> np.ndarray:
+        out = roll_background(sc, controller, np.random.default_rng(0), setup=setup)
+        return sc.tracks[2, :, X] - out[2, :, X]  # metres behind the logged position, per step
+
+    kept, closed = lag(IDMBackground(schedule_gain_per_s=0.0)), lag(IDMBackground())
+    assert kept[-1] > 20.0 and kept[-1] > kept[-31]  # still growing over the last 3 s
+    assert closed[-1] < closed[-31] - 4.0 and closed[-1] < 0.6 * kept[-1]
+    np.testing.assert_allclose(closed[:CURRENT_STEP + 20], kept[:CURRENT_STEP + 20], atol=1e-3)  # on schedule
+    commanded = lag(IDMBackground(), setup=lambda c: c.intent.set_speed(2, 20.0))
+    np.testing.assert_allclose(commanded, kept, atol=1e-9)
+    with pytest.raises(ValueError, match="schedule_gain_per_s"):
+        IDMBackground(schedule_gain_per_s=-1.0)

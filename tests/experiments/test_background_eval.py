@@ -128,7 +128,7 @@ def test_eval_and_bench_background_cli(dataset: Path, tmp_path: Path, model_file
     assert main(["eval", "background", str(dataset), "--model", str(model_file), "--parts", "open,closed",
                  "--out", str(out), "--no-progress", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
-    assert set(report["open_loop"]) == {"constant_velocity", "idm", "rapid", "rapid_unguided", "log"}
+    assert set(report["open_loop"]) == {"constant_velocity", "idm", "idm_unscheduled", "rapid", "rapid_unguided", "log"}
     assert set(report["closed_loop"]["heuristic"]) == {"replay", "idm", "rapid"}
     assert (out / "background_eval.json").is_file() and (out / "background_eval.png").is_file()
     assert main(["eval", "background", str(dataset), "--parts", "open,bogus"]) == 2
