@@ -14,11 +14,13 @@ Each worker process keeps what its chunks share for the session (one token per `
 
 from __future__ import annotations
 
+import logging
 import uuid
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from seal.core.errors import SealError
 from seal.core.plugins import load_plugins, plugin_specs
 from seal.core.workers import torch_threads
 from seal.experiments.backends import Backend, InlineBackend, LocalBackend
@@ -36,6 +38,8 @@ from seal.experiments.evaluation.evaluate import (
 )
 from seal.experiments.evaluation.results_store import ResultsStore
 from seal.experiments.evaluation.worker_cache import use_session
+
+logger = logging.getLogger(__name__)
 
 
 def evaluate_chunk(job: Mapping[str, Any]) -> dict[str, Any]:
@@ -109,7 +113,15 @@ def evaluate_parallel(
     results = backend.map(evaluate_chunk, jobs, desc="eval", unit="episode", sizes=sizes, progress=progress)
     failed = [r for r in results if not r.ok]
     if failed:
-        raise RuntimeError("; ".join(f"{r.job['run']}: {r.error}" for r in failed))
+        # One line for the user (the CLI prints SealError without a traceback): how many jobs failed, for which
+        # egos, and the first failure's own message; every failure's traceback tail goes to the log.
+        for r in failed:
+            logger.error("evaluation job of %s failed: %s", r.job["run"], r.error)
+        runs = list(dict.fromkeys(str(r.job["run"]) for r in failed))
+        first = str(failed[0].error).splitlines()[0]
+        raise SealError(f"{len(failed)} of {len(results)} evaluation jobs failed ({len(runs)} egos: "
+                        f"{', '.join(runs[:3])}{', ...' if len(runs) > 3 else ''}); first error: {first}. Rows of "
+                        "the jobs that finished are in the store; re-running adds only what is missing")
     out: dict[str, dict[str, int]] = {e.run: {s.name: 0 for s in settings} for e in egos}
     for r in results:
         for name, n in r.value["written"].items():

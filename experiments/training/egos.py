@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import Any, Protocol, cast
 
 import numpy as np
-import yaml
 
 from seal.core.errors import SealError
 from seal.core.scenario import CURRENT_STEP, Scenario
@@ -217,7 +216,7 @@ def make_ego(spec: str, algo: str | None = None) -> Ego:
             "folder / SB3 model .zip"
         )
     model = find_model(path)
-    if algo is None and resolve_algo(model) == "RESKILL":
+    if resolve_algo(model, algo) == "RESKILL":
         return ReSkillEgo(load_reskill(path), name=str(path))
     vecnormalize = find_vecnormalize(model)
     normalize = read_vecnormalize(vecnormalize) if vecnormalize is not None else None
@@ -225,15 +224,29 @@ def make_ego(spec: str, algo: str | None = None) -> Ego:
 
 
 def load_reskill(path: Path) -> Any:
-    """The `ReSkillPolicy` of a finished ``seal train --algo reskill`` run folder (or its final model file)."""
-    from seal.experiments.training.reskill import FINAL_RESIDUAL, load_reskill_policy, load_skills, residual_spaces
+    """The `ReSkillPolicy` of a ``seal train --algo reskill`` run: its folder or final model file (the finished
+    run: ``final_residual.zip`` beside it), or a checkpoint's ``model.zip`` (``RUN/checkpoints/step_N/``: the
+    residual saved with it, the gate at step N)."""
+    from seal.experiments.training.reskill import (
+        FINAL_RESIDUAL,
+        RESIDUAL,
+        load_reskill_policy,
+        load_skills,
+        residual_spaces,
+    )
+    from seal.experiments.training.sb3_load import find_run_config
 
     model_path = find_model(Path(path))
-    run = model_path.parent
-    config = yaml.safe_load((run / "config.yaml").read_text()) or {}
-    residual_path = run / FINAL_RESIDUAL
+    found = find_run_config(model_path)
+    if found is None:
+        raise EgoError(f"{model_path}: a ReSkill model needs its run's config.yaml (in the run folder above it)")
+    run, config = found[0].parent, found[1]
+    state = model_path.parent / "state.json"
+    checkpoint = model_path.parent != run and state.is_file()
+    residual_path = model_path.parent / (f"{RESIDUAL}.zip" if checkpoint else FINAL_RESIDUAL)
     if not residual_path.is_file():
-        raise FileNotFoundError(f"ReSkill run {run}: no {FINAL_RESIDUAL} (is the run finished?)")
+        raise EgoError(f"ReSkill {'checkpoint' if checkpoint else 'run'} {model_path.parent}: no "
+                       f"{residual_path.name} (is the {'checkpoint complete' if checkpoint else 'run finished'}?)")
     skills = load_skills(config["hyperparams"])
     from gymnasium import spaces
 
@@ -242,5 +255,8 @@ def load_reskill(path: Path) -> Any:
     res_obs, res_act = residual_spaces(skills)
     residual = load_sb3_model(residual_path, algo_name="TD3", observation_space=res_obs, action_space=res_act)
     done = run / "done.json"
-    steps = json.loads(done.read_text())["steps"] if done.is_file() else int(config["total_timesteps"])
+    if checkpoint:
+        steps = json.loads(state.read_text())["step"]
+    else:
+        steps = json.loads(done.read_text())["steps"] if done.is_file() else int(config["total_timesteps"])
     return load_reskill_policy(run, config, high, residual, int(steps))

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 import scenario_factory as sf
 
 from seal.core.dataset import Dataset, write_dataset
@@ -115,3 +116,27 @@ def test_eval_bench_measures_both_variants_on_the_same_rows(tmp_path: Path) -> N
     expected = result["n_workers"]["episodes_per_s"] / result["one_worker"]["episodes_per_s"]
     assert abs(result["speedup"] - expected) < 1e-2
     assert result["meets_target"] == (result["speedup"] >= 1.8)
+
+
+def test_a_failing_ego_gives_one_line_naming_it_and_keeps_the_other_rows(tmp_path: Path,
+                                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    from seal.core.errors import SealError
+    from seal.experiments.training import egos
+
+    data = _dataset(tmp_path / "data")
+    real_make_ego = egos.make_ego
+
+    def failing_make_ego(spec: str, algo: str | None = None) -> egos.Ego:
+        if spec == "heuristic":  # a model that passes the up-front checks and fails in the job
+            raise egos.EgoError("cannot load this ego\nsecond line of the traceback")
+        return real_make_ego(spec, algo)
+
+    monkeypatch.setattr(egos, "make_ego", failing_make_ego)  # the worker cache imports it at call time
+    store = tmp_path / "r.sqlite"
+    with pytest.raises(SealError) as err:
+        evaluate_runs(["heuristic"], "normal", store, dataset=data, config=resolve_eval_config(), workers=1,
+                      progress=False, chunk_size=2)
+    message = str(err.value)
+    assert "\n" not in message and message.startswith("2 of 4 evaluation jobs failed (1 egos: heuristic)")
+    assert "first error: EgoError: cannot load this ego." in message
+    assert {run for run, *_ in comparable_rows(store)} == {"replay"}  # the finished jobs' rows are kept

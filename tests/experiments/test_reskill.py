@@ -201,7 +201,7 @@ def test_killed_reskill_run_resumes_both_agents_exactly(tmp_path: Path, skills_d
                                                         monkeypatch: pytest.MonkeyPatch) -> None:
     from seal.experiments.training import callbacks as train_callbacks
     from seal.experiments.training import reskill as rk
-    from seal.experiments.training.egos import ReSkillEgo, make_ego
+    from seal.experiments.training.egos import EgoError, ReSkillEgo, make_ego
     from seal.experiments.training.train import train_run
 
     run = tmp_path / "run"
@@ -258,6 +258,19 @@ def test_killed_reskill_run_resumes_both_agents_exactly(tmp_path: Path, skills_d
     ego.reset(sf.highway_scenario(4))
     action = ego.act(_obs(3), 0)
     assert action.shape == (2,) and np.all(np.abs(action) <= 1.0)
+    # a checkpoint is an ego too (seal eval runs RUN/checkpoints/step_N/model.zip): its own two agents, the gate
+    # at its step, whether or not the caller names the algorithm
+    for algo in (None, "reskill"):
+        at_ckpt = make_ego(str(ckpt / "model.zip"), algo)
+        assert isinstance(at_ckpt, ReSkillEgo)
+        for key, value in rec["high"].items():
+            np.testing.assert_array_equal(at_ckpt.policy.high.policy.state_dict()[key].numpy(), value)
+        assert at_ckpt.policy.gate == rk.residual_gate(
+            int(ckpt.name.split("_")[1]), int(config["hyperparams"]["residual_start"]),
+            int(config["hyperparams"]["residual_ramp"]))
+    (ckpt / "residual.zip").unlink()
+    with pytest.raises(EgoError, match="no residual.zip"):
+        make_ego(str(ckpt / "model.zip"))
 
 
 def test_reskill_config_resolves_and_refuses_bad_values() -> None:
