@@ -120,8 +120,11 @@ def precision_line(cis: Sequence[Mapping[str, Any]]) -> str:
     worst = max(rows, key=lambda r: r["half_width"])
     met = sum(r["half_width"] <= TARGET_HALF_WIDTH for r in rows)
     flat = sum(r["ci_low"] == r["ci_high"] for r in rows)
+    span = (f"; its seeds' own rates span {100 * worst['seed_min']:.0f}-{100 * worst['seed_max']:.0f} %"
+            if worst["seeds"] > 1 and math.isfinite(worst.get("seed_min", math.nan)) else "")
     return (f"- Precision: the widest success interval is +/-{100 * worst['half_width']:.1f} points "
-            f"({worst['pipeline']}, {worst['setting']}, {worst['seeds']} seeds x {worst['scenarios']} scenarios); "
+            f"({worst['pipeline']}, {worst['setting']}, {worst['seeds']} seeds x {worst['scenarios']} scenarios"
+            f"{span}); "
             f"{met} of {len(rows)} pipeline x setting cells are within +/-{100 * TARGET_HALF_WIDTH:.0f} points"
             + (f" ({flat} of them at a rate of 0 or 100 %, where the bootstrap interval has zero width)" if flat
                else "") + ".")

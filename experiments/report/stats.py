@@ -133,8 +133,9 @@ def mean_iqm_intervals(matrix: ScoreMatrix, n_boot: int = N_BOOT, seed: int = 0)
 
 def ego_ci_table(rows: Sequence[Mapping[str, Any]], n_boot: int = N_BOOT, seed: int = 0) -> list[dict[str, Any]]:
     """One row per (pipeline, setting, metric): ``seeds``, ``scenarios`` (per seed), ``mean`` with ``ci_low`` /
-    ``ci_high``, ``iqm`` with ``iqm_low`` / ``iqm_high`` (rates in [0, 1]) and ``half_width`` (of the mean's
-    interval)."""
+    ``ci_high``, ``iqm`` with ``iqm_low`` / ``iqm_high`` (rates in [0, 1]), ``half_width`` (of the mean's
+    interval) and ``seed_min`` / ``seed_max`` (the lowest and highest seed's rate: how much of the width the seeds
+    themselves make)."""
     matrices = score_matrices(rows)
     table = []
     for pipeline in ordered_pipelines(p for p, _ in matrices):
@@ -149,8 +150,14 @@ def ego_ci_table(rows: Sequence[Mapping[str, Any]], n_boot: int = N_BOOT, seed: 
                     "mean": e["mean"], "ci_low": e["mean_low"], "ci_high": e["mean_high"],
                     "half_width": (e["mean_high"] - e["mean_low"]) / 2,
                     "iqm": e["iqm"], "iqm_low": e["iqm_low"], "iqm_high": e["iqm_high"],
+                    **_seed_span(m, metric),
                 })
     return table
+
+
+def _seed_span(matrix: ScoreMatrix, metric: str) -> dict[str, float]:
+    rates = matrix.rates(metric) if matrix.values.size else np.array([math.nan])
+    return {"seed_min": float(rates.min()), "seed_max": float(rates.max())}
 
 
 def poi_interval(x: Sequence[np.ndarray], y: Sequence[np.ndarray], n_boot: int = N_BOOT_POI, seed: int = 0

@@ -200,6 +200,12 @@ def test_report_folder_has_the_statistics_first_page_and_json(tmp_path, capsys) 
                                                "ci_success_iqm.png"}
     cell = next(r for r in result["ego_ci"] if (r["pipeline"], r["setting"], r["metric"]) == ("cat", "hard", "success"))
     assert cell["mean"] == pytest.approx((6 + 7 + 8) / 24) and cell["seeds"] == 3 and cell["scenarios"] == 8
+    assert (cell["seed_min"], cell["seed_max"]) == pytest.approx((6 / 8, 8 / 8))  # the seeds' own rates
+    from seal.experiments.report.first_page import precision_line
+    widest = max((r for r in result["ego_ci"] if r["metric"] == "success" and r["pipeline"] != "replay"),
+                 key=lambda r: r["half_width"])
+    assert (f"{widest['seeds']} seeds x {widest['scenarios']} scenarios; its seeds' own rates span "
+            f"{100 * widest['seed_min']:.0f}-{100 * widest['seed_max']:.0f} %)") in precision_line(result["ego_ci"])
     poi = next(r for r in result["improvement"] if r["pipeline"] == "cat")
     assert poi["p_improvement"] == 1.0 and poi["settings"] == 2
     md = (out / "report.md").read_text()
