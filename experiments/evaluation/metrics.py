@@ -56,17 +56,17 @@ def wasserstein_from_counts(a: np.ndarray, b: np.ndarray, bins: np.ndarray) -> f
     return float(np.sum(np.abs(cdf_gap) * np.diff(centres)))
 
 
-REALISM_COUNT_KEYS = ("adv_yaw", "log_yaw", "adv_acc", "log_acc", "adv_road", "log_road")
-"""The histograms behind the set-level realism distances, in the order `realism_counts` stacks them."""
+_REALISM_BINS = (YAW_RATE_BINS, YAW_RATE_BINS, ACC_BINS, ACC_BINS, OFFROAD_BINS, OFFROAD_BINS)
+"""Bins of the six histograms `realism_counts` concatenates, in its order."""
 
 
 def realism_counts(rows: Sequence[dict[str, Any]]) -> np.ndarray:
-    """The summed histogram counts of `REALISM_COUNT_KEYS` of episode rows (histogram columns decoded to int lists),
-    concatenated into one vector: counts of a union of row sets are the sum of their vectors, so a bootstrap can sum
-    precomputed per-group vectors instead of re-reading every row."""
-    yaw_n, acc_n, road_n = len(YAW_RATE_BINS) - 1, len(ACC_BINS) - 1, len(OFFROAD_BINS) - 1
+    """The summed histogram counts of episode rows (histogram columns decoded to int lists) - generated and logged
+    yaw rate, generated and logged acceleration, generated and logged out-of-road share - concatenated into one
+    vector: counts of a union of row sets are the sum of their vectors, so a bootstrap can sum precomputed
+    per-group vectors instead of re-reading every row."""
     if not rows:
-        return np.zeros(2 * (yaw_n + acc_n + road_n), dtype=np.float64)
+        return np.zeros(sum(len(b) - 1 for b in _REALISM_BINS), dtype=np.float64)
     parts = [
         np.sum([r["adv_yaw_hist"] for r in rows], axis=0), np.sum([r["log_yaw_hist"] for r in rows], axis=0),
         np.sum([r["adv_acc_hist"] for r in rows], axis=0), np.sum([r["log_acc_hist"] for r in rows], axis=0),
@@ -79,9 +79,8 @@ def realism_counts(rows: Sequence[dict[str, Any]]) -> np.ndarray:
 def realism_from_counts(counts: np.ndarray) -> dict[str, float]:
     """``yaw_wd``, ``acc_wd``, ``road_wd`` and their mean ``realism`` from a `realism_counts` vector (NaN where a
     histogram is empty)."""
-    yaw_n, acc_n, road_n = len(YAW_RATE_BINS) - 1, len(ACC_BINS) - 1, len(OFFROAD_BINS) - 1
-    ends = np.cumsum([yaw_n, yaw_n, acc_n, acc_n, road_n, road_n])
-    ay, ly, aa, la, ar, lr = np.split(np.asarray(counts, dtype=np.float64), ends[:-1])
+    ends = np.cumsum([len(b) - 1 for b in _REALISM_BINS])[:-1]
+    ay, ly, aa, la, ar, lr = np.split(np.asarray(counts, dtype=np.float64), ends)
     yaw = wasserstein_from_counts(ay, ly, YAW_RATE_BINS)
     acc = wasserstein_from_counts(aa, la, ACC_BINS)
     road = wasserstein_from_counts(ar, lr, OFFROAD_BINS)
@@ -91,10 +90,7 @@ def realism_from_counts(counts: np.ndarray) -> dict[str, float]:
 
 def pooled_realism(rows: Sequence[dict[str, Any]]) -> dict[str, float]:
     """Set-level ``yaw_wd``, ``acc_wd``, ``road_wd`` and their mean ``realism`` over episode rows (histogram
-    columns decoded to int lists), generated vs logged adversaries."""
-    if not rows:
-        nan = float("nan")
-        return {"yaw_wd": nan, "acc_wd": nan, "road_wd": nan, "realism": nan}
+    columns decoded to int lists), generated vs logged adversaries; all NaN without rows."""
     return realism_from_counts(realism_counts(rows))
 
 

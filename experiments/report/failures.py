@@ -170,10 +170,9 @@ def failure_summary_markdown(failures: Sequence[Mapping[str, Any]], rows: Sequen
         cell[kind] = cell.get(kind, 0) + 1
     kinds = ("crash-adversary", "crash-other", "out-of-road", "timeout")
     out = ["| pipeline | setting | failed / episodes | " + " | ".join(kinds) + " |", "|---|---|---:|" + "---:|" * 4]
-    for pipeline in ordered_pipelines({p for p, _ in totals}):
-        for (p, setting), n in totals.items():
-            if p == pipeline:
-                c = counts.get((p, setting), {})
-                out.append(f"| {p} | {setting} | {sum(c.values())} / {n} | "
-                           + " | ".join(str(c.get(k, 0)) for k in kinds) + " |")
+    rank = {p: i for i, p in enumerate(ordered_pipelines({p for p, _ in totals}))}
+    for (p, setting), n in sorted(totals.items(), key=lambda item: rank[item[0][0]]):  # stable: settings as read
+        c = counts.get((p, setting), {})
+        out.append(f"| {p} | {setting} | {sum(c.values())} / {n} | " + " | ".join(str(c.get(k, 0)) for k in kinds)
+                   + " |")
     return "\n".join(out) + "\n"

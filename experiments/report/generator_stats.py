@@ -64,7 +64,7 @@ def _by_scenario_interval(per_group: np.ndarray, statistic: Callable[[np.ndarray
     from rliable import library as rly
 
     if len(per_group) < MIN_SCENARIOS:
-        estimate = statistic(per_group.sum(axis=0)) if len(per_group) else statistic(np.zeros(per_group.shape[1]))
+        estimate = statistic(per_group.sum(axis=0))  # zeros without groups: the statistic's NaN
         return [(float(p), math.nan, math.nan) for p in estimate]
 
     def on_index(index: np.ndarray) -> np.ndarray:
@@ -86,7 +86,8 @@ def generator_intervals(episodes: Sequence[Mapping[str, Any]], n_boot: int = N_B
     for e in episodes:
         by_scenario.setdefault(str(e["scenario_id"]), []).append(e)
     groups = list(by_scenario.values())
-    counts = np.stack([realism_counts([dict(e) for e in g]) for g in groups]) if groups else np.zeros((0, 1))
+    counts = np.array([realism_counts([dict(e) for e in g]) for g in groups]).reshape(len(groups),
+                                                                                      realism_counts([]).size)
     speeds = [[v for e in g if (v := _speed(e)) is not None] for g in groups]
     contact = np.array([[sum(v), len(v)] for v in speeds if v], dtype=np.float64).reshape(-1, 2)
     realism = _by_scenario_interval(counts, _realism, n_boot, seed)
