@@ -58,6 +58,7 @@ from seal.core.road_area import OFFROAD_TOLERANCE_M
 from seal.core.scenario import CURRENT_STEP, VALID, Scenario
 from seal.envs.background import BACKGROUND_KINDS, BackgroundController, IDMBackground
 from seal.envs.behaviors import AdversaryBehavior, BehaviorOutput, ReplayBehavior
+from seal.envs.deadline import deadline_features
 from seal.envs.kinematics import AgentState, bicycle_step
 from seal.envs.observation import ObservationBuilder, observation_space
 from seal.envs.road_geometry import RoadGeometry, get_road_geometry
@@ -275,6 +276,11 @@ class ScenarioEnv(gym.Env):
             info["rollout"] = self.rollout = self._finish(episode_outcome(events))
             info["outcome"] = self.rollout.outcome
         return obs, reward, terminated, truncated, info
+
+    def deadline_features(self) -> np.ndarray:
+        """The ego's time left and required speed ``[2]`` (`seal.envs.deadline`) at the current step."""
+        cfg = self.config
+        return deadline_features(self._route, self._proj.s, self._t, cfg["horizon_steps"], cfg["success_completion"])
 
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":

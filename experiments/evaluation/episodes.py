@@ -12,6 +12,7 @@ from seal.adversaries.base import AdversaryGenerator, Generation
 from seal.adversaries.history import RolloutHistory
 from seal.core.scenario import Scenario
 from seal.envs.behaviors import AdversaryBehavior, ReplayBehavior
+from seal.envs.deadline import with_deadline
 from seal.envs.rollout import Rollout
 from seal.envs.scenario_env import ScenarioEnv
 from seal.experiments.training.egos import Ego
@@ -32,9 +33,11 @@ def run_episode(
     options = {"scenario_id": scenario.scenario_id, "adversary": behavior or ReplayBehavior()}
     obs, info = env.reset(seed=seed, options=options)
     ego.reset(scenario)
+    deadline = bool(getattr(ego, "deadline_obs", False))  # a time-aware ego (`seal.envs.deadline`)
     done = False
     while not done:
-        obs, _, terminated, truncated, info = env.step(ego.act(obs, info["step"]))
+        action = ego.act(with_deadline(obs, env) if deadline else obs, info["step"])
+        obs, _, terminated, truncated, info = env.step(action)
         done = terminated or truncated
     return info["rollout"]
 

@@ -256,6 +256,10 @@ class EgoTrainConfig:
     """`ScenarioEnv` config overrides for training (CAT: episodes go on after a crash)."""
     eval_env: dict[str, Any] = field(default_factory=lambda: {"terminate_on_crash": True})
     """`ScenarioEnv` config overrides for evaluation (a crash ends the episode)."""
+    deadline_obs: bool = False
+    """Time-aware ego (`seal.envs.deadline`): the time left and the speed needed to arrive in time appended to its
+    observation, and the time limit a terminal state instead of a bootstrapped truncation; evaluations give the
+    ego the same slots."""
     eval_every: int = 50_000
     """Env steps between evaluations (0 = never)."""
     eval_episodes: int = 100
@@ -284,7 +288,7 @@ class EgoTrainConfig:
 
 
 RESOLVED_ONLY = ("generator", "preset", "hyperparams")
-ADDED_LATER: dict[str, Any] = {"overlap_updates": False}
+ADDED_LATER: dict[str, Any] = {"overlap_updates": False, "deadline_obs": False}
 """Fields a run folder recorded before they existed may lack, with the value that reproduces those runs."""
 
 PRESETS = ("quick", "standard", "paper", "decisive")

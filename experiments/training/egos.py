@@ -4,7 +4,9 @@ Python policy (`register_policy`: a callable ``obs -> action`` or an object with
 installed package's ``seal.egos`` entry point (`seal.core.plugins`).
 
 An `Ego` is reset with the scenario of each episode and then maps (observation, scenario step) to a normalised
-action ``[steering, acceleration]``.
+action ``[steering, acceleration]``. An ego whose ``deadline_obs`` is True (a trained ego whose observation space
+says it learned with `seal.envs.deadline`) gets the deadline slots appended to each observation by the episode
+loop (`seal.experiments.evaluation.episodes.run_episode`).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import numpy as np
 
 from seal.core.errors import SealError
 from seal.core.scenario import CURRENT_STEP, Scenario
+from seal.envs.deadline import needs_deadline
 from seal.envs.heuristic import HeuristicDriver
 from seal.envs.kinematics import recover_actions
 from seal.experiments.training.sb3_load import (
@@ -93,6 +96,8 @@ class PolicyEgo:
         varkw = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
         self._kwargs = [k for k in ("state", "episode_start", "deterministic") if varkw or k in params]
         self._state: Any = None
+        self.deadline_obs = needs_deadline(getattr(model, "observation_space", None))
+        """Trained on the deadline observation (`seal.envs.deadline`): its episodes append those slots."""
 
     def reset(self, scenario: Scenario) -> None:
         self._state = None
@@ -184,6 +189,8 @@ class ReSkillEgo:
     def __init__(self, policy: Any, name: str) -> None:
         self.policy = policy
         self.name = name
+        self.deadline_obs = needs_deadline(getattr(policy.high, "observation_space", None))
+        """Its high-level agent was trained on the deadline observation (`seal.envs.deadline`)."""
 
     def reset(self, scenario: Scenario) -> None:
         self.policy.reset()

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from seal.envs.observation import OBS_DIM
 from seal.experiments.training.skill_prior import EgoSkills, noise_of
 
 Layers = list[tuple[np.ndarray, np.ndarray]]
@@ -88,10 +89,14 @@ class ReSkillPolicy:
         self.steps = 0
 
     def act(self, observation: np.ndarray) -> np.ndarray:
-        """Normalised ``[steering, acceleration]`` ``[2]`` float32 for one observation ``[obs_dim]``."""
-        obs = np.asarray(observation, dtype=np.float32).reshape(-1)
+        """Normalised ``[steering, acceleration]`` ``[2]`` float32 for one observation ``[obs_dim]`` (with the
+        deadline slots appended for a time-aware ego)."""
+        full = np.asarray(observation, dtype=np.float32).reshape(-1)
+        # A time-aware ego's high-level agent also reads the deadline slots after the observation
+        # (`seal.envs.deadline`); the skills and the residual read the observation only, as in training.
+        obs = full[:OBS_DIM]
         if self.steps % self.skills.horizon == 0:
-            u, _ = self.high.predict(obs, deterministic=True)
+            u, _ = self.high.predict(full, deterministic=True)
             self.z = self.skills.skill(noise_of(np.asarray(u).reshape(-1), self.noise_bound), obs)
         self.steps += 1
         base = self.skills.action(obs)

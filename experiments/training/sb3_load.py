@@ -160,7 +160,20 @@ def _check_shape(model: Path, key: str, entry: dict[str, Any], want: tuple[int, 
     shape = entry.get("_shape")
     if shape is not None and tuple(shape) != want:
         raise ModelLoadError(f"{model}: {key} has shape {tuple(shape)}, seal's ego needs {want} (the observation "
-                             "of seal/Scenario-v0 and [steering, acceleration] actions)")
+                             "of seal/Scenario-v0, with the deadline slots for a time-aware ego, and [steering, "
+                             "acceleration] actions)")
+
+
+def _ego_observation_space(data: dict[str, Any]) -> Any:
+    """The ego observation space a saved model was trained on: the observation, or a time-aware ego's observation
+    plus the deadline slots (`seal.envs.deadline`), told apart by the stored shape."""
+    from seal.envs.deadline import DEADLINE_OBS_DIM, deadline_observation_space
+    from seal.envs.observation import observation_space
+
+    entry = data.get("observation_space")
+    shape = entry.get("_shape") if isinstance(entry, dict) else None
+    return deadline_observation_space() if shape is not None and tuple(shape) == (DEADLINE_OBS_DIM,) \
+        else observation_space()
 
 
 def load_sb3_model(path: Path, algo_name: str | None = None, observation_space: Any = None,
@@ -172,8 +185,6 @@ def load_sb3_model(path: Path, algo_name: str | None = None, observation_space: 
     from gymnasium import spaces
     from stable_baselines3.common.buffers import ReplayBuffer, RolloutBuffer
 
-    from seal.envs.observation import observation_space as default_observation_space
-
     model_path = find_model(Path(path))
     algo_name = resolve_algo(model_path, algo_name)
     algo = getattr(sb3, algo_name, None)
@@ -181,7 +192,7 @@ def load_sb3_model(path: Path, algo_name: str | None = None, observation_space: 
         raise ModelLoadError(f"{model_path}: unknown SB3 algorithm {algo_name!r}; one of "
                              f"{', '.join(a.lower() for a in ALGOS)}")
     data = read_data(model_path)
-    obs_space = observation_space if observation_space is not None else default_observation_space()
+    obs_space = observation_space if observation_space is not None else _ego_observation_space(data)
     act_space = action_space if action_space is not None else spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
     safe: dict[str, Any] = {
         "observation_space": obs_space, "action_space": act_space,

@@ -111,11 +111,23 @@ def build_vec_env(config: Mapping[str, Any], scenarios: list[Any], n_envs: int) 
         from seal.experiments.training.reskill import wrap_env_fns
 
         fns = wrap_env_fns(fns, config["hyperparams"], int(config["seed"]))
+    if config.get("deadline_obs"):
+        fns = [_deadline(fn) for fn in fns]
     from seal.core.plugins import plugin_specs
 
     workers: list[Callable[[], Any]] = [_worker(fn, 1, plugin_specs()) for fn in fns]
     venv = VecMonitor(SubprocVecEnv(workers) if n_envs > 1 else DummyVecEnv(workers))
     return OverlapVecEnv(venv) if config.get("overlap_updates") and config["algo"] != "ppo" else venv
+
+
+def _deadline(fn: Callable[[], Any]) -> Callable[[], Any]:
+    """``fn``'s env wrapped in `seal.envs.deadline.DeadlineObservation` (outermost: the agent's observation)."""
+    def build() -> Any:
+        from seal.envs.deadline import DeadlineObservation
+
+        return DeadlineObservation(fn())
+
+    return build
 
 
 def build_model(config: Mapping[str, Any], env: Any) -> Any:
@@ -414,7 +426,9 @@ def _callbacks(config: Mapping[str, Any], out: Path, checkpoint: Path | None, re
         stats,
         residual,  # after the restore: its first weight copy reaches the restored workers
         CheckpointCallback(int(config["checkpoint_every"]), total, save),
-        EvalCallback(int(config["eval_every"]), out / "eval", lambda: ScenarioEnv(eval_scenarios, eval_env_config),
+        EvalCallback(int(config["eval_every"]), out / "eval",
+                     _deadline(lambda: ScenarioEnv(eval_scenarios, eval_env_config)) if config.get("deadline_obs")
+                     else lambda: ScenarioEnv(eval_scenarios, eval_env_config),
                      eval_scenarios, make_policy=reskill.make_policy() if reskill is not None else None)
         if eval_scenarios else None,
         ProgressCallback(total, stats, curriculum, enabled=progress),

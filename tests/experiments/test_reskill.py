@@ -285,3 +285,42 @@ def test_reskill_config_resolves_and_refuses_bad_values() -> None:
         load_train_config(CONFIG_DIR / "quick.yaml", {"algo": "reskill", "hyperparams.reskill.noise_bound": 0})
     with pytest.raises(ValueError, match="train.algo"):
         load_train_config(CONFIG_DIR / "quick.yaml", {"algo": "nope"})
+
+
+def test_time_aware_reskill_run_learns_and_evaluates_on_the_deadline_observation(tmp_path: Path,
+                                                                                 skills_dir: Path) -> None:
+    """``deadline_obs``: the high-level agent learns on the observation plus the deadline slots (its replay buffer
+    holds them, the time limit is terminal); the trained ego says so, and an evaluation episode gives its high-level
+    agent those slots while its skills read the observation alone."""
+    from seal.envs.deadline import DEADLINE_OBS_DIM, deadline_features
+    from seal.experiments.evaluation.episodes import run_episode
+    from seal.experiments.training.egos import ReSkillEgo, make_ego
+    from seal.experiments.training.train import train_run
+
+    run = tmp_path / "run"
+    config = _tiny_config(_dataset(tmp_path), skills_dir)
+    config["deadline_obs"] = True
+    train_run(config, run, progress=False)
+    ego = make_ego(str(run))
+    assert isinstance(ego, ReSkillEgo) and ego.deadline_obs
+    assert ego.policy.high.observation_space.shape == (DEADLINE_OBS_DIM,)
+    high_seen: list[np.ndarray] = []
+    skill_seen: list[int] = []
+    predict, skill = ego.policy.high.predict, ego.policy.skills.skill
+
+    def recording_predict(obs, **kwargs):  # type: ignore[no-untyped-def]
+        high_seen.append(np.asarray(obs).copy())
+        return predict(obs, **kwargs)
+
+    def recording_skill(noise, obs):  # type: ignore[no-untyped-def]
+        skill_seen.append(np.asarray(obs).size)
+        return skill(noise, obs)
+
+    ego.policy.high.predict, ego.policy.skills.skill = recording_predict, recording_skill
+    scenario = sf.lane_change_scenario()
+    env = ScenarioEnv([scenario])
+    rollout = run_episode(env, scenario, ego)
+    assert rollout.last_step > 10 and len(high_seen) >= 1
+    assert {o.size for o in high_seen} == {DEADLINE_OBS_DIM} and set(skill_seen) == {100}
+    route = env._route
+    np.testing.assert_array_equal(high_seen[0][100:], deadline_features(route, route.start_s, 10, 90, 0.95))
