@@ -59,6 +59,8 @@ def test_preset_resolves_to_recorded_values(key: str) -> None:
     if key.startswith("train/"):
         # Added after the recording (issue 17): off-policy updates overlap env stepping by default.
         assert resolved.pop("overlap_updates") is True
+        # Added after the recording (issue 26): the time-aware ego is opt-in.
+        assert resolved.pop("deadline_obs") is False
         # Added after the recording (issue 25): SB3 policy_kwargs besides net_arch, none by default.
         if "policy_kwargs" in resolved["hyperparams"]:
             assert resolved["hyperparams"].pop("policy_kwargs") == {}
