@@ -36,11 +36,14 @@ def variant_of(config: Mapping[str, Any], pipeline: str) -> dict[str, Any]:
 
 
 def generator_of(pipeline: str, config: Mapping[str, Any] | None = None) -> str | None:
-    """The adversary generator a training pipeline uses (None for ``noadv``; a variant's ``generator``)."""
+    """The adversary generator a training pipeline uses (None for ``noadv`` and for a variant of it, ``generator:
+    noadv``; else a variant's ``generator``)."""
     if pipeline == NO_ADVERSARY:
         return None
     variant = variant_of(config or {}, pipeline)
-    return str(variant["generator"]) if variant else pipeline
+    if not variant:
+        return pipeline
+    return None if variant["generator"] == NO_ADVERSARY else str(variant["generator"])
 
 
 def dotted(prefix: str, value: Any) -> dict[str, Any]:

@@ -41,7 +41,8 @@ The preset's sections (all but ``train`` belong to this module; ``train`` is pas
 * ``variants``: pipeline name -> ``{generator: NAME, kwargs: {...}, train: {...}}``: a training pipeline that uses
   generator NAME with its ``generators`` kwargs updated by ``kwargs``, and the ``train`` section updated by
   ``train`` (nested keys, e.g. ``{curriculum: {warmup: 0.0}}``): the training-pipeline ablations of thesis
-  Fig. 6.5 (``experiments/configs/quick_ablations.yaml``).
+  Fig. 6.5 (``experiments/configs/quick_ablations.yaml``); ``generator: noadv`` is a variant without adversary
+  (``{noadv-dl: {generator: noadv, train: {deadline_obs: true}}}``: the time-aware No-Adv ego).
 * ``eval``: ``settings`` (list, as ``seal eval runs --settings``), ``k``, ``limit``, ``seed``, ``prior``,
   ``candidates``, ``env``, ``replay_ego`` (default true).
 * ``report``: ``plots`` (default true), ``videos`` (per generator, default 0), ``video_format``, ``reps`` /
@@ -220,6 +221,8 @@ def train_config(config: Mapping[str, Any], preset_path: Path, pipeline: str, se
     if gen:
         kwargs = {**dict(generators.get(gen) or {}), **dict(variant.get("kwargs") or {})}
         overrides[f"pipelines.{pipeline}"] = {"name": gen, "kwargs": kwargs}
+    elif variant:  # a variant of noadv: trains without an adversary under its own name (overrides skip None)
+        return load_train_config(preset_path, overrides, sets=[f"pipelines.{pipeline}=null"])
     return load_train_config(preset_path, overrides)
 
 

@@ -293,6 +293,29 @@ def test_ablation_preset_trains_each_fig_6_5_variant_as_a_pipeline() -> None:
         load_run_config(path, ["variants.seal_traj_only.kwarg={}"])
 
 
+def test_time_aware_variants_of_a_generator_and_of_noadv() -> None:
+    """``variants`` with ``train: {deadline_obs: true}``: the time-aware ablation of a pipeline, noadv included
+    (``generator: noadv`` trains without an adversary under the variant's own name)."""
+    from seal.experiments.pipeline.references import generator_of
+    from seal.experiments.pipeline.run import train_config
+
+    path = CONFIGS / "quick.yaml"
+    config = load_run_config(path, [
+        "pipelines=[noadv, noadv-dl, goose, goose-dl]",
+        "variants={noadv-dl: {generator: noadv, train: {deadline_obs: true}}, "
+        "goose-dl: {generator: goose, train: {deadline_obs: true}}}"])
+    gens = {"goose": {"model": "/m/goose.zip"}}
+    resolved = {p: train_config(config, path, p, 0, "/d", gens) for p in config["pipelines"]}
+    assert {p: generator_of(p, config) for p in config["pipelines"]} == {
+        "noadv": None, "noadv-dl": None, "goose": "goose", "goose-dl": "goose"}
+    assert {p: r["generator"]["name"] for p, r in resolved.items()} == {
+        "noadv": None, "noadv-dl": None, "goose": "goose", "goose-dl": "goose"}
+    assert {p: r["deadline_obs"] for p, r in resolved.items()} == {
+        "noadv": False, "noadv-dl": True, "goose": False, "goose-dl": True}
+    assert resolved["goose-dl"]["generator"]["kwargs"]["model"] == "/m/goose.zip"
+    assert all(r["pipeline"] == p for p, r in resolved.items())
+
+
 def test_non_reactive_start_keeps_p_at_zero_then_ramps() -> None:
     from seal.experiments.bench.training import mean_perturb_probability
     from seal.experiments.training.curriculum import perturb_probability
