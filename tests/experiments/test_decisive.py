@@ -86,6 +86,7 @@ def test_each_run_gets_its_algorithm_and_the_reskill_runs_the_fitted_skills(real
     assert reskill["algo"] == "reskill" and reskill["hyperparams"]["skills"] == "/m/ego_skills"
     assert td3["algo"] == "td3" and td3["hyperparams"]["train_freq"] == 2
     assert reskill["generator"] == td3["generator"] == {"name": "seal", "kwargs": gens["seal"]}
+    assert reskill["deadline_obs"] is td3["deadline_obs"] is True  # time-aware egos (the preset's comment says why)
 
 
 def _train(job) -> dict:
