@@ -68,7 +68,10 @@ def deadline_observation_space() -> spaces.Box:
 def with_deadline(obs: np.ndarray, env: gym.Env) -> np.ndarray:
     """``obs [OBS_DIM]`` with the deadline slots of ``env``'s current state appended (``env`` a `ScenarioEnv` or a
     wrapper of one)."""
-    features = env.get_wrapper_attr("deadline_features")()
+    return _appended(obs, env.get_wrapper_attr("deadline_features")())
+
+
+def _appended(obs: np.ndarray, features: np.ndarray) -> np.ndarray:
     return np.concatenate([np.asarray(obs, dtype=np.float32).reshape(-1), features])
 
 
@@ -86,11 +89,12 @@ class DeadlineObservation(gym.Wrapper):
     def __init__(self, env: gym.Env) -> None:
         super().__init__(env)
         self.observation_space = deadline_observation_space()
+        self._features = env.get_wrapper_attr("deadline_features")  # found once, not through the wrappers each step
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         obs, info = self.env.reset(seed=seed, options=options)
-        return with_deadline(obs, self.env), info
+        return _appended(obs, self._features()), info
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
-        return with_deadline(obs, self.env), reward, bool(terminated or truncated), False, info
+        return _appended(obs, self._features()), reward, bool(terminated or truncated), False, info

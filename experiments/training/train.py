@@ -417,6 +417,9 @@ def _callbacks(config: Mapping[str, Any], out: Path, checkpoint: Path | None, re
     curriculum = CurriculumCallback(total, **config["curriculum"], log=bool(config["generator"]["name"]))
     stats = EpisodeStatsCallback()
     eval_env_config = dict(config["eval_env"])
+
+    def make_eval_env() -> Any:
+        return ScenarioEnv(eval_scenarios, eval_env_config)
     counter, residual = reskill.callbacks() if reskill is not None else (None, None)
     callbacks = [
         counter,  # ReSkill: num_timesteps counts env steps before anything reads it
@@ -427,8 +430,7 @@ def _callbacks(config: Mapping[str, Any], out: Path, checkpoint: Path | None, re
         residual,  # after the restore: its first weight copy reaches the restored workers
         CheckpointCallback(int(config["checkpoint_every"]), total, save),
         EvalCallback(int(config["eval_every"]), out / "eval",
-                     _deadline(lambda: ScenarioEnv(eval_scenarios, eval_env_config)) if config.get("deadline_obs")
-                     else lambda: ScenarioEnv(eval_scenarios, eval_env_config),
+                     _deadline(make_eval_env) if config.get("deadline_obs") else make_eval_env,
                      eval_scenarios, make_policy=reskill.make_policy() if reskill is not None else None)
         if eval_scenarios else None,
         ProgressCallback(total, stats, curriculum, enabled=progress),
