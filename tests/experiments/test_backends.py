@@ -82,7 +82,7 @@ def test_ray_backend_smoke(tmp_path: Path) -> None:
         results = backend.map(evaluate_job, jobs, desc="ray smoke")
     finally:
         backend.shutdown()
-    assert [r.ok for r in results] == [True, True, False]
+    assert [r.ok for r in results] == [True, True, False], [r.error for r in results]
     assert "missing-run" in results[2].error
     assert results[0].value == {"run": "replay", "written": {"normal": 2, "rule": 2}}
     with ResultsStore(store) as s:  # both tasks wrote into the same store
