@@ -8,9 +8,10 @@ plan: roll-outs are past episodes only.
 from __future__ import annotations
 
 import importlib
+import os
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -211,6 +212,13 @@ def _load_plugin_generator(name: str) -> None:
     )
 
 
+def expand_user_paths(kwargs: Mapping[str, Any]) -> dict[str, Any]:
+    """``kwargs`` with every string option that starts with ``~`` expanded to the home folder (model paths written
+    as ``~/runs/...`` in a YAML config or ``--gen-opt``; the shell expands only unquoted command-line words)."""
+    return {k: os.path.expanduser(v) if isinstance(v, str) and v.startswith("~") else v for k, v in kwargs.items()}
+
+
 def make_generator(name: str, **kwargs: Any) -> AdversaryGenerator:
-    """Instantiate a registered generator; unknown names get an error listing the known ones."""
-    return generator_class(name)(**kwargs)
+    """Instantiate a registered generator (string options starting with ``~`` expanded, `expand_user_paths`);
+    unknown names get an error listing the known ones."""
+    return generator_class(name)(**expand_user_paths(kwargs))

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from seal.adversaries.base import AdversaryGenerator, generator_class
+from seal.adversaries.base import AdversaryGenerator, expand_user_paths, generator_class
 from seal.adversaries.history import RolloutHistory
 from seal.core.scenario import Scenario
 from seal.envs.rollout import Rollout
@@ -34,12 +34,13 @@ def generator_name(label: str, kwargs: Mapping[str, Any]) -> str:
 
 def build_generator(name: str, kwargs: Mapping[str, Any], shared: Mapping[str, Any]) -> AdversaryGenerator:
     """Instantiate entry ``name`` (a generator name, or a label whose ``kwargs`` name the generator) with
-    ``kwargs`` plus each ``shared`` option (None = not given) its constructor accepts."""
+    ``kwargs`` plus each ``shared`` option (None = not given) its constructor accepts (string options starting
+    with ``~`` expanded, `expand_user_paths`)."""
     cls = generator_class(generator_name(name, kwargs))
     kwargs = {k: v for k, v in kwargs.items() if k != "generator"}
     params = inspect.signature(cls).parameters
     merged = {k: v for k, v in shared.items() if v is not None and k in params and k not in kwargs}
-    return cls(**merged, **kwargs)
+    return cls(**expand_user_paths({**merged, **kwargs}))
 
 
 def generator_stream(name: str) -> int:

@@ -75,3 +75,26 @@ def test_generators_eval_and_runs_eval_play_the_same_episodes(name: str, dataset
             video_generator.name = name
             assert not np.array_equal(other.adv_track, rollout.adv_track)
     env.close()
+
+
+def test_generator_paths_starting_with_tilde_are_expanded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A model path written ``~/...`` in a YAML config reaches the generator as the home folder's path (the rcg
+    generator checks that its behaviour file exists, so an unexpanded path would be an error)."""
+    monkeypatch.setenv("HOME", str(tmp_path))
+    got: dict[str, object] = {}
+
+    @register("tilde_probe")
+    class _Probe(AdversaryGenerator):
+        def __init__(self, model: str = "", prior: str | None = None, count: int = 0) -> None:
+            got.update(model=model, prior=prior, count=count)
+
+        def _generate(self, scenario: Scenario, history: Sequence[Rollout], rng: np.random.Generator) -> Generation:
+            raise NotImplementedError
+
+    protocol.build_generator("probe", {"generator": "tilde_probe", "model": "~/m.zip", "count": 3},
+                             {"prior": "~/p.pt", "unused": "~/x"})
+    assert got == {"model": str(tmp_path / "m.zip"), "prior": str(tmp_path / "p.pt"), "count": 3}
+    from seal.adversaries.base import make_generator
+
+    make_generator("tilde_probe", model="~user_is_not_home", prior="a/~b")
+    assert got["prior"] == "a/~b"  # only a leading ~ is a home folder
