@@ -6,6 +6,8 @@
   ``realism`` is their mean (lower = more realistic). Values outside the bin range count in the edge bins.
 * Smoothness (reported next to realism, not in it): the jerk profile (m/s^3, second difference of the speed)
   against the logged adversary's, as a Wasserstein-1 distance and the 95th percentile of |jerk|.
+* Direction (next to realism, not in it): mean acceleration and the share of hard-braking steps, generated and
+  logged, so a large acc WD can be read as "brakes more" or "accelerates more".
 * Collisions: for every episode the first step where the ego and adversary boxes overlap; the relative speed
   along the contact normal there (the separating axis of least penetration, as a physics engine's contact
   normal), head-on collisions (headings more than 135 deg apart and each vehicle's centre ahead of the other:
@@ -29,6 +31,8 @@ YAW_RATE_BINS = np.linspace(-1.5, 1.5, 61)
 ACC_BINS = np.linspace(-10.0, 10.0, 81)
 JERK_BINS = np.linspace(-100.0, 100.0, 201)
 OFFROAD_BINS = np.linspace(-0.05, 1.05, 12)  # centres 0.0, 0.1, ..., 1.0: a 0/1 flag sits exactly on 0 or 1
+HARD_BRAKE_MPS2 = 3.0
+"""Deceleration (m/s^2) above which a step counts as hard braking in `acceleration_stats`."""
 HEAD_ON_ANGLE_RAD = np.deg2rad(135.0)
 SEVERE_SPEED_MPS = 5.0
 
@@ -74,6 +78,17 @@ def jerk_stats(generated: TrackBatch, original: TrackBatch) -> dict[str, float]:
     g, o = jerks(generated), jerks(original)
     p95 = lambda x: float(np.percentile(np.abs(x), 95)) if x.size else float("nan")  # noqa: E731
     return {"jerk_wd": histogram_wasserstein(g, o, JERK_BINS), "jerk_abs_p95": p95(g), "logged_jerk_abs_p95": p95(o)}
+
+
+def acceleration_stats(generated: TrackBatch, original: TrackBatch) -> dict[str, float]:
+    """Which way generated adversaries differ from the logged ones in acceleration (not part of ``realism``; the
+    acc WD says how much, these say in which direction): the mean acceleration (m/s^2) of both and their shares of
+    steps braking harder than `HARD_BRAKE_MPS2` (NaN for an empty sample)."""
+    g, o = accelerations(generated), accelerations(original)
+    mean = lambda x: float(x.mean()) if x.size else float("nan")  # noqa: E731
+    hard = lambda x: float(np.mean(x < -HARD_BRAKE_MPS2)) if x.size else float("nan")  # noqa: E731
+    return {"acc_mean_mps2": mean(g), "logged_acc_mean_mps2": mean(o), "hard_brake_share": hard(g),
+            "logged_hard_brake_share": hard(o)}
 
 
 def offroad_rates(offroad: np.ndarray | Sequence[np.ndarray]) -> np.ndarray:

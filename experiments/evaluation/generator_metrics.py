@@ -20,7 +20,7 @@ from seal.core.outcome import OUTCOMES
 from seal.core.scenario import CURRENT_STEP, HEADING, LENGTH, VALID, WIDTH, Scenario, X, Y
 from seal.envs.road_geometry import get_road_geometry
 from seal.envs.rollout import Rollout
-from seal.scoring.realism import collision_metrics, jerk_stats, realism_wd
+from seal.scoring.realism import acceleration_stats, collision_metrics, jerk_stats, realism_wd
 
 OFFROAD_TOLERANCE_M = 0.5
 """A box corner may stick out of the drivable area this far (as in `ScenarioEnv`)."""
@@ -162,6 +162,7 @@ def summarize(records: Sequence[EpisodeRecord], logged: Sequence[LoggedAdversary
         "route_completion": float(np.mean([r.route_completion for r in records])),
         **realism,
         **jerk_stats([r.adv_track for r in records], [g.track for g in logged]),
+        **acceleration_stats([r.adv_track for r in records], [g.track for g in logged]),
         "collision_speed_mps": coll["collision_speed_mps"],
         "head_on_rate": coll["head_on_rate"],
         "severe_head_on_rate": coll["severe_head_on_rate"],
@@ -183,6 +184,10 @@ TABLE_COLUMNS = (
     ("acc_wd", "acc WD", "{:.3f}"),
     ("road_wd", "road WD", "{:.3f}"),
     ("realism", "realism", "{:.3f}"),
+    ("acc_mean_mps2", "acc mean (m/s^2)", "{:.2f}"),
+    ("logged_acc_mean_mps2", "logged acc mean", "{:.2f}"),
+    ("hard_brake_share", "hard brake (< -3 m/s^2)", "{:.1%}"),
+    ("logged_hard_brake_share", "logged hard brake", "{:.1%}"),
     ("jerk_wd", "jerk WD", "{:.2f}"),
     ("jerk_abs_p95", "|jerk| p95", "{:.1f}"),
     ("logged_jerk_abs_p95", "logged |jerk| p95", "{:.1f}"),

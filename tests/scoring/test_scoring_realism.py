@@ -106,3 +106,21 @@ def test_jerk_is_the_second_difference_of_the_speed_and_compares_profiles() -> N
     assert same["jerk_wd"] == 0.0 and same["jerk_abs_p95"] == pytest.approx(0.0, abs=1e-6)
     diff = jerk_stats(rough, smooth)
     assert diff["jerk_wd"] > 10.0 and diff["jerk_abs_p95"] > 50.0 and diff["logged_jerk_abs_p95"] < 1e-6
+
+
+def test_acceleration_stats_give_the_direction_of_the_difference() -> None:
+    from seal.scoring.realism import acceleration_stats
+
+    brake = np.zeros((5, 8))
+    brake[:, 3] = [20.0, 19.0, 18.8, 18.6, 18.4]  # -10, -2, -2, -2 m/s^2
+    brake[:, 7] = 1.0
+    cruise = brake.copy()
+    cruise[:, 3] = [20.0, 20.1, 20.2, 20.2, 20.1]  # +1, +1, 0, -1 m/s^2
+    got = acceleration_stats([brake], [cruise])
+    assert got["acc_mean_mps2"] == pytest.approx(-4.0)
+    assert got["logged_acc_mean_mps2"] == pytest.approx(0.25)
+    assert got["hard_brake_share"] == pytest.approx(0.25)  # one of four steps below -3 m/s^2
+    assert got["logged_hard_brake_share"] == 0.0
+    brake[2, 7] = 0.0  # an invalid step drops both differences through it: -10 and -2 are left
+    assert acceleration_stats([brake], [cruise])["acc_mean_mps2"] == pytest.approx(-6.0)
+    assert np.isnan(acceleration_stats([brake[:1]], [cruise])["acc_mean_mps2"])
