@@ -23,6 +23,7 @@ from seal.envs.rollout import Rollout
 from seal.experiments.evaluation.generator_metrics import LoggedAdversary, offroad_flags
 from seal.scoring.realism import (
     ACC_BINS,
+    HARD_BRAKE_MPS2,
     OFFROAD_BINS,
     YAW_RATE_BINS,
     accelerations,
@@ -78,14 +79,27 @@ def realism_counts(rows: Sequence[dict[str, Any]]) -> np.ndarray:
 
 def realism_from_counts(counts: np.ndarray) -> dict[str, float]:
     """``yaw_wd``, ``acc_wd``, ``road_wd`` and their mean ``realism`` from a `realism_counts` vector (NaN where a
-    histogram is empty)."""
+    histogram is empty), and the generated and logged ``hard_brake_share`` (which way the acceleration differs)."""
     ends = np.cumsum([len(b) - 1 for b in _REALISM_BINS])[:-1]
     ay, ly, aa, la, ar, lr = np.split(np.asarray(counts, dtype=np.float64), ends)
     yaw = wasserstein_from_counts(ay, ly, YAW_RATE_BINS)
     acc = wasserstein_from_counts(aa, la, ACC_BINS)
     road = wasserstein_from_counts(ar, lr, OFFROAD_BINS)
     finite = [v for v in (yaw, acc, road) if np.isfinite(v)]
-    return {"yaw_wd": yaw, "acc_wd": acc, "road_wd": road, "realism": float(np.mean(finite)) if finite else np.nan}
+    return {"yaw_wd": yaw, "acc_wd": acc, "road_wd": road, "realism": float(np.mean(finite)) if finite else np.nan,
+            "hard_brake_share": _hard_brake_share(aa), "logged_hard_brake_share": _hard_brake_share(la)}
+
+
+_HARD_BRAKE_BINS = int(np.searchsorted(ACC_BINS, -HARD_BRAKE_MPS2))
+"""Acceleration bins below -`HARD_BRAKE_MPS2` (one of `ACC_BINS`' edges, so the share is exact)."""
+assert ACC_BINS[_HARD_BRAKE_BINS] == -HARD_BRAKE_MPS2, "the hard-braking threshold must be an ACC_BINS edge"
+
+
+def _hard_brake_share(acc_counts: np.ndarray) -> float:
+    """Share of steps braking harder than `HARD_BRAKE_MPS2` in an acceleration histogram on `ACC_BINS` (as
+    `seal.scoring.realism.acceleration_stats`); NaN when empty."""
+    total = float(acc_counts.sum())
+    return float(acc_counts[:_HARD_BRAKE_BINS].sum()) / total if total else float("nan")
 
 
 def pooled_realism(rows: Sequence[dict[str, Any]]) -> dict[str, float]:

@@ -192,6 +192,8 @@ GENERATOR_COLUMNS = (
     ("road_wd", "road WD", "{:.3f}"),
     ("realism", "realism (mean WD)", "{:.3f}"),
     ("realism_yaw_acc", "yaw+acc WD", "{:.3f}"),
+    ("hard_brake_share", "hard brake (< -3 m/s^2)", "{:.1%}"),
+    ("logged_hard_brake_share", "logged hard brake", "{:.1%}"),
     ("collision_speed_mps", "coll. speed (m/s)", "{:.2f}"),
     ("head_on_rate", "head-on", "{:.1%}"),
     ("severe_head_on_rate", "severe head-on", "{:.1%}"),

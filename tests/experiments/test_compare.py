@@ -17,6 +17,7 @@ from seal.scoring.realism import (
     ACC_BINS,
     OFFROAD_BINS,
     YAW_RATE_BINS,
+    acceleration_stats,
     accelerations,
     histogram_wasserstein,
     realism_wd,
@@ -117,6 +118,11 @@ def test_counts_give_the_set_level_realism_of_pooled_samples():
     for key in ("yaw_wd", "acc_wd", "road_wd", "realism"):
         assert pooled[key] == pytest.approx(direct[key])
     assert OFFROAD_BINS[0] < 0  # the 0/1 flags sit inside the bins
+    # The hard-braking shares from the stored histograms equal the direct ones (-3 m/s^2 is a bin edge).
+    direct_acc = acceleration_stats(gen, log)
+    assert pooled["hard_brake_share"] == pytest.approx(direct_acc["hard_brake_share"])
+    assert pooled["logged_hard_brake_share"] == pytest.approx(direct_acc["logged_hard_brake_share"])
+    assert pooled["hard_brake_share"] > 0.0
 
 
 def test_report_files_tables_and_plots(tmp_path):
