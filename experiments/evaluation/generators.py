@@ -48,7 +48,10 @@ class EvalGeneratorsConfig:
     split: str | None = "eval"
     """Dataset split (None: every scenario)."""
     limit: int | None = None
-    """Use the first N scenarios of the split (None: all)."""
+    """Use the first N scenarios of the split (after ``offset``; None: all)."""
+    offset: int = 0
+    """Skip the first N scenarios of the split (a held-out slice: scenario i keeps its index, so its episodes are
+    the ones a run over the whole split plays)."""
     k: int = K_ROLLOUTS
     """Perturbation passes per scenario (the length of the roll-out queue); the last is scored."""
     seed: int = 0
@@ -67,6 +70,8 @@ class EvalGeneratorsConfig:
     def __post_init__(self) -> None:
         if self.k < 1:
             raise ConfigError(f"k must be >= 1, got {self.k}")
+        if self.offset < 0:
+            raise ConfigError(f"offset must be >= 0, got {self.offset}")
 
 
 DEFAULTS: dict[str, Any] = defaults_of(EvalGeneratorsConfig)
@@ -133,16 +138,19 @@ def resolve_config(
 def evaluate_generators(
     scenarios: Sequence[Scenario], generators: Mapping[str, AdversaryGenerator], ego_spec: str, k: int = K_ROLLOUTS,
     seed: int = 0, env_config: Mapping[str, Any] | None = None, progress: bool = True, algo: str | None = None,
+    first_index: int = 0,
 ) -> tuple[list[dict[str, Any]], list[EpisodeRecord]]:
     """Run the protocol (module docstring); returns the summary rows (one per generator) and the episode records.
-    ``ego_spec``: anything `seal.experiments.training.egos.make_ego` takes (``algo`` for a model file)."""
+    ``ego_spec``: anything `seal.experiments.training.egos.make_ego` takes (``algo`` for a model file).
+    ``first_index``: the split index of ``scenarios[0]`` (its episode seeds and generator streams follow it)."""
     from tqdm import tqdm
 
     env = ScenarioEnv(list(scenarios), config=dict(env_config or {}))
     ego = make_ego(ego_spec, algo)
     records: dict[str, list[EpisodeRecord]] = {name: [] for name in generators}
     logged: list[LoggedAdversary] = []
-    for i, scenario in enumerate(tqdm(scenarios, desc="scenarios", unit="scenario", disable=not progress)):
+    bar = tqdm(scenarios, desc="scenarios", unit="scenario", disable=not progress)
+    for i, scenario in enumerate(bar, start=first_index):
         normal = normal_episode(env, scenario, i, ego, seed)
         logged.append(LoggedAdversary.of(scenario))
         for name, generator in generators.items():
@@ -183,12 +191,24 @@ def jsonable(value: Any) -> Any:
     return value
 
 
+def split_slice(dataset: str | Path, split: str | None, limit: int | None, offset: int) -> list[Scenario]:
+    """Scenarios ``offset .. offset + limit`` of ``split`` (all after ``offset`` when ``limit`` is None); an error
+    naming ``--offset`` when nothing is left."""
+    if not offset:
+        return load_split(dataset, split, limit)
+    scenarios = load_split(dataset, split)[offset:]
+    if not scenarios:
+        raise ValueError(f"--offset {offset}: the split {split or 'all'} of {dataset} has no scenario after the first "
+                         f"{offset}")
+    return scenarios if limit is None else scenarios[:limit]
+
+
 def run_eval_generators(
     dataset: str | Path, out: str | Path, config: dict[str, Any], progress: bool = True
 ) -> list[dict[str, Any]]:
     """Evaluate the configured generators on ``dataset`` and write the results into ``out``; returns the rows."""
     out = Path(out)
-    scenarios = load_split(dataset, config["split"], config["limit"])
+    scenarios = split_slice(dataset, config["split"], config["limit"], int(config.get("offset") or 0))
     shared = {key: config.get(key) for key in SHARED_OPTIONS}
     generators = {name: build_generator(name, kw, shared) for name, kw in config["generators"].items()}
     resolved = {**config, "dataset": str(dataset), "scenarios": len(scenarios)}
@@ -196,6 +216,7 @@ def run_eval_generators(
     rows, records = evaluate_generators(
         scenarios, generators, config["ego"], k=int(config["k"]), seed=int(config["seed"]),
         env_config=config["env"], progress=progress, algo=config.get("algo"),
+        first_index=int(config.get("offset") or 0),
     )
     table = markdown_table(rows)
     atomic_write_bytes(out / "generators.csv", _csv(rows))

@@ -80,6 +80,11 @@ def positive_int(name: str) -> Callable[[str], int]:
     return _number(name, int, "an integer", lambda v: v > 0, "positive")
 
 
+def non_negative_int(name: str) -> Callable[[str], int]:
+    """Parser for an integer option >= 0 called ``name``."""
+    return _number(name, int, "an integer", lambda v: v >= 0, ">= 0")
+
+
 def positive_float(name: str) -> Callable[[str], float]:
     """Parser for a strictly positive float option called ``name``."""
     return _number(name, float, "a number", lambda v: v > 0.0, "positive")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from seal.cli.args import CliError, add_plugin_option, positive_int, print_result
+from seal.cli.args import CliError, add_plugin_option, non_negative_int, positive_int, print_result
 from seal.cli.tree import CommandTree
 
 
@@ -15,8 +15,9 @@ def _generator_options(args: argparse.Namespace) -> tuple[dict, dict]:
     try:
         config = resolve_config(
             args.config, generators=args.generators, ego=getattr(args, "ego", None), algo=getattr(args, "algo", None),
-            split=args.split, limit=args.limit, k=getattr(args, "k", None), seed=args.seed, prior=args.prior,
-            candidates=args.candidates, objective=args.objective, skills=args.skills, gen_opts=args.gen_opt,
+            split=args.split, limit=args.limit, offset=getattr(args, "offset", None), k=getattr(args, "k", None),
+            seed=args.seed, prior=args.prior, candidates=args.candidates, objective=args.objective, skills=args.skills,
+            gen_opts=args.gen_opt,
         )
     except ValueError as exc:
         raise CliError(str(exc)) from None
@@ -121,6 +122,9 @@ def register(tree: CommandTree) -> None:
     ev.add_argument("--algo", default=None, help="SB3 algorithm of an --ego model file that does not record it "
                     "(td3 | sac | ppo | ddpg | a2c; default: read from the file)")
     ev.add_argument("--k", type=positive_int("--k"), default=None, help="perturbation passes = queue length (5)")
+    ev.add_argument("--offset", type=non_negative_int("--offset"), default=None,
+                    help="skip the first N scenarios of the split (a held-out slice; each scenario keeps the "
+                    "episodes it gets in a run over the whole split)")
     ev.add_argument("--out", required=True, help="output folder")
     ev.add_argument("--no-progress", action="store_true", help="no progress bar")
     ev.set_defaults(func=cmd_eval_generators)

@@ -163,3 +163,28 @@ def test_run_ego_loads_sb3_models_without_pickle(tmp_path: Path, algo: str) -> N
     assert ego.act(obs, CURRENT_STEP).shape == (2,)
     with pytest.raises(ValueError, match="not 'heuristic', 'replay'"):
         make_ego(str(tmp_path / "missing"))
+
+
+def test_cli_offset_plays_a_slice_with_the_episodes_of_the_whole_run(tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture) -> None:
+    """``--offset`` keeps each scenario's split index, so a held-out slice replays exactly its rows of a run over
+    the whole split (episode seeds and generator streams follow the index); past the end is a one-line error."""
+    data = tmp_path / "data"
+    write_dataset(data, [sf.highway_scenario(1), sf.highway_scenario(2), sf.highway_scenario(3)])
+    common = ["eval", "generators", str(data), "--generators", "rule", "--all-scenarios", "--k", "2", "--ego",
+              "heuristic", "--no-progress"]
+    assert main([*common, "--out", str(tmp_path / "all")]) == 0
+    assert main([*common, "--offset", "1", "--limit", "1", "--out", str(tmp_path / "slice")]) == 0
+    whole = list(csv.DictReader((tmp_path / "all" / "episodes.csv").open()))
+    part = list(csv.DictReader((tmp_path / "slice" / "episodes.csv").open()))
+    assert len(whole) == 3 and len(part) == 1
+    timing = "generation_ms_mean"  # wall time, the only column that may differ
+    assert {k: v for k, v in part[0].items() if k != timing} == {k: v for k, v in whole[1].items() if k != timing}
+    assert yaml.safe_load((tmp_path / "slice" / "config.yaml").read_text())["offset"] == 1
+    capsys.readouterr()
+    assert main([*common, "--offset", "3", "--out", str(tmp_path / "none")]) == 2
+    err = capsys.readouterr().err
+    assert "--offset 3" in err and "no scenario after the first 3" in err and "Traceback" not in err
+    with pytest.raises(SystemExit) as exc:  # argparse's own usage error
+        main([*common, "--offset", "-1", "--out", str(tmp_path / "neg")])
+    assert exc.value.code == 2 and "--offset must be >= 0" in capsys.readouterr().err
