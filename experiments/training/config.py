@@ -304,14 +304,48 @@ def preset_path(name_or_path: str | Path) -> Path:
     return CONFIG_DIR / f"{text}.yaml" if text in PRESETS else Path(text)
 
 
+RUN_CONFIG_FILE = "config.yaml"
+"""The resolved config a run folder records (`resolve`'s output); `seal train --config` takes it back."""
+_RUN_CONFIG_KEYS = frozenset({"algo", "pipeline", "generator", "hyperparams"})
+
+
+def config_file(name_or_path: str | Path) -> Path:
+    """`preset_path`, with a run folder meaning its recorded ``config.yaml``."""
+    path = preset_path(name_or_path)
+    return path / RUN_CONFIG_FILE if path.is_dir() else path
+
+
+def is_run_config(loaded: Mapping[str, Any]) -> bool:
+    """Whether a loaded YAML mapping is a run folder's resolved config (no ``train:`` section; flat hyperparameters
+    of one algorithm and the pipeline's generator)."""
+    return "train" not in loaded and set(loaded) >= _RUN_CONFIG_KEYS
+
+
+def train_section_of_run(run_config: Mapping[str, Any]) -> dict[str, Any]:
+    """A run's resolved config as a ``train:`` section that resolves to the same run: the hyperparameters go under
+    the run's algorithm, its generator becomes the definition of its pipeline, the recorded preset name is dropped
+    (``--set`` and the command-line options then change what they change in any preset)."""
+    section = {k: v for k, v in run_config.items() if k not in ("generator", "preset")}
+    section["hyperparams"] = {str(run_config["algo"]).lower(): run_config["hyperparams"]}
+    generator = run_config.get("generator") or {}
+    spec = None if generator.get("name") is None else {"name": generator["name"],
+                                                        "kwargs": dict(generator.get("kwargs") or {})}
+    section["pipelines"] = {str(run_config["pipeline"]): spec}
+    return section
+
+
 def read_train_section(path: str | Path) -> dict[str, Any]:
-    """The ``train:`` mapping of the YAML file ``path`` (a preset name or a path; keys checked when loaded)."""
-    path = preset_path(path)
+    """The ``train:`` mapping of the YAML file ``path`` (a preset name or a path; keys checked when loaded), or of a
+    run folder / its ``config.yaml`` (`train_section_of_run`)."""
+    path = config_file(path)
     if not path.is_file():
         raise FileNotFoundError(
-            f"--config {path}: no such file (presets: experiments/configs/quick|standard|paper|decisive.yaml)"
+            f"--config {path}: no such file (presets: experiments/configs/quick|standard|paper|decisive.yaml, or a "
+            "run folder)"
         )
     loaded = read_yaml(path)
+    if is_run_config(loaded):
+        return train_section_of_run(loaded)
     if not isinstance(loaded.get("train"), dict):
         raise ConfigError(f"{path}: no 'train:' section (a mapping of the fields of "
                           f"seal.experiments.training.config.EgoTrainConfig)")
@@ -320,22 +354,33 @@ def read_train_section(path: str | Path) -> dict[str, Any]:
 
 def load_ego_train_config(path: str | Path, overrides: Mapping[str, Any] | None = None,
                           sets: Sequence[str] = ()) -> EgoTrainConfig:
-    """The `EgoTrainConfig` of the preset file ``path`` (or a preset name) with ``overrides`` (dotted keys; None
-    values ignored) and ``sets`` (``"key.sub=value"``) on top."""
-    file = preset_path(path)
-    read_train_section(file)  # a clear error for a missing file or section
+    """The `EgoTrainConfig` of the preset file ``path`` (or a preset name, or a run folder / its recorded
+    ``config.yaml``) with ``overrides`` (dotted keys; None values ignored) and ``sets`` (``"key.sub=value"``) on
+    top."""
+    file = config_file(path)
+    section = read_train_section(file)  # a clear error for a missing file or section
+    if is_run_config(read_yaml(file)):
+        return load_config(EgoTrainConfig, file=section, values=overrides, overrides=sets)
     return load_config(EgoTrainConfig, file=file, section="train", values=overrides, overrides=sets)
+
+
+def _preset_name(path: str | Path) -> str:
+    """The ``preset`` a run records: the preset file's stem, or the preset the given run recorded."""
+    file = config_file(path)
+    loaded = read_yaml(file)
+    return str(loaded.get("preset") or file.parent.name) if is_run_config(loaded) else file.stem
 
 
 def load_train_config(path: str | Path, overrides: Mapping[str, Any] | None = None,
                       sets: Sequence[str] = ()) -> dict[str, Any]:
     """The resolved run config (`resolve`) of the preset file ``path`` (or a preset name, `preset_path`; its
-    ``train:`` section), ``overrides`` (dotted keys; None values ignored) and ``sets`` (``--set`` strings).
-    ``preset`` is the file's stem."""
+    ``train:`` section; or a run folder, which then trains again as recorded), ``overrides`` (dotted keys; None
+    values ignored) and ``sets`` (``--set`` strings). ``preset`` is the file's stem (a run folder's: the one it
+    recorded)."""
     config = load_ego_train_config(path, overrides, sets)
     # A --set for another algorithm would be dropped by `resolve` (files keep every algorithm's section: presets do).
     check_algo_settings(config.algo.lower(), [s.partition("=")[0].strip() for s in sets], "--set")
-    return resolve(config, preset=preset_path(path).stem)
+    return resolve(config, preset=_preset_name(path))
 
 
 def _generator(config: EgoTrainConfig) -> dict[str, Any]:

@@ -116,8 +116,9 @@ def register(tree: CommandTree) -> None:
         "same number of steps; a finished run is never overwritten.",
     )
     p.add_argument("--config", default=None,
-                   help="preset name (quick | standard | paper: experiments/configs/<name>.yaml) or a YAML file with a "
-                   f"train: section (default {DEFAULT_CONFIG})")
+                   help="preset name (quick | standard | paper: experiments/configs/<name>.yaml), a YAML file with a "
+                   "train: section, or a run folder (its recorded config.yaml: trains again as it did, with --set and "
+                   f"the options below on top; give a new --out) (default {DEFAULT_CONFIG})")
     p.add_argument("--pipeline", default=None,
                    help="adversary pipeline: noadv, a pipeline of the config's train.pipelines (built-in: goose, cat, "
                    "seal, steered, cat-rcg, seal-rcg) or any generator name, e.g. one from --plugin (default: the "

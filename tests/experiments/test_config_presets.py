@@ -65,3 +65,24 @@ def test_preset_resolves_to_recorded_values(key: str) -> None:
         if "policy_kwargs" in resolved["hyperparams"]:
             assert resolved["hyperparams"].pop("policy_kwargs") == {}
     assert resolved == RECORDED[key]
+
+
+@pytest.mark.parametrize("preset,overrides", [
+    ("standard", TRAIN_CLI),
+    ("decisive", {"pipeline": "noadv", "algo": "td3", "dataset": "d"}),
+    ("decisive", {"pipeline": "seal", "algo": "reskill", "dataset": "d", "pipelines.seal.kwargs.prior": "p.pt",
+                  "hyperparams.reskill.skills": "s"}),
+])
+def test_a_run_folder_trains_again_as_recorded(tmp_path: Path, preset: str, overrides: dict[str, Any]) -> None:
+    """`seal train --config RUN` (a run folder or its config.yaml): the recorded, resolved config resolves to itself,
+    preset name included, and --set / options change it as they change a preset."""
+    import yaml
+
+    resolved = load_train_config(preset, overrides)
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "config.yaml").write_text(yaml.safe_dump(resolved, sort_keys=True))
+    assert load_train_config(run) == resolved
+    assert load_train_config(run / "config.yaml") == resolved
+    again = load_train_config(run, {"seed": 9}, sets=["deadline_obs=false"])
+    assert again == {**resolved, "seed": 9, "deadline_obs": False}
