@@ -37,7 +37,8 @@ The preset's sections (all but ``train`` belong to this module; ``train`` is pas
 * ``pipelines``: training pipelines (``noadv`` = no adversary; ``goose``, ``cat``, ``seal``, ... = that
   generator; or a name of ``variants``); ``seeds``: list of seeds; ``algos`` (optional): ego algorithms to train
   each pipeline x seed with (``[reskill, td3]``: the main and a secondary row of the report, which labels and
-  compares them apart, `seal.experiments.report.grouping`).
+  compares them apart, `seal.experiments.report.grouping`); ``algo_train`` (optional): algorithm -> ``train``
+  settings for that algorithm's runs only (``{td3: {deadline_obs: false}}``), applied after ``train``.
 * ``variants``: pipeline name -> ``{generator: NAME, kwargs: {...}, train: {...}}``: a training pipeline that uses
   generator NAME with its ``generators`` kwargs updated by ``kwargs``, and the ``train`` section updated by
   ``train`` (nested keys, e.g. ``{curriculum: {warmup: 0.0}}``): the training-pipeline ablations of thesis
@@ -115,6 +116,8 @@ class RunPreset:
     algos: list[str] = field(default_factory=list)
     """Ego algorithms (``train.algo`` values) each pipeline x seed is trained with, run folders
     ``<pipeline>-<algo>-s<seed>``; empty: the train section's ``algo`` only, run folders ``<pipeline>-s<seed>``."""
+    algo_train: dict[str, Any] = field(default_factory=dict)
+    """Ego algorithm -> ``train`` settings for that algorithm's runs only, on top of ``train`` (nested keys)."""
     preset: str = ""
     """The preset's name (default: the file name)."""
 
@@ -144,6 +147,14 @@ def load_run_config(path: str | Path, sets: Sequence[str] = ()) -> dict[str, Any
     for key in ("data", "fit", "generators", "eval", "report", "backend", "train"):
         if config.get(key) is not None and not isinstance(config[key], dict):
             raise ValueError(f"{path}: '{key}' must be a mapping of options, got {config[key]!r}")
+    algo_train = config.get("algo_train") or {}
+    if not isinstance(algo_train, dict) or not all(isinstance(v, dict) for v in algo_train.values()):
+        raise ValueError(f"{path}: 'algo_train' must be a mapping of ego algorithm -> train settings, got "
+                         f"{algo_train!r}")
+    unknown = sorted(set(algo_train) - set(config.get("algos") or [(config.get("train") or {}).get("algo")]))
+    if unknown:
+        raise ValueError(f"{path}: 'algo_train' names algorithm(s) {unknown} that the plan does not train "
+                         f"(algos: {config.get('algos') or (config.get('train') or {}).get('algo')})")
     if not isinstance(config.get("variants") or {}, dict):
         raise ValueError(f"{path}: 'variants' must be a mapping of pipeline name -> {{generator, kwargs, train}}")
     for name in config.get("variants") or {}:
@@ -215,8 +226,11 @@ def train_config(config: Mapping[str, Any], preset_path: Path, pipeline: str, se
 
     gen = generator_of(pipeline, config)
     variant = variant_of(config, pipeline)
-    # The run config's train section (the preset's, with any --set train.* applied), then the variant's.
-    overrides: dict[str, Any] = {**dotted("", config.get("train") or {}), **dotted("", variant.get("train") or {}),
+    # The run config's train section (the preset's, with any --set train.* applied), then the algorithm's, then the
+    # variant's.
+    train = dict(config.get("train") or {})
+    per_algo = (config.get("algo_train") or {}).get(train.get("algo")) or {}
+    overrides: dict[str, Any] = {**dotted("", train), **dotted("", per_algo), **dotted("", variant.get("train") or {}),
                                  "pipeline": pipeline, "seed": int(seed), "dataset": dataset}
     if gen:
         kwargs = {**dict(generators.get(gen) or {}), **dict(variant.get("kwargs") or {})}

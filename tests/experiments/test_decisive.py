@@ -144,3 +144,21 @@ def test_toy_decisive_runs_end_to_end_and_reports_the_algorithms_apart(tmp_path:
     assert len(poi) == 2 * 7 * 6  # every ordered pair within each algorithm
     best = next(r for r in poi if (r["pipeline"], r["reference"]) == ("seal (reskill)", "cat (reskill)"))
     assert float(best["p_improvement"]) == 1.0 and int(best["settings"]) == 3
+
+
+def test_algo_train_sets_one_algorithm_apart(real_dataset: str) -> None:
+    """``algo_train: {td3: {...}}`` applies to that algorithm's runs only, after ``train``; naming an algorithm
+    the plan does not train is an error before anything runs."""
+    from seal.experiments.pipeline.references import with_algo, with_models
+
+    sets = [_settings_with(real_dataset, ["normal"]), "algo_train={td3: {deadline_obs: false, hyperparams: "
+            "{td3: {train_freq: 4}}}}"]
+    config = with_models(load_run_config(PRESET, sets), {"skills": "/m/skills", "ego_skills": "/m/ego_skills"})
+    reskill = train_config(with_algo(config, "reskill"), PRESET, "noadv", 0, "/d", {})
+    td3 = train_config(with_algo(config, "td3"), PRESET, "noadv", 0, "/d", {})
+    assert reskill["deadline_obs"] is True and td3["deadline_obs"] is False
+    assert td3["hyperparams"]["train_freq"] == 4 and td3["hyperparams"]["learning_starts"] == 5000  # nested keys
+    with pytest.raises(ValueError, match=r"'algo_train' names algorithm\(s\) \['sac'\]"):
+        load_run_config(PRESET, [*sets[:1], "algo_train={sac: {deadline_obs: false}}"])
+    with pytest.raises(ValueError, match="'algo_train' must be a mapping"):
+        load_run_config(PRESET, [*sets[:1], "algo_train={td3: 3}"])
