@@ -151,10 +151,11 @@ def load_run_config(path: str | Path, sets: Sequence[str] = ()) -> dict[str, Any
     if not isinstance(algo_train, dict) or not all(isinstance(v, dict) for v in algo_train.values()):
         raise ValueError(f"{path}: 'algo_train' must be a mapping of ego algorithm -> train settings, got "
                          f"{algo_train!r}")
-    unknown = sorted(set(algo_train) - set(config.get("algos") or [(config.get("train") or {}).get("algo")]))
+    from seal.experiments.training.config import ALGOS
+
+    unknown = sorted(set(algo_train) - set(ALGOS))  # one the plan does not train is ignored (--set algos=[...])
     if unknown:
-        raise ValueError(f"{path}: 'algo_train' names algorithm(s) {unknown} that the plan does not train "
-                         f"(algos: {config.get('algos') or (config.get('train') or {}).get('algo')})")
+        raise ValueError(f"{path}: 'algo_train' names unknown ego algorithm(s) {unknown}; known: {list(ALGOS)}")
     if not isinstance(config.get("variants") or {}, dict):
         raise ValueError(f"{path}: 'variants' must be a mapping of pipeline name -> {{generator, kwargs, train}}")
     for name in config.get("variants") or {}:

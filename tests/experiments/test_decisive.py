@@ -86,7 +86,8 @@ def test_each_run_gets_its_algorithm_and_the_reskill_runs_the_fitted_skills(real
     assert reskill["algo"] == "reskill" and reskill["hyperparams"]["skills"] == "/m/ego_skills"
     assert td3["algo"] == "td3" and td3["hyperparams"]["train_freq"] == 2
     assert reskill["generator"] == td3["generator"] == {"name": "seal", "kwargs": gens["seal"]}
-    assert reskill["deadline_obs"] is td3["deadline_obs"] is True  # time-aware egos (the preset's comment says why)
+    # The ReSkill ego is time-aware, TD3 is not (`algo_train`; the preset's comments give the measurements).
+    assert reskill["deadline_obs"] is True and td3["deadline_obs"] is False
 
 
 def _train(job) -> dict:
@@ -147,8 +148,8 @@ def test_toy_decisive_runs_end_to_end_and_reports_the_algorithms_apart(tmp_path:
 
 
 def test_algo_train_sets_one_algorithm_apart(real_dataset: str) -> None:
-    """``algo_train: {td3: {...}}`` applies to that algorithm's runs only, after ``train``; naming an algorithm
-    the plan does not train is an error before anything runs."""
+    """``algo_train: {td3: {...}}`` applies to that algorithm's runs only, after ``train``; an unknown algorithm is
+    an error before anything runs, one the plan does not train is ignored."""
     from seal.experiments.pipeline.references import with_algo, with_models
 
     sets = [_settings_with(real_dataset, ["normal"]), "algo_train={td3: {deadline_obs: false, hyperparams: "
@@ -158,7 +159,8 @@ def test_algo_train_sets_one_algorithm_apart(real_dataset: str) -> None:
     td3 = train_config(with_algo(config, "td3"), PRESET, "noadv", 0, "/d", {})
     assert reskill["deadline_obs"] is True and td3["deadline_obs"] is False
     assert td3["hyperparams"]["train_freq"] == 4 and td3["hyperparams"]["learning_starts"] == 5000  # nested keys
-    with pytest.raises(ValueError, match=r"'algo_train' names algorithm\(s\) \['sac'\]"):
-        load_run_config(PRESET, [*sets[:1], "algo_train={sac: {deadline_obs: false}}"])
+    with pytest.raises(ValueError, match=r"'algo_train' names unknown ego algorithm\(s\) \['dqn'\]"):
+        load_run_config(PRESET, [*sets[:1], "algo_train={dqn: {deadline_obs: false}}"])
+    load_run_config(PRESET, [*sets[:1], "algos=[reskill]"])  # an algorithm the plan does not train is ignored
     with pytest.raises(ValueError, match="'algo_train' must be a mapping"):
         load_run_config(PRESET, [*sets[:1], "algo_train={td3: 3}"])
