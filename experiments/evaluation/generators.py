@@ -208,15 +208,15 @@ def run_eval_generators(
 ) -> list[dict[str, Any]]:
     """Evaluate the configured generators on ``dataset`` and write the results into ``out``; returns the rows."""
     out = Path(out)
-    scenarios = split_slice(dataset, config["split"], config["limit"], int(config.get("offset") or 0))
+    offset = int(config.get("offset") or 0)
+    scenarios = split_slice(dataset, config["split"], config["limit"], offset)
     shared = {key: config.get(key) for key in SHARED_OPTIONS}
     generators = {name: build_generator(name, kw, shared) for name, kw in config["generators"].items()}
     resolved = {**config, "dataset": str(dataset), "scenarios": len(scenarios)}
     atomic_write_bytes(out / "config.yaml", yaml.safe_dump(jsonable(resolved), sort_keys=True).encode())
     rows, records = evaluate_generators(
         scenarios, generators, config["ego"], k=int(config["k"]), seed=int(config["seed"]),
-        env_config=config["env"], progress=progress, algo=config.get("algo"),
-        first_index=int(config.get("offset") or 0),
+        env_config=config["env"], progress=progress, algo=config.get("algo"), first_index=offset,
     )
     table = markdown_table(rows)
     atomic_write_bytes(out / "generators.csv", _csv(rows))

@@ -334,22 +334,44 @@ def train_section_of_run(run_config: Mapping[str, Any]) -> dict[str, Any]:
     return section
 
 
-def read_train_section(path: str | Path) -> dict[str, Any]:
-    """The ``train:`` mapping of the YAML file ``path`` (a preset name or a path; keys checked when loaded), or of a
-    run folder / its ``config.yaml`` (`train_section_of_run`)."""
-    path = config_file(path)
-    if not path.is_file():
+def _read_config(path: str | Path) -> tuple[Path, dict[str, Any]]:
+    """(file, its YAML) of a preset name, a preset file, a run folder or a run's ``config.yaml``; a clear error for a
+    missing file."""
+    file = config_file(path)
+    if not file.is_file():
         raise FileNotFoundError(
-            f"--config {path}: no such file (presets: experiments/configs/quick|standard|paper|decisive.yaml, or a "
+            f"--config {file}: no such file (presets: experiments/configs/quick|standard|paper|decisive.yaml, or a "
             "run folder)"
         )
-    loaded = read_yaml(path)
+    return file, read_yaml(file)
+
+
+def _train_section(file: Path, loaded: Mapping[str, Any]) -> dict[str, Any]:
+    """The ``train:`` mapping of a loaded file, or a loaded run config as one (`train_section_of_run`)."""
     if is_run_config(loaded):
         return train_section_of_run(loaded)
     if not isinstance(loaded.get("train"), dict):
-        raise ConfigError(f"{path}: no 'train:' section (a mapping of the fields of "
+        raise ConfigError(f"{file}: no 'train:' section (a mapping of the fields of "
                           f"seal.experiments.training.config.EgoTrainConfig)")
     return dict(loaded["train"])
+
+
+def read_train_section(path: str | Path) -> dict[str, Any]:
+    """The ``train:`` mapping of the YAML file ``path`` (a preset name or a path; keys checked when loaded), or of a
+    run folder / its ``config.yaml`` (`train_section_of_run`)."""
+    return _train_section(*_read_config(path))
+
+
+def _load_with_preset(path: str | Path, overrides: Mapping[str, Any] | None, sets: Sequence[str]
+                      ) -> tuple[EgoTrainConfig, str]:
+    """`load_ego_train_config` and the ``preset`` name its run records: the preset file's stem, or the preset a
+    given run recorded."""
+    file, loaded = _read_config(path)
+    section = _train_section(file, loaded)  # a clear error for a missing section
+    if is_run_config(loaded):
+        config = load_config(EgoTrainConfig, file=section, values=overrides, overrides=sets)
+        return config, str(loaded.get("preset") or file.parent.name)
+    return load_config(EgoTrainConfig, file=file, section="train", values=overrides, overrides=sets), file.stem
 
 
 def load_ego_train_config(path: str | Path, overrides: Mapping[str, Any] | None = None,
@@ -357,18 +379,7 @@ def load_ego_train_config(path: str | Path, overrides: Mapping[str, Any] | None 
     """The `EgoTrainConfig` of the preset file ``path`` (or a preset name, or a run folder / its recorded
     ``config.yaml``) with ``overrides`` (dotted keys; None values ignored) and ``sets`` (``"key.sub=value"``) on
     top."""
-    file = config_file(path)
-    section = read_train_section(file)  # a clear error for a missing file or section
-    if is_run_config(read_yaml(file)):
-        return load_config(EgoTrainConfig, file=section, values=overrides, overrides=sets)
-    return load_config(EgoTrainConfig, file=file, section="train", values=overrides, overrides=sets)
-
-
-def _preset_name(path: str | Path) -> str:
-    """The ``preset`` a run records: the preset file's stem, or the preset the given run recorded."""
-    file = config_file(path)
-    loaded = read_yaml(file)
-    return str(loaded.get("preset") or file.parent.name) if is_run_config(loaded) else file.stem
+    return _load_with_preset(path, overrides, sets)[0]
 
 
 def load_train_config(path: str | Path, overrides: Mapping[str, Any] | None = None,
@@ -377,10 +388,10 @@ def load_train_config(path: str | Path, overrides: Mapping[str, Any] | None = No
     ``train:`` section; or a run folder, which then trains again as recorded), ``overrides`` (dotted keys; None
     values ignored) and ``sets`` (``--set`` strings). ``preset`` is the file's stem (a run folder's: the one it
     recorded)."""
-    config = load_ego_train_config(path, overrides, sets)
+    config, preset = _load_with_preset(path, overrides, sets)
     # A --set for another algorithm would be dropped by `resolve` (files keep every algorithm's section: presets do).
     check_algo_settings(config.algo.lower(), [s.partition("=")[0].strip() for s in sets], "--set")
-    return resolve(config, preset=_preset_name(path))
+    return resolve(config, preset=preset)
 
 
 def _generator(config: EgoTrainConfig) -> dict[str, Any]:
