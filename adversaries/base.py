@@ -115,7 +115,7 @@ GENERATORS: dict[str, GeneratorSpec] = {
     "cat": GeneratorSpec("cat", "seal.adversaries.cat.generator",
                          _opts(*_CANDIDATE_OPTIONS, models=("prior",)), pipeline=True),
     "seal": GeneratorSpec("seal", "seal.adversaries.seal.generator", _opts(
-        *_CANDIDATE_OPTIONS, "objective", "skills", "switch", "switch_offset_steps", "noise_scale",
+        *_CANDIDATE_OPTIONS, "objective", "prior_weight", "skills", "switch", "switch_offset_steps", "noise_scale",
         "skill_horizon",
         models=("prior", "objective", "skills"), builtins={"objective": ("cat",)}), pipeline=True),
     # CAT / SEAL's optional `steer` is a plain option (checked when the generator loads it), so their pipelines'

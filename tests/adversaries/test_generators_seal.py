@@ -15,6 +15,7 @@ from seal.adversaries.candidate_path import candidate_track
 from seal.adversaries.history import RolloutHistory
 from seal.adversaries.seal.contact import predict_contact
 from seal.adversaries.seal.generator import SEALGenerator
+from seal.adversaries.seal.objective import DEFAULT_PRIOR_WEIGHT
 from seal.core.geometry import box_corners, boxes_overlap
 from seal.core.scenario import CURRENT_STEP, DT_S, HEADING, LENGTH, N_FUTURE, N_STEPS, VALID, WIDTH, Scenario, X, Y
 from seal.envs.behaviors import ReplayBehavior
@@ -213,15 +214,46 @@ def test_learned_objective_ranks_with_the_model(highway: list[Scenario], tmp_pat
     gen = _generator(objective=path).generate(scenario, history, np.random.default_rng(0))
     xy, heading, valid = objective.align_ego_rollouts(*stack_ego_rollouts(history))
     cands = _candidates(scenario)
-    expected = objective.ObjectiveModel.load(path).rank(cands.xy, cands.heading, xy, heading, valid)
+    learned = objective.ObjectiveModel.load(path).rank(cands.xy, cands.heading, xy, heading, valid)
+    # Default: the learned score plus DEFAULT_PRIOR_WEIGHT x log prior probability.
+    expected = learned + DEFAULT_PRIOR_WEIGHT * np.log(cands.probs)
     np.testing.assert_allclose(gen.extra["scores"], expected, atol=1e-5)
     assert gen.chosen_candidate == int(np.argmax(expected)) and gen.extra["objective"] == "objective.pt"
+    assert gen.extra["prior_weight"] == DEFAULT_PRIOR_WEIGHT
+    # prior_weight=0: the thesis's score alone.
+    thesis = _generator(objective=path, prior_weight=0.0).generate(scenario, history, np.random.default_rng(0))
+    np.testing.assert_allclose(thesis.extra["scores"], learned, atol=1e-5)
+    assert thesis.chosen_candidate == int(np.argmax(learned)) and "prior_weight" not in thesis.extra
     k = gen.chosen_candidate
     now = scenario.tracks[:, CURRENT_STEP]
     sizes = [(float(now[i, LENGTH]), float(now[i, WIDTH])) for i in (scenario.adv_index, scenario.ego_index)]
     ego_xy, ego_h, ego_v = stack_ego_rollouts(history)
     contact = predict_contact(cands.xy[k], cands.heading[k], sizes[0], ego_xy, ego_h, ego_v, sizes[1])
     assert gen.predicted_step == contact.step
+
+
+def test_prior_weight_trades_the_learned_score_for_plausibility(highway: list[Scenario], tmp_path) -> None:
+    objective = pytest.importorskip("seal.models.objective", reason="seal.models.objective (learned "
+        "objective) not available yet")
+    torch.manual_seed(0)
+    path = tmp_path / "objective.pt"
+    objective.ObjectiveModel(objective.ObjectiveConfig(hidden=8)).save(path)
+    scenario = highway[0]
+    history = RolloutHistory().queue(scenario)
+    learned = _generator(objective=path, prior_weight=0.0).generate(scenario, history, np.random.default_rng(0))
+    gap = abs(learned.extra["scores"][0] - learned.extra["scores"][1])
+    # log(0.7 / 0.3) = 0.847 nats apart: a weight above gap / 0.847 makes the likelier candidate 0 win whatever the
+    # learned score prefers; a weight far below it leaves the learned choice.
+    strong = _generator(objective=path, prior_weight=2 * gap / np.log(0.7 / 0.3) + 1e-3)
+    assert strong.generate(scenario, history, np.random.default_rng(0)).chosen_candidate == 0
+    weak = _generator(objective=path, prior_weight=1e-3 * gap)
+    chosen = weak.generate(scenario, history, np.random.default_rng(0))
+    assert chosen.chosen_candidate == learned.chosen_candidate == chosen.extra["learned_argmax"]
+    for bad in (-0.1, float("nan")):
+        with pytest.raises(ValueError, match="prior_weight must be a finite number >= 0"):
+            _generator(objective=path, prior_weight=bad)
+    with pytest.raises(ValueError, match="prior_weight applies to a learned objective"):
+        _generator(objective="cat", prior_weight=0.1)
 
 
 def test_close_call_gap_between_ego_and_adversary_boxes() -> None:
