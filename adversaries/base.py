@@ -124,10 +124,11 @@ GENERATORS: dict[str, GeneratorSpec] = {
                              _opts(*_CANDIDATE_OPTIONS, "steer_random_seed", models=("prior", "steer")),
                              pipeline=True),
     "cat-rcg": GeneratorSpec("cat-rcg", "seal.adversaries.rcg.generator", _opts(
-        "prior", "candidates", "follow", "behavior", "n_knn", "n_int", "distance", models=("prior", "behavior")),
+        "prior", "candidates", "follow", "behavior", "n_knn", "n_int", "distance", "prior_weight",
+        models=("prior", "behavior")),
         pipeline=True, base="cat"),
     "seal-rcg": GeneratorSpec("seal-rcg", "seal.adversaries.rcg.generator", _opts(
-        "prior", "candidates", "follow", "behavior", "n_knn", "n_int", "distance", "skills", "switch",
+        "prior", "candidates", "follow", "behavior", "n_knn", "n_int", "distance", "prior_weight", "skills", "switch",
         "switch_offset_steps", "noise_scale", models=("prior", "behavior", "skills")), pipeline=True, base="seal"),
 }
 """The built-in generators, one entry each (add a line per new generator). Each module is imported on first lookup

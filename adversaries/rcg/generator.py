@@ -18,17 +18,28 @@ import numpy as np
 from seal.adversaries.base import Generation, register
 from seal.adversaries.candidate_generator import CandidateContext, CandidateGenerator, Follow
 from seal.adversaries.candidate_sources import CandidateSource
-from seal.adversaries.rcg.select import N_INT, N_KNN_CAT, N_KNN_SEAL, Distance, RCGObjective, selection_extra
+from seal.adversaries.rcg.select import (
+    DEFAULT_PRIOR_WEIGHT,
+    N_INT,
+    N_KNN_CAT,
+    N_KNN_SEAL,
+    Distance,
+    RCGObjective,
+    selection_extra,
+)
 from seal.adversaries.seal.contact import predict_contact
 from seal.adversaries.seal.generator import SEALGenerator, Switch
 from seal.adversaries.seal.objective import Ranking
 from seal.envs.skill_behavior import SWITCH_OFFSET_STEPS
 
 
-def _objective(behavior: Any, n_knn: int, n_int: int, distance: str, generator: str) -> RCGObjective:
+def _objective(behavior: Any, n_knn: int, n_int: int, distance: str, prior_weight: float, generator: str
+               ) -> RCGObjective:
     if behavior is None:
         raise ValueError(f"{generator}: option 'behavior' is required: a behaviour model file (seal fit behavior)")
-    return behavior if isinstance(behavior, RCGObjective) else RCGObjective(behavior, n_knn, n_int, distance)
+    if isinstance(behavior, RCGObjective):
+        return behavior
+    return RCGObjective(behavior, n_knn, n_int, distance, float(prior_weight))
 
 
 @register("cat-rcg")
@@ -41,6 +52,8 @@ class CATRCGGenerator(CandidateGenerator):
         n_knn: neighbours of KNN_dist (thesis 15 for CAT).
         n_int: candidates kept by collision closeness (thesis 6).
         distance: ``"knn"`` or ``"prototype"`` (the Table 7.4 ablation).
+        prior_weight: weight of the candidates' ``-log`` prior probability added to eq. 7.7's distance (0 = the
+            thesis's rule; `seal.adversaries.rcg.select`).
         follow: ``"replay"`` or ``"track"``.
     """
 
@@ -53,9 +66,10 @@ class CATRCGGenerator(CandidateGenerator):
         n_knn: int = N_KNN_CAT,
         n_int: int = N_INT,
         distance: str = Distance.KNN,
+        prior_weight: float = DEFAULT_PRIOR_WEIGHT,
         follow: str = Follow.REPLAY,
     ) -> None:
-        self.rcg = _objective(behavior, n_knn, n_int, distance, "cat-rcg")
+        self.rcg = _objective(behavior, n_knn, n_int, distance, prior_weight, "cat-rcg")
         super().__init__(candidate_source, prior, candidates, follow)
 
     def _choose(self, context: CandidateContext, rng: np.random.Generator) -> Generation:
@@ -82,7 +96,7 @@ class CATRCGGenerator(CandidateGenerator):
 @register("seal-rcg")
 class SEALRCGGenerator(SEALGenerator):
     """SEAL-RCG (see the module docstring); options as `SEALGenerator` without ``objective``, plus ``behavior``,
-    ``n_knn`` (thesis 8 for SEAL), ``n_int`` and ``distance`` as `CATRCGGenerator`."""
+    ``n_knn`` (thesis 8 for SEAL), ``n_int``, ``distance`` and ``prior_weight`` as `CATRCGGenerator`."""
 
     def __init__(
         self,
@@ -93,6 +107,7 @@ class SEALRCGGenerator(SEALGenerator):
         n_knn: int = N_KNN_SEAL,
         n_int: int = N_INT,
         distance: str = Distance.KNN,
+        prior_weight: float = DEFAULT_PRIOR_WEIGHT,
         skills: str | Path | None = None,
         switch: str = Switch.ADVERSARIAL,
         switch_offset_steps: int = SWITCH_OFFSET_STEPS,
@@ -100,7 +115,7 @@ class SEALRCGGenerator(SEALGenerator):
         noise_scale: float = 1.0,
         policy: Any = None,
     ) -> None:
-        rcg = _objective(behavior, n_knn, n_int, distance, "seal-rcg")
+        rcg = _objective(behavior, n_knn, n_int, distance, prior_weight, "seal-rcg")
         super().__init__(candidate_source, prior, candidates, objective=rcg, skills=skills, switch=switch,
                          switch_offset_steps=switch_offset_steps, follow=follow, noise_scale=noise_scale,
                          policy=policy)

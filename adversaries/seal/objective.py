@@ -4,7 +4,7 @@
   mean over the K past ego roll-outs of the predicted ``f_coll + f_diff``, plus ``prior_weight`` times the log of the
   candidate's prior probability; the highest score wins. ``prior_weight = 0`` is the thesis's rule (6.3.1).
 
-  Why the plausibility term (README, "SEAL's plausibility weight"): the learned score alone picks the prior's
+  Why the plausibility term (README, "Plausibility weight"): the learned score alone picks the prior's
   unlikeliest modes (median prior probability 0.001 against CAT's 0.010), which are its stopping modes, and the
   adversary then brakes in front of the ego far more often than logged drivers do, making SEAL less realistic than
   CAT. A small weight keeps the choice among plausible futures while the learned score still decides between them.
@@ -26,7 +26,7 @@ from seal.models.prior.candidates import Candidates
 HEURISTIC = "cat"
 DEFAULT_PRIOR_WEIGHT = 0.02
 """Weight of ``log p(candidate)`` in SEAL's learned ranking (score units per nat; 0 = the thesis's score alone). Chosen
-on the train split among 0.02 / 0.05 / 0.1 / 0.2 (README, "SEAL's plausibility weight")."""
+on the train split among 0.02 / 0.05 / 0.1 / 0.2 (README, "Plausibility weight")."""
 PROB_FLOOR = 1e-12
 """Probabilities are floored here before the log, so a candidate of probability 0 is penalised, not infinitely."""
 

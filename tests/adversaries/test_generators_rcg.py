@@ -107,6 +107,35 @@ def test_rcg_picks_the_kept_candidate_nearest_the_unsafe_cache() -> None:
     assert proto.index == 1
 
 
+def test_prior_weight_prefers_the_likelier_kept_candidate() -> None:
+    from dataclasses import replace
+
+    from seal.adversaries.candidate_generator import stack_ego_rollouts
+
+    s = sf.stopped_adversary_scenario()
+    ego_xy, ego_h, ego_v = stack_ego_rollouts(RolloutHistory().queue(s))
+    x0 = float(s.tracks[s.adv_index, CURRENT_STEP, X])
+    ends = [x0 + 5.0, x0 + 20.0, x0 + 55.0, x0 + 62.0, x0 + 300.0]
+    model = EndpointModel(x_unsafe=x0 + 60.0, x_proto=x0 + 20.0)
+    probs = np.array([0.05, 0.05, 0.6, 0.05, 0.25])  # candidate 2 (x0 + 55) is the prior's likeliest
+    cands = replace(_fan(s, ends), probs=probs)
+    thesis = rcg_select(model, s, cands, ego_xy, ego_h, ego_v, n_knn=2, n_int=5,  # type: ignore[arg-type]
+                        prior_weight=0.0)
+    assert thesis.index == 3 and np.array_equal(thesis.score, thesis.distance)  # nearest the unsafe cache
+    d = dict(zip(thesis.kept.tolist(), thesis.distance.tolist(), strict=True))
+    # Candidate 2 wins once weight * log(0.6 / 0.05) exceeds its extra distance d_2 - d_3.
+    flip = (d[2] - d[3]) / np.log(0.6 / 0.05)
+    for weight, chosen in ((0.5 * flip, 3), (2.0 * flip, 2)):
+        sel = rcg_select(model, s, cands, ego_xy, ego_h, ego_v, n_knn=2, n_int=5,  # type: ignore[arg-type]
+                         prior_weight=weight)
+        assert sel.index == chosen
+        np.testing.assert_allclose(sel.score, sel.distance - weight * np.log(probs[sel.kept]))
+        np.testing.assert_allclose(sel.distance, thesis.distance)  # eq. 7.7's d itself is unchanged
+        assert int(np.argmax(ranking_scores(sel))) == chosen
+    with pytest.raises(ValueError, match="prior_weight must be a finite number >= 0"):
+        RCGObjective(model, n_knn=2, prior_weight=-1.0)  # type: ignore[arg-type]
+
+
 def test_perturbed_scenes_replace_ego_and_adversary_only() -> None:
     s = sf.lane_change_scenario()
     cands = _fan(s, [300.0, 320.0])
