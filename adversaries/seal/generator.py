@@ -32,7 +32,7 @@ from seal.adversaries.candidate_path import candidate_track
 from seal.adversaries.candidate_sources import DEFAULT_STEER_ALPHA, DEFAULT_STEER_VECTOR, CandidateSource
 from seal.adversaries.cat.select import DECAY, N_KEPT_MODES, STRIDE_STEPS
 from seal.adversaries.seal.contact import predict_contact
-from seal.adversaries.seal.objective import DEFAULT_PRIOR_WEIGHT, HEURISTIC, Objective, Ranking, make_objective
+from seal.adversaries.seal.objective import DEFAULT_PRIOR_WEIGHT, Objective, Ranking, make_objective
 from seal.envs.behaviors import AdversaryBehavior
 from seal.envs.skill_behavior import SWITCH_OFFSET_STEPS, SkillSwitchBehavior, switch_step_for
 
@@ -76,8 +76,7 @@ class SEALGenerator(CandidateGenerator):
         objective: a learned objective model file, ``"cat"`` (CAT's heuristic selection), or an
             `seal.adversaries.seal.objective.Objective`.
         prior_weight: weight of the candidates' log prior probability added to the learned score (>= 0; 0 = the
-            thesis's score alone; None = `seal.adversaries.seal.objective.DEFAULT_PRIOR_WEIGHT`; learned objectives
-            only).
+            thesis's score alone); not used by ``objective="cat"``, which weighs its candidates by the prior itself.
         skills: skill model folder (``seal fit skills``); not needed with ``switch="none"``.
         switch: ``"adversarial"`` (SEAL), ``"benign"`` or ``"none"`` (trajectory only).
         switch_offset_steps: steps between the switch and the predicted collision / closest approach (10 = 1 s).
@@ -97,7 +96,7 @@ class SEALGenerator(CandidateGenerator):
         prior: str | Path | None = None,
         candidates: str | None = None,
         objective: str | Path | Objective | None = None,
-        prior_weight: float | None = None,
+        prior_weight: float = DEFAULT_PRIOR_WEIGHT,
         skills: str | Path | None = None,
         switch: str = Switch.ADVERSARIAL,
         switch_offset_steps: int = SWITCH_OFFSET_STEPS,
@@ -122,12 +121,8 @@ class SEALGenerator(CandidateGenerator):
             raise ValueError(f"seal: noise_scale must be >= 0, got {noise_scale}")
         if skill_horizon is not None and int(skill_horizon) < 1:
             raise ValueError(f"seal: skill_horizon must be >= 1, got {skill_horizon}")
-        if prior_weight is not None and str(objective) == HEURISTIC:
-            raise ValueError("seal: prior_weight applies to a learned objective; objective=cat already weighs its "
-                             "candidates by the prior (leave prior_weight out)")
-        self.objective = make_objective(
-            objective, prior_weight=DEFAULT_PRIOR_WEIGHT if prior_weight is None else float(prior_weight),
-            stride=stride, decay=decay, n_kept=n_kept_modes)
+        self.objective = make_objective(objective, prior_weight=float(prior_weight), stride=stride, decay=decay,
+                                        n_kept=n_kept_modes)
         self.switch = Switch(switch)
         self.switch_offset_steps = int(switch_offset_steps)
         self.policy = policy if policy is not None or switch == Switch.NONE else load_skill_policy(

@@ -127,8 +127,8 @@ class LearnedObjective:
 def make_objective(spec: str | Path | Objective | None, prior_weight: float = DEFAULT_PRIOR_WEIGHT,
                    **heuristic_options: Any) -> Objective:
     """``"cat"`` -> `HeuristicObjective` (with ``heuristic_options``); a file path -> `LearnedObjective` (with
-    ``prior_weight``); an `Objective` object is returned as is. ``prior_weight`` applies to a learned objective only:
-    CAT's heuristic already weighs its candidates by the prior."""
+    ``prior_weight``); an `Objective` object is returned as is. ``prior_weight`` applies to a learned objective only
+    (CAT's heuristic weighs its candidates by the prior itself)."""
     if spec is None:
         raise ValueError("seal: option 'objective' is required: a learned objective file (seal fit objective) or "
                          "'cat' for CAT's heuristic selection")

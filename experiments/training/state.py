@@ -3,6 +3,8 @@
 Layout of a run folder ``RUN/``::
 
     config.yaml           resolved config (seal.experiments.training.config)
+    provenance.json       one entry per training session: code version (git commit), library versions, every
+                          generator option with the value it got (seal.experiments.training.provenance)
     progress.csv          SB3 CSV log (rows after the resumed checkpoint are dropped on resume)
     tb/                   TensorBoard event files (a resumed session adds a file; the killed session's points
                           after its last checkpoint stay in the older one)

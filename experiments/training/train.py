@@ -228,6 +228,9 @@ def train_run(config: dict[str, Any], out: Path, resume: bool = False, progress:
     if not resume:
         out.mkdir(parents=True, exist_ok=True)
         _write_config(out, config)
+    from seal.experiments.training.provenance import append_session
+
+    append_session(out, config)
     checkpoint, restored = _restore_point(out, resume, n_envs)
 
     from seal.envs.road_geometry import reserve_road_cache

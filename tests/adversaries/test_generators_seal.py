@@ -252,8 +252,10 @@ def test_prior_weight_trades_the_learned_score_for_plausibility(highway: list[Sc
     for bad in (-0.1, float("nan")):
         with pytest.raises(ValueError, match="prior_weight must be a finite number >= 0"):
             _generator(objective=path, prior_weight=bad)
-    with pytest.raises(ValueError, match="prior_weight applies to a learned objective"):
-        _generator(objective="cat", prior_weight=0.1)
+    # CAT's heuristic weighs candidates by its own flattened prior: the weight does not change its choice.
+    cat = [_generator(objective="cat", prior_weight=w).generate(scenario, history, np.random.default_rng(0))
+           for w in (0.0, 10.0)]
+    assert cat[0].chosen_candidate == cat[1].chosen_candidate and cat[0].extra["scores"] == cat[1].extra["scores"]
 
 
 def test_close_call_gap_between_ego_and_adversary_boxes() -> None:

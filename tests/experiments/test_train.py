@@ -190,6 +190,12 @@ def test_killed_run_resumes_to_the_same_step_count(tmp_path: Path, monkeypatch: 
     assert done["steps"] == 160 and done["resumed_from"] == 80
     recorded = yaml.safe_load((run / ts.CONFIG).read_text())
     assert recorded["pipeline"] == "cat" and recorded["seed"] == 1 and recorded["n_envs"] == 2
+    # One provenance entry per session (the killed start and the resume), with the generator's options resolved.
+    sessions = json.loads((run / "provenance.json").read_text())["sessions"]
+    assert len(sessions) == 2 and all(s["generator"]["name"] == recorded["generator"]["name"] for s in sessions)
+    options = sessions[1]["generator"]["options"]
+    assert options == sessions[0]["generator"]["options"]
+    assert set(options) >= set(recorded["generator"]["kwargs"]) and len(options) > len(recorded["generator"]["kwargs"])
     # Logs: no row after the checkpoint survives twice; evaluations at 80 and the end.
     import csv
 
