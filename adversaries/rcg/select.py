@@ -31,7 +31,7 @@ import numpy as np
 import torch
 
 from seal.adversaries.candidate_path import candidate_track
-from seal.adversaries.seal.objective import PROB_FLOOR, Ranking
+from seal.adversaries.seal.objective import Ranking, log_prior
 from seal.core.scenario import CURRENT_STEP, DT_S, HEADING, LENGTH, N_STEPS, VALID, VX, VY, WIDTH, Scenario, X, Y
 from seal.models.prior.candidates import Candidates
 
@@ -165,10 +165,7 @@ def rcg_select(
             raise ValueError("rcg: the behaviour model has no unsafe cache (fit it with `seal fit behavior`)")
         d = knn_distance(v, model.unsafe_cache, n_knn)
     per_cand = d.reshape(kept.size, egos.shape[0]).mean(axis=1)
-    score = per_cand
-    if prior_weight:
-        probs = np.maximum(np.asarray(cands.probs, dtype=np.float64)[kept], PROB_FLOOR)
-        score = per_cand - float(prior_weight) * np.log(probs)
+    score = per_cand - float(prior_weight) * log_prior(cands.probs)[kept] if prior_weight else per_cand
     return RCGSelection(int(kept[int(np.argmin(score))]), kept, close, per_cand, score)
 
 

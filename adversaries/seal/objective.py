@@ -31,6 +31,12 @@ PROB_FLOOR = 1e-12
 """Probabilities are floored here before the log, so a candidate of probability 0 is penalised, not infinitely."""
 
 
+def log_prior(probs: np.ndarray) -> np.ndarray:
+    """``log p`` of candidate probabilities ``[C]`` (floored at `PROB_FLOOR`): the plausibility term SEAL's and
+    RCG's rankings weigh with their ``prior_weight``."""
+    return np.log(np.maximum(np.asarray(probs, dtype=np.float64), PROB_FLOOR))
+
+
 @dataclass(frozen=True)
 class Ranking:
     """Which candidate an objective picked.
@@ -117,8 +123,7 @@ class LearnedObjective:
                              dtype=np.float64)
         if self.prior_weight == 0.0:
             return Ranking(int(np.argmax(learned)), learned, {})
-        scores = learned + self.prior_weight * np.log(np.maximum(np.asarray(cands.probs, dtype=np.float64),
-                                                                 PROB_FLOOR))
+        scores = learned + self.prior_weight * log_prior(cands.probs)
         best = int(np.argmax(scores))
         return Ranking(best, scores, {"prior_weight": self.prior_weight, "learned_score": float(learned[best]),
                                       "learned_argmax": int(np.argmax(learned))})

@@ -17,6 +17,7 @@ each session (`seal train`, each ``--resume``) appends:
 from __future__ import annotations
 
 import inspect
+import json
 import platform
 import subprocess
 from collections.abc import Mapping
@@ -111,8 +112,6 @@ def session_record(config: Mapping[str, Any]) -> dict[str, Any]:
 def append_session(out: Path, config: Mapping[str, Any]) -> dict[str, Any]:
     """Append this session's record to ``out/provenance.json`` (atomic rewrite; an unreadable file is started
     again, the run's own files are never touched); returns the record."""
-    import json
-
     path = Path(out) / PROVENANCE
     sessions: list[Any] = []
     if path.is_file():
