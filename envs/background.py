@@ -269,6 +269,17 @@ class IDMBackground(BackgroundController):
         rows = np.flatnonzero(self.driven)
         self._headway[rows] = logged_time_headway(self.log, rows)
 
+    def set_intent(self, row: int, desired_speed_mps: float | None = None,
+                   destination_xy: tuple[float, float] | None = None) -> None:
+        """Command agent ``row``'s desired speed (m/s) for the rest of the episode (after `reset`), as
+        `SimulatedBackground.set_intent` does; it is not corrected toward the logged schedule. IDM follows each
+        agent's logged route, so a destination cannot be commanded (a `ValueError`)."""
+        if destination_xy is not None:
+            raise ValueError("IDMBackground follows each agent's logged route: a destination cannot be commanded "
+                             "(RAPID's can)")
+        if desired_speed_mps is not None:
+            self.intent.set_speed(row, desired_speed_mps)
+
     def _route(self, row: int) -> Route:
         route = self._routes.get(row)
         if route is None:

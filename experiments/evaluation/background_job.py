@@ -11,6 +11,7 @@ from typing import Any
 from seal.core.atomic import atomic_write_json
 from seal.core.dataset import load_split
 from seal.core.errors import SealError
+from seal.envs.background import IDMBackground
 from seal.experiments.evaluation.background import build_controllers, intent_metrics, open_loop_metrics, plot_background
 from seal.experiments.evaluation.background_closed import closed_loop_metrics, rear_end_change
 
@@ -48,7 +49,11 @@ def run_background_eval(
         with tqdm(total=len(scenarios), desc="open loop", disable=not progress) as bar:
             report["open_loop"] = open_loop_metrics(scenarios, build_controllers(kinds, rapid), seed, bar)
     if "intent" in parts:
-        report["intent"] = intent_metrics(scenarios, rapid, seed)
+        with tqdm(total=2 * len(scenarios), desc="intent control", disable=not progress) as bar:
+            report["intent"] = intent_metrics(scenarios, rapid, seed, progress=bar)
+            # the same commanded speeds as desired speeds of the env's IDM (`background` module docstring)
+            report["intent_idm_reference"] = intent_metrics(scenarios, IDMBackground(), seed, heading=False,
+                                                            progress=bar)
     if "closed" in parts:
         kinds = [k for k in CLOSED_LOOP_KINDS if k != "rapid" or rapid is not None]
         report["closed_loop_dataset"] = str(closed_dataset or dataset)

@@ -48,7 +48,8 @@ def cmd_eval_background(args: argparse.Namespace) -> int:
         seed=args.seed, guidance=_guidance(args.guidance), ddim_steps=args.ddim_steps,
         progress=not args.no_progress)
     print(json.dumps(report, indent=2, default=str) if args.json else json.dumps(
-        {k: v for k, v in report.items() if k in ("open_loop", "intent", "rear_end_rate_change_vs_replay")},
+        {k: v for k, v in report.items()
+         if k in ("open_loop", "intent", "intent_idm_reference", "rear_end_rate_change_vs_replay")},
         indent=1, default=str))
     return 0
 

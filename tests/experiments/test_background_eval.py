@@ -15,7 +15,7 @@ from seal.core.scenario import CURRENT_STEP, DT_S, VX, VY
 from seal.envs.background import ConstantVelocityBackground, IDMBackground, SimulatedBackground, roll_background
 from seal.envs.scenario_env import ScenarioEnv
 from seal.experiments.bench.background import tiled_scenario
-from seal.experiments.evaluation.background import intent_metrics, open_loop_metrics, r2, rollout_errors
+from seal.experiments.evaluation.background import FAR_M, alone, intent_metrics, open_loop_metrics, r2, rollout_errors
 from seal.experiments.evaluation.evaluate import parse_settings, resolve_eval_config
 from seal.experiments.evaluation.parallel import evaluate_runs
 from seal.experiments.evaluation.results_store import ResultsStore
@@ -87,6 +87,37 @@ def test_intent_metrics_give_r2_one_to_an_obedient_controller() -> None:
     assert out["speed_r2"] == pytest.approx(1.0) and out["speed_mae_mps"] == pytest.approx(0.0, abs=1e-9)
     assert out["speed_r2_if_ignored"] < 0.9
     assert out["heading_r2_24"] == pytest.approx(out["heading_r2_if_ignored_24"])  # it ignores destinations
+    assert out["speed_r2_free_road"] == pytest.approx(1.0)
+
+
+def test_alone_keeps_one_background_agent_on_an_empty_road() -> None:
+    sc = sf.highway_scenario(1)
+    row = next(i for i in range(sc.n_agents) if i not in (sc.ego_index, sc.adv_index))
+    solo = alone(sc, row)
+    assert solo.n_agents == 3 and (solo.ego_index, solo.adv_index) == (0, 1)
+    np.testing.assert_array_equal(solo.tracks[2], sc.tracks[row])
+    assert solo.agent_ids[2] == sc.agent_ids[row] and solo.road is sc.road
+    np.testing.assert_allclose(solo.tracks[0, :, 0], sc.tracks[sc.ego_index, :, 0] + FAR_M)
+
+
+def test_free_road_speed_r2_separates_yielding_from_not_following() -> None:
+    # a follower 30 m behind the (replayed, 20 m/s) ego: commanded above 20 m/s, IDM yields to the ego; alone on
+    # the road it reaches every command
+    scenes = [follower_scenario() for _ in range(8)]
+    out = intent_metrics(scenes, IDMBackground(), 0, heading=False)
+    assert out["agents"] == 8 and "heading_r2_24" not in out
+    assert out["speed_r2_free_road"] > 0.97
+    assert out["speed_r2"] < out["speed_r2_free_road"] - 0.2
+
+
+def test_idm_background_takes_a_commanded_speed_but_no_destination() -> None:
+    sc = follower_scenario()
+    ctrl = IDMBackground()
+    ctrl.reset(sc, np.random.default_rng(0), np.array([False, False, True]))
+    ctrl.set_intent(2, desired_speed_mps=7.0)
+    assert ctrl.intent.desired_at(CURRENT_STEP, np.array([2]))[0] == 7.0
+    with pytest.raises(ValueError, match="destination"):
+        ctrl.set_intent(2, destination_xy=(0.0, 0.0))
 
 
 def test_tiled_scenario_has_exactly_n_background_agents() -> None:
