@@ -168,6 +168,8 @@ def test_eval_and_bench_background_cli(dataset: Path, tmp_path: Path, model_file
                  "--steps", "3", "--json"]) == 0
     bench = json.loads(capsys.readouterr().out)
     assert set(bench["per_step"]["rapid"]) == {"5", "20"} and bench["per_step"]["rapid"]["20"]["agents"] == 20
+    idm = bench["per_step"]["idm"]
+    assert bench["idm_ratio_20_over_5"] == pytest.approx(idm["20"]["median_ms"] / idm["5"]["median_ms"])
 
 
 def test_rapid_background_in_the_env_moves_agents_off_their_log(model_file: Path) -> None:
