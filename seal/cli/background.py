@@ -17,9 +17,9 @@ def _guidance(items: list[str]) -> dict[str, float]:
         try:
             out[key.strip()] = float(value)
         except ValueError:
-            raise CliError(f"--guidance {item!r}: expected KEY=NUMBER, e.g. w_social=0.3") from None
+            raise CliError(f"--guidance {item!r}: expected KEY=NUMBER, e.g. w_social=0.8") from None
         if not sep:
-            raise CliError(f"--guidance {item!r}: expected KEY=NUMBER, e.g. w_social=0.3")
+            raise CliError(f"--guidance {item!r}: expected KEY=NUMBER, e.g. w_social=0.8")
     return out
 
 
@@ -68,7 +68,7 @@ def _model_options(p: argparse.ArgumentParser, required: bool) -> None:
     p.add_argument("--model", required=required, default=None,
                    help="RAPID model file (seal fit background OUT/model.pt)")
     p.add_argument("--guidance", action="append", default=[], metavar="KEY=VALUE",
-                   help="physics guidance option of seal.models.rapid.Guidance, repeatable (e.g. w_social=0.3; "
+                   help="physics guidance option of seal.models.rapid.Guidance, repeatable (e.g. w_social=0.8; "
                    "all w_*=0: unguided)")
     p.add_argument("--ddim-steps", type=positive_int("--ddim-steps"), default=5, help="DDIM steps per env step")
 

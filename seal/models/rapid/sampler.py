@@ -79,9 +79,27 @@ def schedule(n: int = N_DIFFUSION) -> torch.Tensor:
 
 @dataclass(frozen=True)
 class Guidance:
-    """Physics-guidance options of the sampler (eq. 7 weights and the social-force constants). The defaults of
-    ``w_destination`` / ``tau_s`` were chosen among (0.1, 2 s), (0.2, 1 s), (0.3, 1 s) on 12 validation scenarios
-    (pool2500 train split 300-311, not used for fitting): 8 s ADE, background collisions and speed R^2.
+    """Physics-guidance options of the sampler (eq. 7 weights and the social-force constants). ``tau_s`` was
+    chosen among 2 s and 1 s on 12 validation scenarios (pool2500 train split 300-311, not used for fitting).
+    ``w_destination`` / ``w_social`` (0.3 / 0.5; before 0.2 / 0.3) on 60 validation scenarios of the decisive pool
+    (train split 300-359; the standard-preset fit reads the first 200), 8 s ADE m / background collisions / the
+    heuristic ego's closed-loop crash rate / speed R^2:
+
+    ==============  =====  =====  =====  =====
+    (w_dest, w_soc)  ADE   coll.  crash  R^2
+    ==============  =====  =====  =====  =====
+    (0.2, 0.3)      2.41   0.031  0.050  0.734
+    (0.3, 0.3)      1.83   0.053  0.067  0.763
+    (0.4, 0.3)      1.83   0.071  0.033  0.772
+    (0.3, 0.5)      2.08   0.037  0.033  0.761
+    (0.3, 0.8)      2.40   0.027  0.017  0.749
+    unguided        9.31   0.366  0.233  0.199
+    ==============  =====  =====  =====  =====
+
+    Held out (first 100 eval scenarios; closed loop on all 300), (0.2, 0.3) -> (0.3, 0.5): 8 s ADE 2.31 -> 2.08 m
+    (IDM without its schedule 2.27, constant velocity 6.85), background collisions 0.046 -> 0.034 (log 0.029),
+    heuristic ego crash rate 0.140 -> 0.113 (replayed background 0.110), speed R^2 0.725 -> 0.747, heading R^2 at
+    24 steps 0.911 -> 0.889.
 
     Attributes:
         w_destination, w_social, w_map, w_leader: weights w_i of eq. 7 (0 = off).
@@ -98,8 +116,8 @@ class Guidance:
             not lower the heuristic ego's crashes, so it is off by default.
     """
 
-    w_destination: float = 0.2
-    w_social: float = 0.3
+    w_destination: float = 0.3
+    w_social: float = 0.5
     w_map: float = 0.1
     w_leader: float = 0.0
     w_safety: float = 0.5
