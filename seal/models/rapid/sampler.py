@@ -43,8 +43,9 @@ Targets ``a_i`` (agent frame, m/s^2; `physics_targets`):
   0.739 with the bound, 0.811 without, with 12% and 22% of the commanded agents colliding in that roll; a
   stronger pull toward the desired speed (``tau_s`` 0.5, ``w_destination`` 0.3 / 0.4) or a looser bound (no
   predicted contacts, 0.1 s reaction, 1 m stopping gap) moved the validation R^2 by 0.01 at most. On the decisive
-  pool (standard preset, first 100 eval scenarios) 0.725 with every agent commanded and 0.830 with each commanded
-  agent alone on its road; the env's IDM given the same commands as desired speeds 0.624 and 0.998.
+  pool (standard preset, first 100 eval scenarios, `Guidance` defaults) 0.747 with every agent commanded and 0.841
+  with each commanded agent alone on its road; the env's IDM given the same commands as desired speeds 0.624 and
+  0.998.
 
 Deliberate difference from the paper: its social and map targets are the repulsive forces alone, which for
 vehicles would pull every acceleration toward zero wherever nothing is near; here they are the model's own
