@@ -152,7 +152,7 @@ def intent_metrics(scenarios: Sequence[Scenario], ctrl: Any, seed: int, heading:
     destination test out (a controller that follows logged routes); ``progress`` (a tqdm bar) advances by one per
     scenario."""
     rng = np.random.default_rng(seed)
-    cmd_v, gen_v, base_v, cur_v, free_v = [], [], [], [], []
+    cmd_v, gen_v, base_v, free_v = [], [], [], []
     cmd_h: dict[int, list[float]] = {k: [] for k in HEADING_STEPS}
     gen_h: dict[int, list[float]] = {k: [] for k in HEADING_STEPS}
     base_h: dict[int, list[float]] = {k: [] for k in HEADING_STEPS}
@@ -173,12 +173,12 @@ def intent_metrics(scenarios: Sequence[Scenario], ctrl: Any, seed: int, heading:
         cmd_v += cmd.tolist()
         gen_v += np.hypot(got[rows, window, VX], got[rows, window, VY]).mean(axis=1).tolist()
         base_v += np.hypot(base[rows, window, VX], base[rows, window, VY]).mean(axis=1).tolist()
-        cur_v += speed0.tolist()
         for r, v in zip(rows, cmd, strict=True):
             solo = _roll_with(alone(scenario, int(r)), ctrl, seed + n, {2: {"desired_speed_mps": float(v)}},
                               SPEED_STEPS)
             free_v.append(float(np.hypot(solo[2, window, VX], solo[2, window, VY]).mean()))
-        ang = np.radians(rng.uniform(-30.0, 30.0, rows.size))  # drawn either way: the same speeds with and without
+        # drawn with or without the heading test, so later scenarios get the same commanded speeds either way
+        ang = np.radians(rng.uniform(-30.0, 30.0, rows.size))
         if not heading:
             continue
         p0 = log[rows, CURRENT_STEP][:, [X, Y]]
