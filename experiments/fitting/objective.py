@@ -204,6 +204,25 @@ def _prev_rows(labels: LabelSet, seed: int) -> np.ndarray:
     return np.asarray(rows, dtype=np.int64)
 
 
+def per_head_ranking(pred: np.ndarray, close: np.ndarray, labels: LabelSet) -> dict[str, dict[str, float]]:
+    """Mean Spearman (over scenarios, previous roll-out = the logged episode) of each head alone against its own
+    label, next to closeness against the same label: where the learned objective ranks candidates differently
+    from closeness and where it only shifts the level of a scenario (which no ranking sees).
+
+    Args:
+        pred: ``[S, N, 2]`` predicted f_coll, f_diff.
+        close: ``[S, N]`` closeness to the logged-adversary roll-out.
+        labels: the labels (f_coll ``[S, N]``, f_diff of the logged row ``[S, N]``).
+    """
+    from seal.models.objective.metrics import spearman
+
+    out = {}
+    for h, (name, target) in enumerate((("f_coll", labels.f_coll), ("f_diff", labels.f_diff[:, LOGGED_ROW]))):
+        out[name] = {"pi_score_head": round(float(spearman(pred[..., h], target).mean()), 4),
+                     "closeness": round(float(spearman(close, target).mean()), 4)}
+    return out
+
+
 def evaluate(model: Any, labels: LabelSet, seed: int = 0) -> dict[str, Any]:
     """Held-out metrics of the module docstring for ``model`` (an `ObjectiveModel`) on ``labels``."""
     from seal.models.objective.metrics import ranking_report
@@ -245,6 +264,7 @@ def evaluate(model: Any, labels: LabelSet, seed: int = 0) -> dict[str, Any]:
     return {
         "mse": {"all_prev": mse(np.ones(len(all_pairs), dtype=bool)), "logged_prev": mse(logged)},
         "ranking_logged_prev": {k: ranking_report(v, sim_logged) for k, v in scores_logged.items()},
+        "ranking_per_head": per_head_ranking(pred_grid[:, LOGGED_ROW], close_logged, labels),
         "ranking_k5_prev": {k: ranking_report(v, sim_k) for k, v in scores_k.items()},
         "labels": label_stats(labels),
     }
@@ -391,6 +411,11 @@ def format_report(r: dict[str, Any]) -> str:
             lines.append(f"| {name} | {m['spearman_mean']:.3f} | {m['spearman_median']:.3f} | "
                          f"{m['share_spearman_ge_0.6']:.2f} | {m['top1_in_top3']:.2f} | {m['chosen_target_mean']:.3f} "
                          f"| {m['best_target_mean']:.3f} |")
+    if "ranking_per_head" in r:
+        lines += ["", "## Each head against its own label (previous roll-out = logged episode; Spearman mean)", "",
+                  "| label | pi_score head | closeness |", "|---|---|---|"]
+        lines += [f"| {k} | {v['pi_score_head']:.3f} | {v['closeness']:.3f} |"
+                  for k, v in r["ranking_per_head"].items()]
     lat = r["rank_latency"]
     lines += ["", f"rank() latency, {lat['candidates']} candidates x K = {lat['rollouts']}, one thread: median "
               f"{lat['median_ms']} ms, p95 {lat['p95_ms']} ms.", "", f"Timings (s): {r['timings']}"]

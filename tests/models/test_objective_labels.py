@@ -126,10 +126,28 @@ def test_evaluate_reports_metrics_and_baselines(built) -> None:
     c = closeness(labels, np.full((2, 1), LOGGED_ROW))[:, 0]
     expected = f_coll(labels.ego_xy[:, :1], labels.cand_xy, valid=labels.ego_valid[:, :1])
     np.testing.assert_allclose(c, expected)
-    assert K_PREV == 5 and "Spearman" in format_report({**report, "eval_split": "x", "dataset": "d",
-                                                         "rank_latency": {"candidates": 32, "rollouts": 5,
-                                                                          "median_ms": 1.0, "p95_ms": 2.0},
-                                                         "timings": {}})
+    text = format_report({**report, "eval_split": "x", "dataset": "d",
+                          "rank_latency": {"candidates": 32, "rollouts": 5, "median_ms": 1.0, "p95_ms": 2.0},
+                          "timings": {}})
+    assert K_PREV == 5 and "Spearman" in text and "| f_diff |" in text
+    assert set(report["ranking_per_head"]) == {"f_coll", "f_diff"}
+
+
+def test_per_head_ranking_scores_each_head_against_its_own_label(built) -> None:
+    from seal.experiments.fitting.objective import per_head_ranking
+
+    labels, _ = built
+    s, n = labels.f_coll.shape
+    # Head 0 equals its label (Spearman 1 wherever the label varies), head 1 is the reverse of its label (-1).
+    pred = np.stack([labels.f_coll, -labels.f_diff[:, LOGGED_ROW]], axis=-1)
+    close = np.tile(np.arange(n, dtype=float), (s, 1))
+    out = per_head_ranking(pred, close, labels)
+    varies = [np.ptp(labels.f_coll, axis=1) > 0, np.ptp(labels.f_diff[:, LOGGED_ROW], axis=1) > 0]
+    assert out["f_coll"]["pi_score_head"] == pytest.approx(varies[0].mean(), abs=1e-4)
+    assert out["f_diff"]["pi_score_head"] == pytest.approx(-varies[1].mean(), abs=1e-4)
+    from seal.models.objective.metrics import spearman
+
+    assert out["f_coll"]["closeness"] == pytest.approx(float(spearman(close, labels.f_coll).mean()), abs=1e-4)
 
 
 @pytest.fixture(scope="module")
