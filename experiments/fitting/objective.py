@@ -145,10 +145,11 @@ def resolve_config(preset: str | None = "standard", config_file: str | Path | No
 
 def labels_for_split(
     dataset: str | Path, split: str, limit: int | None, folder: Path, config: ObjectiveFitConfig, progress: bool,
+    start_over: bool = True,
 ) -> tuple[LabelSet, float]:
     """Build (or resume / reuse) the labels of ``split``'s first ``limit`` scenarios in ``folder`` (with
     ``config.labels_from``: read them from ``labels_from/<split>`` instead); returns the labels and the seconds it
-    took."""
+    took. ``start_over``: ``folder`` holding labels of other settings is emptied (else ValueError)."""
     from seal.core.dataset import load_split
     from seal.experiments.fitting.objective_labels import build_labels, load_label_folder, source_spec
 
@@ -162,7 +163,8 @@ def labels_for_split(
     start = time.perf_counter()
     labels = build_labels(scenarios, folder, spec, n_candidates=config.n_candidates,
                           workers=config.workers, chunk_size=config.chunk_size, progress=progress,
-                          desc=f"labels {split}", egos=config.egos, behavior=config.label_behavior())
+                          desc=f"labels {split}", egos=config.egos, behavior=config.label_behavior(),
+                          start_over=start_over)
     return labels, round(time.perf_counter() - start, 1)
 
 
@@ -361,12 +363,13 @@ def fit_objective(dataset: str | Path, out: str | Path, config: ObjectiveFitConf
 def eval_objective(model_path: str | Path, dataset: str | Path, config: ObjectiveFitConfig, labels_dir: str | Path,
                    out: str | Path, progress: bool = True) -> dict[str, Any]:
     """Recompute the held-out report of a saved model on ``config.eval_split`` (labels built or reused in
-    ``labels_dir``); writes ``report.json`` / ``report.md`` to ``out``."""
+    ``labels_dir``); writes ``report.json`` / ``report.md`` to ``out``. A ``labels_dir`` holding labels of other
+    settings (e.g. the model's own, built with another seed or behaviour) is left alone: ValueError."""
     from seal.models.objective import ObjectiveModel
 
     model = ObjectiveModel.load(model_path)
     labels, seconds = labels_for_split(dataset, config.eval_split, config.eval_limit, Path(labels_dir), config,
-                                       progress)
+                                       progress, start_over=False)
     report: dict[str, Any] = {"model_file": str(model_path), "dataset": str(dataset),
                               "eval_split": config.eval_split, "out": str(out), "model": model.config.to_dict()}
     report.update(evaluate(model, labels, config.seed))

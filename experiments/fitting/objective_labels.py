@@ -296,6 +296,7 @@ def build_labels(
     desc: str = "objective labels",
     egos: Sequence[str] = ("heuristic",),
     behavior: LabelBehavior | None = None,
+    start_over: bool = True,
 ) -> LabelSet:
     """Label ``scenarios`` in ``workers`` processes into chunk files ``out/part_NNNNN.npz`` (resumable, see the
     module docstring) and return all of them as one `LabelSet`, in scenario order.
@@ -311,6 +312,8 @@ def build_labels(
         desc: the bar's label.
         egos: ego specs; each scenario gives one row per ego (in this order).
         behavior: the adversary behaviour of the candidates (default: replay).
+        start_over: ``out`` holding labels of other settings is emptied; False raises ValueError instead
+            (`seal.core.chunked.run_chunked`).
 
     Resuming / restarting is reported through this module's logger.
     """
@@ -326,7 +329,7 @@ def build_labels(
         scenarios, out, _fingerprint(spec, ids, chunk_size, n_candidates, egos, behavior),
         {"n_candidates": n_candidates, "source": spec, "egos": egos, "behavior": behavior.to_dict()}, _run_chunk,
         (spec, n_candidates, egos, behavior.to_dict()),
-        lambda labels, file: labels.save(file), workers, chunk_size, progress, desc,
+        lambda labels, file: labels.save(file), workers, chunk_size, progress, desc, start_over,
     )
     merged = LabelSet.concat([LabelSet.load(p) for p in path])
     if list(merged.scenario_ids) != [i for i in ids for _ in egos]:

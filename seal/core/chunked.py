@@ -42,6 +42,7 @@ def run_chunked(
     chunk_size: int,
     progress: bool,
     desc: str,
+    start_over: bool = True,
 ) -> list[Path]:
     """Run ``work((i, chunk_i, *work_args)) -> (i, result)`` for every chunk of ``chunk_size`` items that has no
     file in ``folder`` yet, ``save(result, path)`` each (atomically, by the caller's writer); return every chunk's
@@ -59,6 +60,9 @@ def run_chunked(
             a fork); 1 runs in this process.
         chunk_size: items per chunk file.
         progress: show a tqdm bar labelled ``desc``.
+        start_over: a folder holding chunks of another fingerprint is emptied (a run's own cache); False raises
+            ValueError instead, leaving the folder as it is (a folder the user named, whose chunks another command
+            wrote and may still need).
 
     Resuming / restarting is reported to this module's logger (INFO).
     """
@@ -70,6 +74,9 @@ def run_chunked(
             same = json.loads(state_path.read_text()).get("fingerprint") == settings_fingerprint
         except (OSError, json.JSONDecodeError):
             same = False
+        if not same and not start_over:
+            raise ValueError(f"{folder} holds chunks ({desc}) of other scenarios or settings (its state.json); "
+                             "give another folder, or delete this one to rebuild it there")
         if not same:
             logger.info(f"{desc}: {folder} holds chunks of other scenarios or settings; starting over")
             shutil.rmtree(folder)

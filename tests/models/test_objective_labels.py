@@ -92,6 +92,9 @@ def test_build_resumes_skips_finished_chunks_and_restarts_on_other_settings(buil
     assert calls == [scenarios[1].scenario_id]  # only the missing chunk
     np.testing.assert_allclose(again.f_coll, labels.f_coll)
     calls.clear()
+    with pytest.raises(ValueError, match="other scenarios or settings"):  # a folder the caller must not wipe
+        ol.build_labels(scenarios[:1], out, spec, n_candidates=2, start_over=False, **kw)
+    assert sorted(p.name for p in out.glob("part_*.npz")) == ["part_00000.npz", "part_00001.npz"] and not calls
     other = ol.build_labels(scenarios[:1], out, spec, n_candidates=2, **kw)  # other settings: start over
     assert calls == [scenarios[0].scenario_id] and other.n_candidates == 2
     assert sorted(p.name for p in out.glob("part_*.npz")) == ["part_00000.npz"]
