@@ -30,7 +30,7 @@ from seal.adversaries.rcg.select import (
 from seal.adversaries.seal.contact import predict_contact
 from seal.adversaries.seal.generator import SEALGenerator, Switch
 from seal.adversaries.seal.objective import Ranking
-from seal.envs.skill_behavior import SWITCH_OFFSET_STEPS
+from seal.envs.skill_behavior import SKILL_NOISE_SCALE, SWITCH_OFFSET_STEPS
 
 
 def _objective(behavior: Any, n_knn: int, n_int: int, distance: str, prior_weight: float, generator: str
@@ -112,7 +112,7 @@ class SEALRCGGenerator(SEALGenerator):
         switch: str = Switch.ADVERSARIAL,
         switch_offset_steps: int = SWITCH_OFFSET_STEPS,
         follow: str = Follow.REPLAY,
-        noise_scale: float = 1.0,
+        noise_scale: float = SKILL_NOISE_SCALE,
         policy: Any = None,
     ) -> None:
         rcg = _objective(behavior, n_knn, n_int, distance, prior_weight, "seal-rcg")

@@ -34,7 +34,7 @@ from seal.adversaries.cat.select import DECAY, N_KEPT_MODES, STRIDE_STEPS
 from seal.adversaries.seal.contact import predict_contact
 from seal.adversaries.seal.objective import DEFAULT_PRIOR_WEIGHT, Objective, Ranking, make_objective
 from seal.envs.behaviors import AdversaryBehavior
-from seal.envs.skill_behavior import SWITCH_OFFSET_STEPS, SkillSwitchBehavior, switch_step_for
+from seal.envs.skill_behavior import SKILL_NOISE_SCALE, SWITCH_OFFSET_STEPS, SkillSwitchBehavior, switch_step_for
 
 
 class Switch(StrEnum):
@@ -81,7 +81,8 @@ class SEALGenerator(CandidateGenerator):
         switch: ``"adversarial"`` (SEAL), ``"benign"`` or ``"none"`` (trajectory only).
         switch_offset_steps: steps between the switch and the predicted collision / closest approach (10 = 1 s).
         follow: ``"replay"`` or ``"track"``: how the candidate is followed before the switch.
-        noise_scale: standard deviation of the skill noise (1 = sample the prior; < 1 keeps to its likelier skills).
+        noise_scale: standard deviation of the skill noise (1 = sample the prior; < 1 keeps to its likelier skills;
+            default `seal.envs.skill_behavior.SKILL_NOISE_SCALE`).
         skill_horizon: steps per skill (a new skill is drawn every ``skill_horizon`` steps; None: the VAE's window,
             10 = 1 s).
         policy: a ready skill policy (``reset(seed)`` / ``act(obs)``) instead of loading ``skills``.
@@ -101,7 +102,7 @@ class SEALGenerator(CandidateGenerator):
         switch: str = Switch.ADVERSARIAL,
         switch_offset_steps: int = SWITCH_OFFSET_STEPS,
         follow: str = Follow.REPLAY,
-        noise_scale: float = 1.0,
+        noise_scale: float = SKILL_NOISE_SCALE,
         skill_horizon: int | None = None,
         policy: Any = None,
         stride: int = STRIDE_STEPS,

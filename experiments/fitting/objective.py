@@ -42,6 +42,7 @@ import yaml
 
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
 from seal.core.config import load_config, overrides_field, to_dict
+from seal.envs.skill_behavior import SKILL_NOISE_SCALE
 from seal.experiments import presets
 from seal.models.objective.labels import LOGGED_ROW, LabelSet
 from seal.models.objective.network import ObjectiveConfig
@@ -91,8 +92,8 @@ class ObjectiveFitConfig:
     """Egos of the label roll-outs: ``heuristic`` and / or `seal train` run folders; one label row per ego."""
     switch_offset_steps: int = 10
     """``seal`` behaviour: steps between the skill switch and the predicted contact (as the generator)."""
-    noise_scale: float = 1.0
-    """``seal`` behaviour: skill noise scale (as the generator)."""
+    noise_scale: float = SKILL_NOISE_SCALE
+    """``seal`` behaviour: skill noise scale (as the generator, `seal.envs.skill_behavior.SKILL_NOISE_SCALE`)."""
     labels_from: Path | None = None
     """Reuse the label chunks in ``labels_from/<split>`` (and ``/<eval_split>``) as they are, e.g. an earlier run's
     ``OUT/labels``: nothing is simulated and the folder is only read (`load_label_folder`); None simulates (or

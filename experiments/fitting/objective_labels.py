@@ -45,6 +45,7 @@ import numpy as np
 
 from seal.core.chunked import fingerprint, run_chunked
 from seal.core.scenario import CURRENT_STEP, HEADING, LENGTH, N_FUTURE, VALID, WIDTH, Scenario, X, Y
+from seal.envs.skill_behavior import SKILL_NOISE_SCALE
 from seal.models.objective.labels import LabelSet
 
 logger = logging.getLogger(__name__)
@@ -122,7 +123,7 @@ class LabelBehavior:
     kind: str = "replay"
     skills: str | None = None
     switch_offset_steps: int = 10
-    noise_scale: float = 1.0
+    noise_scale: float = SKILL_NOISE_SCALE
     seed: int = 0
 
     def __post_init__(self) -> None:

@@ -278,7 +278,8 @@ def test_close_call_gap_between_ego_and_adversary_boxes() -> None:
 def test_switch_names_from_a_config_load_that_prior_at_noise_1(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, switch: str,
 ) -> None:
-    """A config names the switch as text; the skills folder is loaded with that prior and, by default, noise 1."""
+    """A config names the switch as text; the generator loads the skills folder with that prior and the default skill
+    noise (`SKILL_NOISE_SCALE`, 0.5); `load_skill_policy` alone defaults to the prior itself (noise 1)."""
     from seal.adversaries.seal.generator import load_skill_policy
 
     loaded: list[dict] = []
@@ -286,7 +287,8 @@ def test_switch_names_from_a_config_load_that_prior_at_noise_1(
     generator = SEALGenerator(candidate_source=_candidates, objective="cat", skills=tmp_path, switch=switch)
     assert generator.switch == switch and generator.policy == "policy"
     assert load_skill_policy(tmp_path, switch) == "policy"
-    assert loaded == [{"prior": switch, "noise_scale": 1.0, "horizon": None}] * 2
+    assert loaded == [{"prior": switch, "noise_scale": 0.5, "horizon": None},
+                      {"prior": switch, "noise_scale": 1.0, "horizon": None}]
 
 
 def test_option_bounds_are_inclusive() -> None:

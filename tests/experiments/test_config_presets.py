@@ -3,7 +3,8 @@
 ``data/resolved_presets.json`` was recorded from the dict-based configs (``DEFAULTS`` + ``resolve_config`` /
 ``load_train_config`` at commit ac931ba) for each preset, with and without command-line style overrides; the
 dataclass configs must give the same plain data. Changed since: the standard and paper presets train with
-``torch_threads: 2`` (issue 17's throughput)."""
+``torch_threads: 2`` (issue 17's throughput); the objective's ``seal`` label behaviour uses skill noise 0.5, as the
+SEAL generator (`seal.envs.skill_behavior.SKILL_NOISE_SCALE`, issue 16)."""
 
 from __future__ import annotations
 
