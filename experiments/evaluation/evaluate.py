@@ -267,13 +267,21 @@ def plan_ego(store: ResultsStore, ego: EgoSpec, settings: Sequence[Setting], con
 
     k, seed = int(config["k"]), int(config["seed"])
     shared = {"prior": config.get("prior"), "candidates": config.get("candidates")}
-    store.upsert_run(ego.run, ego.pipeline, ego.seed, ego.ego, ego.path, ego.config)
+    records = []
     for s in settings:
         kwargs = dict(config["generators"].get(s.generator, {})) if s.generator else {}
         if s.reactive:
             kwargs = {"background": config.get("background", "idm"), "background_model": config.get("background_model")}
-        store.upsert_setting(s.dataset, s.name, s.kind, s.split, s.generator, {**_shared_for(s, shared), **kwargs},
-                             k if s.generator else 0, seed)
+        record = (s.dataset, s.name, s.kind, s.split, s.generator, {**_shared_for(s, shared), **kwargs},
+                  k if s.generator else 0, seed)
+        if differences := store.setting_differences(*record):
+            raise ValueError(f"results store {store.path}: setting {s.name!r} holds episodes played with other "
+                             f"settings (differs in {', '.join(differences)}; see its settings table); evaluate "
+                             "into another --store, or with the recorded options")
+        records.append(record)
+    store.upsert_run(ego.run, ego.pipeline, ego.seed, ego.ego, ego.path, ego.config)
+    for record in records:
+        store.upsert_setting(*record)
     groups: dict[tuple[str, str | None], list[Setting]] = {}
     for s in settings:
         groups.setdefault((s.dataset, s.split), []).append(s)

@@ -219,6 +219,26 @@ class ResultsStore:
                  int(k), int(seed), time.time()),
             )
 
+    def setting_differences(
+        self, dataset: str, setting: str, kind: str, split: str | None, generator: str | None,
+        kwargs: Mapping[str, Any], k: int, seed: int = 0,
+    ) -> list[str]:
+        """How a new evaluation of ``setting`` on ``dataset`` differs from the recorded one (``kwargs.KEY`` for a
+        constructor option, else the column name), when the store already holds episodes of it; empty when it
+        matches or nothing was played yet. Rows of one setting must come from one configuration: a comparison of
+        egos met by different adversaries under one name would be wrong without a trace."""
+        row = self._conn.execute("SELECT * FROM settings WHERE dataset = ? AND setting = ?",
+                                 (dataset, setting)).fetchone()
+        if row is None or not self._conn.execute(
+                "SELECT 1 FROM episodes WHERE dataset = ? AND setting = ? LIMIT 1", (dataset, setting)).fetchone():
+            return []
+        old_kwargs = json.loads(row["kwargs"])
+        new_kwargs = json.loads(json.dumps(dict(kwargs), sort_keys=True, default=str))
+        diff = [f"kwargs.{key}" for key in sorted(set(old_kwargs) | set(new_kwargs))
+                if old_kwargs.get(key) != new_kwargs.get(key)]
+        new = {"kind": kind, "split": split, "generator": generator, "k": int(k), "seed": int(seed)}
+        return [c for c, v in new.items() if row[c] != v] + diff
+
     # ------------------------------------------------------------------------------------------ queries
     def episodes(
         self, run: str | Iterable[str] | None = None, pipeline: str | Iterable[str] | None = None,

@@ -62,6 +62,12 @@ def test_heuristic_ego_normal_and_cat_into_the_store(dataset: Path, tmp_path: Pa
     with ResultsStore(store_path) as store:
         assert store.count() == 10
         assert {(r["setting"], r["scenario_id"]): r["created_at"] for r in store.episodes()} == before
+    # another ego met by other adversaries under the same setting name: refused before anything is written
+    with pytest.raises(ValueError, match=r"setting 'cat' holds episodes played with other settings \(differs in k"):
+        evaluate_runs(["heuristic"], "normal,cat", store_path, dataset=dataset, replay_ego=False,
+                      config=resolve_eval_config(candidates="lanes", k=3), progress=False)
+    with ResultsStore(store_path) as store:
+        assert store.count() == 10 and [s["k"] for s in store.settings() if s["setting"] == "cat"] == [2]
 
 
 def test_incremental_limit_then_all(dataset: Path, tmp_path: Path) -> None:

@@ -106,3 +106,15 @@ def test_two_processes_write_concurrently(tmp_path):
         assert {r["run"]: r["config"]["i"] for r in store.runs()} == {"w0": 59, "w1": 59}
         assert sorted(store.done_scenarios("w1", "/data", "normal")) == sorted(f"s{i}" for i in range(60))
         assert store._conn.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
+
+
+def test_setting_differences_only_once_episodes_exist(tmp_path):
+    with ResultsStore(tmp_path / "r.sqlite") as store:
+        rec = ("/data", "cat", "generator", "eval", "cat", {"prior": "/m/prior.pt"}, 5, 0)
+        store.upsert_setting(*rec)
+        other = ("/data", "cat", "generator", "eval", "cat", {"prior": "/m/prior.pt", "noise_scale": 0.5}, 3, 0)
+        assert store.setting_differences(*other) == []  # nothing played yet: a new configuration may replace it
+        store.upsert_episodes([episode(setting="cat")])
+        assert store.setting_differences(*rec) == []
+        assert store.setting_differences(*other) == ["k", "kwargs.noise_scale"]
+        assert store.setting_differences("/other", *other[1:]) == []  # another dataset is another setting
