@@ -157,8 +157,10 @@ def generator_lines(gen_ci: Sequence[Mapping[str, Any]]) -> list[str]:
 
 
 def first_page_markdown(cis: Sequence[Mapping[str, Any]], poi: Sequence[Mapping[str, Any]],
-                        poi_by_setting: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[str, Any]]) -> str:
-    """The report's first page (module docstring) as Markdown."""
+                        poi_by_setting: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[str, Any]],
+                        training_lines: Sequence[str] = ()) -> str:
+    """The report's first page (module docstring) as Markdown; ``training_lines`` (e.g.
+    `seal.experiments.report.convergence.convergence_line`) follow the precision line."""
     md = ["## Summary: who wins where\n",
           "Success rate: mean over seeds and scenarios with its 95 % stratified-bootstrap interval (rliable). "
           "P = probability that the leader's ego beats the runner-up's in that setting (per-seed success rates; "
@@ -176,6 +178,7 @@ def first_page_markdown(cis: Sequence[Mapping[str, Any]], poi: Sequence[Mapping[
         md += overall_lines([r for r in poi if algo_of(r["pipeline"]) == algo]) or ["- (one pipeline only)"]
         md.append("")
     md.append(precision_line(cis))
+    md += list(training_lines)
     md += generator_lines(gen_ci)
     md.append("")
     md.append(claims_markdown(poi, gen_ci))

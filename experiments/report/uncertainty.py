@@ -45,10 +45,11 @@ class Uncertainty:
 
 
 def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapping[str, Any]], out: Path,
-                       plots: bool = True, n_boot: int = N_BOOT, n_boot_poi: int = N_BOOT_POI, seed: int = 0
-                       ) -> Uncertainty:
+                       plots: bool = True, n_boot: int = N_BOOT, n_boot_poi: int = N_BOOT_POI, seed: int = 0,
+                       training_lines: Sequence[str] = ()) -> Uncertainty:
     """Write `FILES` (and with ``plots`` the interval figures) into ``out`` from the episode rows (pipelines
-    already labelled by algorithm, `seal.experiments.report.grouping.label_by_algo`) and Table 6.2 rows."""
+    already labelled by algorithm, `seal.experiments.report.grouping.label_by_algo`) and Table 6.2 rows;
+    ``training_lines`` go onto the first page (`first_page_markdown`)."""
     cis = ego_ci_table(ego_rows, n_boot, seed)
     poi = improvement_table(ego_rows, n_boot_poi, seed)
     # Per setting only what the first page reads (leader vs runner-up): each pair costs ~1 s per setting.
@@ -82,5 +83,5 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
         "setting's scenarios resampled, each with all its episodes].\n",
         generator_ci_markdown(gen_ci) if gen_ci else "(no generator settings evaluated)\n",
     ]
-    return Uncertainty(cis, poi, poi_setting, paired, gen_ci, first_page_markdown(cis, poi, poi_setting, gen_ci),
-                       sections, figures)
+    first_page = first_page_markdown(cis, poi, poi_setting, gen_ci, training_lines)
+    return Uncertainty(cis, poi, poi_setting, paired, gen_ci, first_page, sections, figures)

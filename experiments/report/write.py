@@ -21,6 +21,7 @@ from seal.experiments.report.compare import (
     to_csv,
 )
 from seal.experiments.report.compare_plots import plot_setting_bars, plot_training_curves, render_generator_videos
+from seal.experiments.report.convergence import convergence_line, convergence_markdown, convergence_rows
 from seal.experiments.report.failure_section import write_failure_section
 from seal.experiments.report.grouping import filter_datasets, label_by_algo, separate
 from seal.experiments.report.stats import N_BOOT, N_BOOT_POI
@@ -52,7 +53,11 @@ def write_report(
     atomic_write_bytes(out / "table_6_1.csv", to_csv(t61))
     atomic_write_bytes(out / "table_6_2.csv", to_csv(t62))
     atomic_write_bytes(out / "rates_per_run.csv", to_csv(per_run))
-    stats = uncertainty_report(ego_rows, t62, out, plots=plots, n_boot=n_boot, n_boot_poi=n_boot_poi)
+    convergence = convergence_rows(runs)
+    atomic_write_bytes(out / "convergence.csv", to_csv(convergence))
+    training = [line] if (line := convergence_line(convergence)) else []
+    stats = uncertainty_report(ego_rows, t62, out, plots=plots, n_boot=n_boot, n_boot_poi=n_boot_poi,
+                               training_lines=training)
     figures: list[str] = list(stats.figures)
     video_files: list[str] = []
     if plots:
@@ -88,6 +93,12 @@ def write_report(
         generator_markdown(t62) if t62 else "(no generator settings evaluated)\n",
         where["markdown"],
     ]
+    if convergence:
+        md += ["## Training convergence\n",
+               "Slope of each run's periodic Normal-eval success over the last half of its evaluations (least "
+               "squares), averaged per pipeline, with its standard error from the evaluations' binomial noise; "
+               "*still improving*: at least +1 point per 10k env steps and more than 2 standard errors above 0 "
+               "(convergence.csv).\n", convergence_markdown(convergence)]
     if figures:
         md.append("## Figures\n")
         md += [f"![{f}]({f})\n" for f in figures if f not in where["figures"]]
@@ -101,7 +112,7 @@ def write_report(
             "generator_ci": stats.generator_ci, "figures": figures,
             "videos": video_files, "episodes": len(rows), "outcomes": where["outcomes"],
             "by_layout": where["by_layout"], "by_source": where["by_source"], "failures": where["failures"],
-            "failure_videos": where["videos"]}
+            "failure_videos": where["videos"], "convergence": convergence}
 
 
 Rows = list[dict[str, Any]]

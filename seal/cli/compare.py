@@ -77,7 +77,8 @@ def register(tree: CommandTree) -> None:
         "outcomes_by_source.csv (success, crash, out-of-road, timeout shares with n and route completion), "
         "failures.csv (every failed scenario per ego and setting with the reason; failures.md lists them per ego "
         "and setting, report.md sums them per pipeline), with --failure-videos N videos of N failures of each kind "
-        "per ego and setting, eval_curves.png (the runs' periodic evaluations). "
+        "per ego and setting, eval_curves.png (the runs' periodic evaluations) and convergence.csv (per pipeline: "
+        "were its egos still improving when training stopped? also on the first page). "
         "Datasets are kept apart (settings read normal@DATASET when the store holds several) and egos without a "
         "pipeline are never grouped as seeds of one; egos of several algorithms read '<pipeline> (<algo>)' and are "
         "compared only within their algorithm.",
