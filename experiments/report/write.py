@@ -53,11 +53,9 @@ def write_report(
     atomic_write_bytes(out / "table_6_1.csv", to_csv(t61))
     atomic_write_bytes(out / "table_6_2.csv", to_csv(t62))
     atomic_write_bytes(out / "rates_per_run.csv", to_csv(per_run))
-    convergence = convergence_rows(runs)
-    atomic_write_bytes(out / "convergence.csv", to_csv(convergence))
-    training = [line] if (line := convergence_line(convergence)) else []
+    convergence, training_line, training_md = _convergence(runs, out)
     stats = uncertainty_report(ego_rows, t62, out, plots=plots, n_boot=n_boot, n_boot_poi=n_boot_poi,
-                               training_lines=training)
+                               training_lines=training_line)
     figures: list[str] = list(stats.figures)
     video_files: list[str] = []
     if plots:
@@ -92,13 +90,8 @@ def write_report(
         "distances alone (thesis Table 7.6 leaves the out-of-road term out).\n",
         generator_markdown(t62) if t62 else "(no generator settings evaluated)\n",
         where["markdown"],
+        *training_md,
     ]
-    if convergence:
-        md += ["## Training convergence\n",
-               "Slope of each run's periodic Normal-eval success over the last half of its evaluations (least "
-               "squares), averaged per pipeline, with its standard error from the evaluations' binomial noise; "
-               "*still improving*: at least +1 point per 10k env steps and more than 2 standard errors above 0 "
-               "(convergence.csv).\n", convergence_markdown(convergence)]
     if figures:
         md.append("## Figures\n")
         md += [f"![{f}]({f})\n" for f in figures if f not in where["figures"]]
@@ -116,6 +109,22 @@ def write_report(
 
 
 Rows = list[dict[str, Any]]
+
+
+def _convergence(runs: Rows, out: Path) -> tuple[Rows, list[str], list[str]]:
+    """Write ``convergence.csv`` (`seal.experiments.report.convergence`); return its rows, the first page's line
+    (none without periodic evaluations) and the report section."""
+    rows = convergence_rows(runs)
+    atomic_write_bytes(out / "convergence.csv", to_csv(rows))
+    line = convergence_line(rows)
+    if not rows:
+        return rows, [], []
+    section = ["## Training convergence\n",
+               "Slope of each run's periodic Normal-eval success over the last half of its evaluations (least "
+               "squares), averaged per pipeline, with its standard error from the evaluations' binomial noise; "
+               "*still improving*: at least +1 point per 10k env steps and more than 2 standard errors above 0 "
+               "(convergence.csv).\n", convergence_markdown(rows)]
+    return rows, [line] if line else [], section
 
 
 def _read_store(store_path: str | Path, pipelines: Sequence[str] | None, settings: Sequence[str] | None,
