@@ -117,6 +117,11 @@ def _create_sql() -> list[str]:
     ]
 
 
+def _kwargs_json(kwargs: Mapping[str, Any]) -> str:
+    """A setting's constructor options as the settings table stores them (paths and other objects as text)."""
+    return json.dumps(dict(kwargs), sort_keys=True, default=str)
+
+
 def _as_list(value: str | int | Iterable[Any] | None) -> list[Any] | None:
     if value is None:
         return None
@@ -215,7 +220,7 @@ class ResultsStore:
         with self._write() as conn:
             conn.execute(
                 "INSERT OR REPLACE INTO settings VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                (dataset, setting, kind, split, generator, json.dumps(dict(kwargs), sort_keys=True, default=str),
+                (dataset, setting, kind, split, generator, _kwargs_json(kwargs),
                  int(k), int(seed), time.time()),
             )
 
@@ -233,7 +238,7 @@ class ResultsStore:
                 "SELECT 1 FROM episodes WHERE dataset = ? AND setting = ? LIMIT 1", (dataset, setting)).fetchone():
             return []
         old_kwargs = json.loads(row["kwargs"])
-        new_kwargs = json.loads(json.dumps(dict(kwargs), sort_keys=True, default=str))
+        new_kwargs = json.loads(_kwargs_json(kwargs))  # as upsert_setting would store them
         diff = [f"kwargs.{key}" for key in sorted(set(old_kwargs) | set(new_kwargs))
                 if old_kwargs.get(key) != new_kwargs.get(key)]
         new = {"kind": kind, "split": split, "generator": generator, "k": int(k), "seed": int(seed)}

@@ -21,7 +21,7 @@ import numpy as np
 
 from seal.experiments.report.compare import ordered_pipelines
 from seal.experiments.report.eval_curves import read_eval_curves
-from seal.experiments.report.grouping import run_algos
+from seal.experiments.report.grouping import label_by_algo
 
 MIN_LATE_EVALS = 3
 """Fewest evaluations in the late half for a slope (fewer: no verdict for that run)."""
@@ -55,9 +55,8 @@ def late_slope(steps: np.ndarray, success: np.ndarray, episodes: np.ndarray | No
     return float((weights * y).sum()) * scale, se * scale
 
 
-def _verdict(slopes: Sequence[float], ses: Sequence[float]) -> str:
-    mean = float(np.mean(slopes))
-    se = float(np.sqrt(np.sum(np.square(ses)))) / len(ses)  # NaN when an evaluation file has no episode counts
+def _verdict(mean: float, se: float) -> str:
+    """The verdict of a mean late slope and its standard error (NaN: no episode counts, the size alone decides)."""
     sure = not math.isfinite(se) or abs(mean) > N_SE * se
     if mean >= RISING_PTS_PER_10K and sure:
         return "still improving"
@@ -72,28 +71,24 @@ def convergence_rows(runs: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     ``slope_se`` (binomial noise of the evaluations), ``share_rising``, ``final_success`` (mean of the last
     evaluations), ``last_step`` and ``verdict``: *still improving* / *falling* when the mean slope is at least
     `RISING_PTS_PER_10K` in size and more than `N_SE` standard errors from zero, else *no clear trend*."""
-    algos = run_algos(runs)
-    several = len(set(algos.values())) > 1
+    labels = {str(r["run"]): str(r["pipeline"]) for r in label_by_algo(runs, runs)}
     groups: dict[str, list[tuple[float, float, float, float]]] = {}
     for run, cols in read_eval_curves(runs):
         if "success_rate" not in cols:
             continue
         fit = late_slope(cols["step"], cols["success_rate"], cols.get("episodes"))
-        if fit is None:
-            continue
-        label = str(run["pipeline"])
-        if several and str(run["run"]) in algos:
-            label = f"{label} ({algos[str(run['run'])]})"
-        groups.setdefault(label, []).append((*fit, float(cols["success_rate"][-1]), float(cols["step"][-1])))
+        if fit is not None:
+            groups.setdefault(labels[str(run["run"])], []).append(
+                (*fit, float(cols["success_rate"][-1]), float(cols["step"][-1])))
     rows = []
     for label in ordered_pipelines(groups):
         slopes, ses = [g[0] for g in groups[label]], [g[1] for g in groups[label]]
-        rows.append({"pipeline": label, "runs": len(slopes),
-                     "late_slope_pts_per_10k": round(float(np.mean(slopes)), 2),
-                     "slope_se": round(float(np.sqrt(np.sum(np.square(ses)))) / len(ses), 2),
-                     "share_rising": round(float(np.mean([v > 0 for v in slopes])), 2),
+        mean = float(np.mean(slopes))
+        se = float(np.sqrt(np.sum(np.square(ses)))) / len(ses)  # of the mean; NaN without episode counts
+        rows.append({"pipeline": label, "runs": len(slopes), "late_slope_pts_per_10k": round(mean, 2),
+                     "slope_se": round(se, 2), "share_rising": round(float(np.mean([v > 0 for v in slopes])), 2),
                      "final_success": round(float(np.mean([g[2] for g in groups[label]])), 4),
-                     "last_step": int(max(g[3] for g in groups[label])), "verdict": _verdict(slopes, ses)})
+                     "last_step": int(max(g[3] for g in groups[label])), "verdict": _verdict(mean, se)})
     return rows
 
 

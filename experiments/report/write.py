@@ -116,9 +116,9 @@ def _convergence(runs: Rows, out: Path) -> tuple[Rows, list[str], list[str]]:
     (none without periodic evaluations) and the report section."""
     rows = convergence_rows(runs)
     atomic_write_bytes(out / "convergence.csv", to_csv(rows))
-    line = convergence_line(rows)
     if not rows:
         return rows, [], []
+    line = convergence_line(rows)
     section = ["## Training convergence\n",
                "Slope of each run's periodic Normal-eval success over the last half of its evaluations (least "
                "squares), averaged per pipeline, with its standard error from the evaluations' binomial noise; "
