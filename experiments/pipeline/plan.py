@@ -23,7 +23,7 @@ from seal.experiments.pipeline.references import (
     with_algo,
     with_models,
 )
-from seal.experiments.pipeline.tasks import FIT_DEFAULTS, OPTIONS
+from seal.experiments.pipeline.tasks import FIT_CONFIGS, FIT_DEFAULTS, OPTIONS
 from seal.experiments.training.config import ALGOS
 
 RUN_EVAL_KEYS = ("settings", "replay_ego")
@@ -158,6 +158,17 @@ def _check_fits(fit: Mapping[str, Any], models: Mapping[str, str]) -> None:
         config_file = options.get("config")
         if config_file is not None and not Path(str(config_file)).expanduser().is_file():
             raise ValueError(f"fit.{name}.config: {config_file} does not exist")
+        if options.get("set") is not None:
+            _check_fit_sets(name, kind, options)
+
+
+def _check_fit_sets(name: str, kind: str, options: Mapping[str, Any]) -> None:
+    """A fit's ``set`` overrides resolved with the rest of its options, as the fit will resolve them (unknown keys,
+    wrong types, values out of range); references to other fits (``${fit.prior}``) stand in as they are."""
+    try:
+        FIT_CONFIGS[kind](options)
+    except ValueError as exc:
+        raise ValueError(f"fit.{name}: {exc}") from None
 
 
 def _check_eval(ev: Mapping[str, Any], dataset: str) -> None:

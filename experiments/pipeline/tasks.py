@@ -5,8 +5,8 @@ probes``).
 
 A job is a dict: ``task`` (``generate``, ``score``, ``split``, ``fit``), ``dataset`` (the dataset folder),
 ``model`` and ``out`` (fits: which model and the file or folder to write) and ``options`` (the preset's options of
-that step, named as the command's options without dashes: ``{n_train: 80}`` is ``--n-train 80``). Unknown
-options raise an error naming them and the known ones.
+that step, named as the command's options without dashes: ``{n_train: 80}`` is ``--n-train 80``; ``set: [KEY=VALUE,
+...]`` is the fit command's ``--set``). Unknown options raise an error naming them and the known ones.
 """
 
 from __future__ import annotations
@@ -31,13 +31,13 @@ OPTIONS: dict[str, tuple[str, ...]] = {
     "split": ("hard_quantile", "n_train", "n_eval", "n_hard", "seed", "hard_by", "score"),
     "prior": ("split", "config", "epochs", "max_minutes", "no_time_budget", "threads", "seed", "limit", "resume",
               "no_progress"),
-    "goose": ("preset", "config", "algo", "steps", "split", "limit", "eval_split", "eval_limit", "no_eval", "run_dir",
-              "seed", "no_progress"),
-    "skills": ("preset", "config", "split", "limit", "demos", "workers", "seed", "no_progress"),
-    "objective": ("preset", "config", "prior", "candidates", "eval_split", "eval_limit", "workers", "seed", "split",
-                  "limit", "skills", "behavior", "egos", "no_progress"),
-    "behavior": ("preset", "config", "split", "limit", "eval_split", "eval_limit", "max_samples", "crash_datasets",
-                 "seed", "threads", "no_progress"),
+    "goose": ("preset", "config", "set", "algo", "steps", "split", "limit", "eval_split", "eval_limit", "no_eval",
+              "run_dir", "seed", "no_progress"),
+    "skills": ("preset", "config", "set", "split", "limit", "demos", "workers", "seed", "no_progress"),
+    "objective": ("preset", "config", "set", "prior", "candidates", "eval_split", "eval_limit", "workers", "seed",
+                  "split", "limit", "skills", "behavior", "egos", "no_progress"),
+    "behavior": ("preset", "config", "set", "split", "limit", "eval_split", "eval_limit", "max_samples",
+                 "crash_datasets", "seed", "threads", "no_progress"),
     "probes": ("prior", "config", "split", "limit", "max_targets", "seed", "no_progress"),
 }
 """Known options per task / fitted model (the options of the matching ``seal`` command)."""
@@ -143,57 +143,99 @@ def fit_prior(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
     return summary
 
 
-def fit_goose(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
-    """``seal fit goose DATASET --out OUT``."""
+def fit_overrides(o: Mapping[str, Any]) -> tuple[str, ...]:
+    """A fit's ``set`` option: ``KEY=VALUE`` overrides of its config, as ``seal fit ... --set`` takes them (e.g.
+    ``vae_train.max_minutes=null``)."""
+    sets = o.get("set") or ()
+    if isinstance(sets, str) or not all(isinstance(item, str) for item in sets):
+        raise ValueError(f"option 'set' must be a list of KEY=VALUE strings, got {sets!r}")
+    return tuple(sets)
+
+
+def goose_config(o: Mapping[str, Any]) -> Any:
+    """The `GooseFitConfig` of a goose fit's options."""
     from dataclasses import replace
 
-    from seal.experiments.fitting.goose import FIT_THREADS, fit_goose, resolve_config
+    from seal.experiments.fitting.goose import resolve_config
 
     config = resolve_config(
         preset=o.get("preset", "standard"), config_file=o.get("config"), algo=o.get("algo"),
         total_steps=o.get("steps"), seed=o.get("seed"), split=o.get("split"), limit=o.get("limit"),
-        eval_split=o.get("eval_split"), eval_limit=o.get("eval_limit"),
+        eval_split=o.get("eval_split"), eval_limit=o.get("eval_limit"), sets=fit_overrides(o),
     )
-    if o.get("no_eval"):
-        config = replace(config, eval_split=None)
+    return replace(config, eval_split=None) if o.get("no_eval") else config
+
+
+def skills_config(o: Mapping[str, Any]) -> Any:
+    """The `SkillsFitConfig` of a skills fit's options."""
+    from seal.experiments.fitting.skills import resolve_config
+
+    return resolve_config(preset=o.get("preset", "standard"), config_file=o.get("config"), split=o.get("split"),
+                          limit=o.get("limit"), seed=o.get("seed"), workers=o.get("workers"), sets=fit_overrides(o))
+
+
+def objective_config(o: Mapping[str, Any]) -> Any:
+    """The `ObjectiveFitConfig` of an objective fit's options."""
+    from seal.experiments.fitting.objective import resolve_config
+
+    return resolve_config(
+        preset=o.get("preset", "standard"), config_file=o.get("config"), prior=o.get("prior"),
+        candidates=o.get("candidates"), eval_split=o.get("eval_split"), eval_limit=o.get("eval_limit"),
+        workers=o.get("workers"), seed=o.get("seed"), split=o.get("split"), limit=o.get("limit"),
+        skills=o.get("skills"), behavior=o.get("behavior"), egos=o.get("egos"), sets=fit_overrides(o),
+    )
+
+
+def behavior_config(o: Mapping[str, Any]) -> Any:
+    """The `BehaviorFitConfig` of a behaviour fit's options."""
+    from seal.experiments.fitting.behavior import resolve_config
+
+    return resolve_config(
+        preset=o.get("preset", "standard"), config_file=o.get("config"), split=o.get("split"), limit=o.get("limit"),
+        eval_split=o.get("eval_split"), eval_limit=o.get("eval_limit"), max_samples=o.get("max_samples"),
+        crash_datasets=o.get("crash_datasets"), seeds=None if o.get("seed") is None else [o["seed"]],
+        threads=o.get("threads"), sets=fit_overrides(o),
+    )
+
+
+FIT_CONFIGS: dict[str, Callable[[Mapping[str, Any]], Any]] = {
+    "goose": goose_config, "skills": skills_config, "objective": objective_config, "behavior": behavior_config,
+}
+"""The fits whose config a ``set`` option overrides, and how each resolves its options to its config."""
+
+
+def fit_goose(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
+    """``seal fit goose DATASET --out OUT``."""
+    from seal.experiments.fitting.goose import FIT_THREADS, fit_goose
+
+    config = goose_config(o)
     _torch_threads(FIT_THREADS)
     return fit_goose(dataset, out, config, run_dir=o.get("run_dir"), progress=not o.get("no_progress", False))
 
 
 def fit_skills(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
     """``seal fit skills DATASET --out OUT``."""
-    from seal.experiments.fitting.skills import fit_skills, resolve_config
+    from seal.experiments.fitting.skills import fit_skills
 
-    config = resolve_config(preset=o.get("preset", "standard"), config_file=o.get("config"), split=o.get("split"),
-                            limit=o.get("limit"), seed=o.get("seed"), workers=o.get("workers"))
+    config = skills_config(o)
     _torch_threads(config.threads)
     return fit_skills(dataset, out, config, demos_path=o.get("demos"), progress=not o.get("no_progress", False))
 
 
 def fit_objective(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
     """``seal fit objective DATASET --out OUT``."""
-    from seal.experiments.fitting.objective import fit_objective, resolve_config
+    from seal.experiments.fitting.objective import fit_objective
 
-    config = resolve_config(
-        preset=o.get("preset", "standard"), config_file=o.get("config"), prior=o.get("prior"),
-        candidates=o.get("candidates"), eval_split=o.get("eval_split"), eval_limit=o.get("eval_limit"),
-        workers=o.get("workers"), seed=o.get("seed"), split=o.get("split"), limit=o.get("limit"),
-        skills=o.get("skills"), behavior=o.get("behavior"), egos=o.get("egos"),
-    )
+    config = objective_config(o)
     _torch_threads(config.threads)
     return fit_objective(dataset, out, config, progress=not o.get("no_progress", False))
 
 
 def fit_behavior(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
     """``seal fit behavior DATASET --out OUT`` (RCG's behaviour embedding; ``crash_datasets``: a list of folders)."""
-    from seal.experiments.fitting.behavior import fit_behavior, resolve_config
+    from seal.experiments.fitting.behavior import fit_behavior
 
-    config = resolve_config(
-        preset=o.get("preset", "standard"), config_file=o.get("config"), split=o.get("split"), limit=o.get("limit"),
-        eval_split=o.get("eval_split"), eval_limit=o.get("eval_limit"), max_samples=o.get("max_samples"),
-        crash_datasets=o.get("crash_datasets"), seeds=None if o.get("seed") is None else [o["seed"]],
-        threads=o.get("threads"),
-    )
+    config = behavior_config(o)
     _torch_threads(config.threads)
     return fit_behavior(dataset, out, config, progress=not o.get("no_progress", False))
 

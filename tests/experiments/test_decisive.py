@@ -53,13 +53,38 @@ def test_decisive_plan_is_every_pipeline_times_two_algorithms_times_four_seeds(t
     assert set(fits_needed(config)) == {"prior", "goose", "skills", "ego_skills", "objective", "behavior", "probes"}
     # the ReSkill ego needs its own skills, fitted on the SEAL skills' demonstrations (so those come first)
     assert fits_needed({**config, "pipelines": ["noadv"], "eval": {}}) == ["skills", "ego_skills"]
-    assert config["fit"]["ego_skills"] == {"model": "skills", "preset": "ego", "demos": "${fit.skills}",
-                                           "no_progress": True}
+    assert {k: v for k, v in config["fit"]["ego_skills"].items() if k != "set"} == {
+        "model": "skills", "preset": "ego", "demos": "${fit.skills}", "no_progress": True}
     settings = [s for s in ev["settings"] if not s.startswith("real:")]
     plan = check_run(PRESET, tmp_path / "out", [_settings_with(real_dataset, settings)])
     assert len(plan["runs"]) == 56 and "seal-rcg-reskill-s3" in plan["runs"] and "noadv-td3-s0" in plan["runs"]
     assert not (tmp_path / "out").exists()
 
+
+
+def test_no_decisive_fit_stops_on_a_wall_clock_budget(tmp_path: Path, real_dataset: str) -> None:
+    """A budget that binds makes a model depend on the machine's speed and load: every fit of the preset stops on
+    its epochs / steps and patience alone, resolved as the fit itself resolves its options."""
+    from dataclasses import asdict
+
+    from seal.experiments.pipeline.tasks import FIT_CONFIGS
+
+    fits = load_run_config(PRESET)["fit"]
+    assert fits["prior"].get("no_time_budget") is True and "max_minutes" not in fits["prior"]
+    budgets = {}
+    for name in ("goose", "skills", "ego_skills", "objective", "behavior"):
+        options = {k: v for k, v in fits[name].items() if k != "model"}
+        config = asdict(FIT_CONFIGS[fits[name].get("model", name)](options))
+        budgets[name] = {section: values["max_minutes"] for section, values in config.items()
+                         if isinstance(values, dict) and "max_minutes" in values}
+    assert budgets == {"goose": {}, "skills": {"vae_train": None, "prior_train": None},
+                       "ego_skills": {"vae_train": None, "prior_train": None},
+                       "objective": {"train": None}, "behavior": {"train": None}}
+    # a bad override fails the plan check, naming the fit and the key, before anything is written
+    sets = [_settings_with(real_dataset, ["normal"]), "fit.behavior.set=[train.max_minute=null]"]
+    with pytest.raises(ValueError, match=r"fit.behavior: .*train.max_minute"):
+        check_run(PRESET, tmp_path / "out", sets)
+    assert not (tmp_path / "out").exists()
 
 
 def test_seal_run_check_prints_the_plan_and_writes_nothing(tmp_path: Path, real_dataset: str, capsys) -> None:
@@ -126,6 +151,7 @@ def test_toy_decisive_runs_end_to_end_and_reports_the_algorithms_apart(tmp_path:
     # the named fit: the skills command, into models/ego_skills, on the demonstrations of models/skills
     kind, _, ego_out, options = fits["ego_skills"]
     assert kind == "skills" and options == {"preset": "ego", "demos": str(out / "models" / "skills"),
+                                            "set": ["vae_train.max_minutes=null", "prior_train.max_minutes=null"],
                                             "no_progress": True}
     assert list(fits).index("skills") < list(fits).index("ego_skills")
     assert len(summary["runs"]) == 7 * 2 * 2 and not summary["errors"]

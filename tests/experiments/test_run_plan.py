@@ -49,6 +49,7 @@ def _nested(base: dict, dotted: str, value: object) -> dict:
     ("fit.prior.model", "oracle", r"fit: unknown fit.prior.model 'oracle'"),
     ("fit.prior.model", 3, r"fit.prior.model must be the name of a fitted model kind"),
     ("fit.prior.demos", "/d", r"fit.prior: unknown option\(s\) \['demos'\]"),
+    ("fit.prior.set", ["epochs=2"], r"fit.prior: unknown option\(s\) \[.set.\]"),
     ("train.hyperparams", {"td3": {"learning_rate": "fast"}}, r"train \(noadv, seed 0\): .*learning_rate"),
     ("train.hyperparams", {"td3": {"batch_size": -1}}, r"train \(noadv, seed 0\): .*batch_size"),
     ("train.total_timesteps", "lots", r"train \(noadv, seed 0\): .*total_timesteps"),

@@ -133,3 +133,18 @@ def test_finetuning_moves_only_the_adapter_and_changes_the_embedding() -> None:
     z = net.encode(data.agents, data.mask)
     assert not torch.allclose(net.project(z, lora=True), net.project(z, lora=False))
     assert all(p.requires_grad for p in net.parameters())  # frozen only while fine-tuning
+
+
+def test_a_stage_runs_every_epoch_without_a_cap_and_stops_after_one_when_the_cap_is_spent() -> None:
+    # `max_minutes: null` (the decisive preset): the epochs alone decide, so the embedding does not depend on the
+    # machine's speed; a cap that is spent at once ends the stage after its first epoch.
+    logs = {}
+    for cap in (None, 1e-9):
+        net = small_net()
+        data = _random_tensors(net, 16, seed=1)
+        protos = update_prototypes(net.project(net.encode(data.agents, data.mask)).detach(), data.labels, 0.8, 10.0)
+        cfg = BehaviorTrainConfig(finetune_epochs=3, finetune_batch_size=8, max_minutes=cap)
+        logs[cap] = finetune(net, data, cfg, protos)[1]
+    assert len(logs[None]) == 3 and len(logs[1e-9]) == 1
+    with pytest.raises(ValueError, match="max_minutes"):
+        BehaviorTrainConfig(max_minutes=0.0)

@@ -327,3 +327,9 @@ def test_fit_records_training_spearman_and_the_closeness_baseline_on_validation(
     assert fit.train_closeness_spearman != fit.val_closeness_spearman
     for row in fit.history:
         assert -1.0 <= row["train_spearman"] <= 1.0 and row["train_spearman"] != row["val_spearman"]
+
+
+def test_the_training_budget_can_be_switched_off_but_not_set_to_nothing() -> None:
+    assert ObjectiveTrainConfig(max_minutes=None).max_minutes is None
+    with pytest.raises(ValueError, match="max_minutes"):
+        ObjectiveTrainConfig(max_minutes=0.0)

@@ -43,7 +43,8 @@ class BehaviorTrainConfig:
         finetune_epochs: fine-tuning epochs on the crash set.
         finetune_batch_size: fine-tuning batch size.
         finetune_lr: fine-tuning learning rate of A, B.
-        max_minutes: wall-clock cap of each stage (min).
+        max_minutes: wall-clock cap of each stage (min; None: none, the epochs alone decide, as on every machine;
+            a cap that ends a stage makes the embedding depend on the machine's speed and load).
         seed: torch seed (initialisation and batch order).
     """
 
@@ -59,7 +60,7 @@ class BehaviorTrainConfig:
     finetune_epochs: int = 30
     finetune_batch_size: int = 64
     finetune_lr: float = 1e-3
-    max_minutes: float = 30.0
+    max_minutes: float | None = 30.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -67,7 +68,7 @@ class BehaviorTrainConfig:
             if int(getattr(self, key)) < 1:
                 raise ValueError(f"behaviour training: field {key!r} must be >= 1, got {getattr(self, key)}")
         for key in ("lr", "finetune_lr", "tau", "max_minutes"):
-            if not float(getattr(self, key)) > 0:
+            if not (key == "max_minutes" and self.max_minutes is None) and not float(getattr(self, key)) > 0:
                 raise ValueError(f"behaviour training: field {key!r} must be > 0, got {getattr(self, key)}")
         if not 0.0 <= self.eta < 1.0 or self.alpha < 0 or self.lam < 0 or self.weight_decay < 0:
             raise ValueError("behaviour training: need 0 <= eta < 1 and alpha, lam, weight_decay >= 0, got "
@@ -119,6 +120,11 @@ def _epoch_log(stage: str, epoch: int, sums: dict[str, float], n: int) -> dict[s
     return row  # type: ignore[return-value]
 
 
+def _over(start: float, max_minutes: float | None) -> bool:
+    """Whether a stage that began at ``start`` (`time.monotonic`) has used up its cap (never without one)."""
+    return max_minutes is not None and time.monotonic() - start > 60.0 * max_minutes
+
+
 def pretrain(net: BehaviorNet, data: Tensors, cfg: BehaviorTrainConfig) -> tuple[Prototypes, list[dict[str, Any]]]:
     """Pre-train ``net`` in place (see the module docstring); returns the last prototypes and one log row per
     epoch (mean ``recon_reg``, ``recon_cls``, ``inst``, ``proto`` losses)."""
@@ -149,7 +155,7 @@ def pretrain(net: BehaviorNet, data: Tensors, cfg: BehaviorTrainConfig) -> tuple
             batches += 1
         log.append(_epoch_log("pretrain", epoch, sums, batches))
         protos = update_prototypes(embed_all(net, data), data.labels, cfg.eta, cfg.alpha, protos)
-        if time.monotonic() - start > 60.0 * cfg.max_minutes:
+        if _over(start, cfg.max_minutes):
             logger.info("pre-training stopped at the %.1f min cap after %d epochs", cfg.max_minutes, epoch + 1)
             break
     net.eval()
@@ -185,7 +191,8 @@ def finetune(net: BehaviorNet, data: Tensors, cfg: BehaviorTrainConfig, protos: 
                 batches += 1
             log.append(_epoch_log("finetune", epoch, sums, batches))
             protos = update_prototypes(embed_all(net, data), data.labels, cfg.eta, cfg.alpha, protos)
-            if time.monotonic() - start > 60.0 * cfg.max_minutes:
+            if _over(start, cfg.max_minutes):
+                logger.info("fine-tuning stopped at the %.1f min cap after %d epochs", cfg.max_minutes, epoch + 1)
                 break
     finally:
         for p in net.parameters():

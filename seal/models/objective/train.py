@@ -61,7 +61,8 @@ class ObjectiveTrainConfig:
         max_epochs: epochs at most.
         pairs_per_epoch: pairs drawn per epoch (all pairs when larger).
         patience: epochs without validation improvement before stopping.
-        max_minutes: wall-clock budget of the training loop.
+        max_minutes: wall-clock budget of the training loop (None: none, the epochs and ``patience`` alone decide,
+            as on every machine; a budget that ends the fit makes the model depend on the machine's speed and load).
         val_fraction: share of the scenarios held out for early stopping.
         prev: ``"all"`` or ``"logged"`` (`PREV_MODES`).
         rank_weight: weight of the listwise ranking loss next to the MSE (0: MSE only).
@@ -81,7 +82,7 @@ class ObjectiveTrainConfig:
     max_epochs: int = 20
     pairs_per_epoch: int = 200_000
     patience: int = 4
-    max_minutes: float = 5.0
+    max_minutes: float | None = 5.0
     val_fraction: float = 0.1
     prev: str = "all"
     rank_weight: float = 0.0
@@ -96,8 +97,9 @@ class ObjectiveTrainConfig:
         for name in ("batch_size", "max_epochs", "pairs_per_epoch", "patience"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"objective training: {name} must be >= 1, got {getattr(self, name)}")
-        if not (self.lr > 0 and self.max_minutes > 0 and self.weight_decay >= 0):
-            raise ValueError("objective training: lr and max_minutes must be > 0, weight_decay >= 0")
+        if not (self.lr > 0 and (self.max_minutes is None or self.max_minutes > 0) and self.weight_decay >= 0):
+            raise ValueError("objective training: lr and max_minutes (or null: no budget) must be > 0, weight_decay "
+                             ">= 0")
         if not 0.0 < self.val_fraction < 1.0:
             raise ValueError(f"objective training: val_fraction must be in (0, 1), got {self.val_fraction}")
         if self.prev not in PREV_MODES:
@@ -386,7 +388,7 @@ def _train_epoch(
         seen += n_pairs
         if on_step is not None:
             on_step(epoch, step, steps)
-        if time.perf_counter() - start > 60.0 * cfg.max_minutes:
+        if cfg.max_minutes is not None and time.perf_counter() - start > 60.0 * cfg.max_minutes:
             return total / max(seen, 1), True
     return total / max(seen, 1), False
 
