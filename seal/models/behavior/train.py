@@ -67,8 +67,8 @@ class BehaviorTrainConfig:
         for key in ("epochs", "batch_size", "finetune_epochs", "finetune_batch_size"):
             if int(getattr(self, key)) < 1:
                 raise ValueError(f"behaviour training: field {key!r} must be >= 1, got {getattr(self, key)}")
-        for key in ("lr", "finetune_lr", "tau", "max_minutes"):
-            if not (key == "max_minutes" and self.max_minutes is None) and not float(getattr(self, key)) > 0:
+        for key in ("lr", "finetune_lr", "tau") + (() if self.max_minutes is None else ("max_minutes",)):
+            if not float(getattr(self, key)) > 0:
                 raise ValueError(f"behaviour training: field {key!r} must be > 0, got {getattr(self, key)}")
         if not 0.0 <= self.eta < 1.0 or self.alpha < 0 or self.lam < 0 or self.weight_decay < 0:
             raise ValueError("behaviour training: need 0 <= eta < 1 and alpha, lam, weight_decay >= 0, got "
