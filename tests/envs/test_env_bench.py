@@ -53,5 +53,7 @@ def test_skill_bench_repeats_play_the_same_episodes(tmp_path: Path, highway: lis
     assert isinstance(result["meets_target"], bool)
     # The floor: the replayed step plus the adversary's observation and policy step, each measured alone.
     parts = result["adversary_observation_us"] + result["skill_policy_step_on_recorded_obs_us"]
-    assert result["adversary_observation_us"] > 0 and result["skill_policy_step_on_recorded_obs_us"] > 0
+    # The observation's share is a difference of two timings (two viewers minus one), clamped at 0: on a loaded
+    # machine the difference can vanish, so only its sign is checked; the policy step is a timing of its own.
+    assert result["adversary_observation_us"] >= 0 and result["skill_policy_step_on_recorded_obs_us"] > 0
     assert abs(result["floor_cost_ratio"] - (result["replay_step_us"] + parts) / result["replay_step_us"]) < 0.01
