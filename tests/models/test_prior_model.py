@@ -273,3 +273,13 @@ def test_interrupted_training_resumes_to_the_same_model(handful: list[Scenario],
                           None, {"epoch": 1}, [{"other": 1}, {}])
     with pytest.raises(ValueError, match="another model or training config"):
         fit_prior(handful, out, TINY, cfg, resume=True, progress=False)
+
+
+def test_a_budget_that_cuts_the_plan_is_named_as_the_stop_reason(handful: list[Scenario], tmp_path: Path) -> None:
+    # A budget spent during the first epoch plans no more: the stop reason must say the budget decided (the model
+    # then depends on the machine's speed), not that the planned epochs were completed.
+    cut = fit_prior(handful, tmp_path / "cut.pt", TINY, replace(tiny_train(epochs=3), max_minutes=1e-6),
+                    progress=False).training
+    assert cut["epochs_run"] == 1 and cut["stop_reason"].startswith("time budget of 1e-06 min reached: 1 of 3")
+    full = fit_prior(handful, tmp_path / "full.pt", TINY, tiny_train(epochs=2), progress=False).training
+    assert full["epochs_run"] == 2 and full["stop_reason"] == "completed 2 planned epochs"

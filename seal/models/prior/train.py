@@ -267,7 +267,11 @@ class _PriorFit:
     def finish(self) -> TrajectoryPrior:
         """Write the best epoch's model, remove the resumable state and return the model."""
         st = self.st
-        if st["stop_reason"] is None:
+        if st["stop_reason"] is None and st["planned_epochs"] < self.tc.epochs:
+            # the budget cut the plan after the first epoch: say so (the model depends on the machine's speed)
+            st["stop_reason"] = (f"time budget of {self.tc.max_minutes:g} min reached: {st['epoch']} of "
+                                 f"{self.tc.epochs} epochs planned after the first")
+        elif st["stop_reason"] is None:
             st["stop_reason"] = f"completed {st['epoch']} planned epochs"
         prior = TrajectoryPrior(_net_with(self.model_cfg, self.best_state), training=self.summary())
         prior.save(self.out)
