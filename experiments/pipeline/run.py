@@ -54,8 +54,6 @@ The preset's sections (all but ``train`` belong to this module; ``train`` is pas
 
 from __future__ import annotations
 
-import hashlib
-import json
 import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -72,7 +70,6 @@ from seal.experiments.backends import Backend, InlineBackend, Job, JobResult, Lo
 from seal.experiments.pipeline.plan import check_plan
 from seal.experiments.pipeline.references import (
     dotted,
-    fit_kind,
     fits_needed,
     generator_of,
     generators_in_use,
@@ -82,6 +79,7 @@ from seal.experiments.pipeline.references import (
     with_algo,
     with_models,
 )
+from seal.experiments.pipeline.steps import FIT_OUTPUTS, Steps, data_steps, fit_steps
 from seal.experiments.pipeline.tasks import run_task
 
 logger = logging.getLogger(__name__)
@@ -123,9 +121,6 @@ class RunPreset:
 
 
 SECTIONS = tuple(f.name for f in fields(RunPreset))
-FIT_OUTPUTS = {"prior": "prior.pt", "goose": "goose.zip", "skills": "skills", "objective": "objective",
-               "behavior": "behavior", "probes": "probes"}
-"""Model name -> file or folder written under OUT/models by the fit of that model."""
 
 # ---------------------------------------------------------------------------------------------- config
 def load_run_config(path: str | Path, sets: Sequence[str] = ()) -> dict[str, Any]:
@@ -162,43 +157,6 @@ def load_run_config(path: str | Path, sets: Sequence[str] = ()) -> dict[str, Any
         variant_of(config, name)  # a malformed variant fails here, before any step runs
     config.setdefault("preset", path.stem)
     return config
-
-
-# ---------------------------------------------------------------------------------------------- steps
-class Steps:
-    """Done-markers under OUT/steps: a step is done when its marker holds the same parameter hash."""
-
-    def __init__(self, out: Path) -> None:
-        self.dir = out / "steps"
-        self.ran: list[str] = []
-        self.skipped: list[str] = []
-
-    @staticmethod
-    def digest(params: Any) -> str:
-        return hashlib.sha256(json.dumps(params, sort_keys=True, default=str).encode()).hexdigest()[:16]
-
-    def done(self, name: str, params: Any) -> bool:
-        path = self.dir / f"{name}.json"
-        if not path.is_file():
-            return False
-        return json.loads(path.read_text()).get("params") == self.digest(params)
-
-    def run(self, name: str, params: Any, action: Callable[[], Any]) -> bool:
-        """Run ``action`` unless ``name`` is done with these ``params``; returns True if it ran. The marker is
-        written when ``action`` returns anything but False (False: partly failed, run it again next time)."""
-        if self.done(name, params):
-            logger.info(f"[seal run] {name}: done, skipped")
-            self.skipped.append(name)
-            return False
-        logger.info(f"[seal run] {name}: running")
-        start = time.perf_counter()
-        if action() is False:
-            return True
-        atomic_write_json(self.dir / f"{name}.json", {
-            "params": self.digest(params), "seconds": round(time.perf_counter() - start, 2), "finished": time.time(),
-        })
-        self.ran.append(name)
-        return True
 
 
 # ---------------------------------------------------------------------------------------------- jobs
@@ -339,37 +297,18 @@ def run_pipeline(
 def _data_steps(run: _Run) -> tuple[str, dict[str, Any]]:
     """1. data: generate, score and split OUT/data (or take ``data.path``); returns the dataset folder and the
     data parameters (the fits run again when they change)."""
-    data = run.config.get("data") or {}
-    data_params = {k: data.get(k) for k in ("path", "generate", "score", "split")}
-    if data.get("path"):
-        return str(Path(data["path"]).expanduser().resolve()), data_params
-    dataset = str(run.out / "data")
-    gen_opts = dict(data.get("generate") or {})
-    run.steps.run("data", gen_opts, lambda: run.task(
-        {"name": "data", "task": "generate", "dataset": dataset, "options": gen_opts}))
-    score_opts = dict(data.get("score") or {})
-    run.steps.run("score", [gen_opts, score_opts], lambda: run.task(
-        {"name": "score", "task": "score", "dataset": dataset, "options": score_opts}))
-    split_opts = dict(data.get("split") or {})
-    run.steps.run("split", [gen_opts, split_opts], lambda: run.task(
-        {"name": "split", "task": "split", "dataset": dataset, "options": split_opts}))
+    dataset, data_params, steps = data_steps(run.config, run.out)
+    for step in steps:
+        run.steps.run(step.name, step.params, partial(run.task, step.job))
     return dataset, data_params
 
 
 def _fit_steps(run: _Run, dataset: str, data_params: Mapping[str, Any]) -> dict[str, str]:
     """2. fit the models the generators in use need, dependencies first; returns model name -> path."""
-    models: dict[str, str] = {}
-    for name in fits_needed(run.config):
-        spec = dict((run.config.get("fit") or {})[name] or {})
-        if spec.get("path"):
-            models[name] = str(Path(spec["path"]).expanduser().resolve())
-            continue
-        kind, spec = fit_kind(name, spec)
+    models, steps = fit_steps(run.config, run.out, dataset, data_params)
+    for step in steps:
         (run.out / "models").mkdir(exist_ok=True)
-        models[name] = str(run.out / "models" / FIT_OUTPUTS.get(name, name))
-        job = {"name": f"fit-{name}", "task": "fit", "model": kind, "dataset": dataset, "out": models[name],
-               "options": substitute(spec, models)}  # e.g. the objective's candidates: "${fit.prior}"
-        run.steps.run(f"fit-{name}", [data_params, job], partial(run.task, job))
+        run.steps.run(step.name, step.params, partial(run.task, step.job))
     return models
 
 

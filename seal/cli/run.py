@@ -20,6 +20,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     except (OSError, ValueError) as exc:
         raise CliError(str(exc)) from None
     out = args.out or str(Path("runs") / Path(args.config).stem)
+    if args.status:
+        from seal.experiments.pipeline.status import format_status, run_status
+
+        status = run_status(args.config, out, args.set)
+        print(json.dumps(status, indent=2) if args.json else format_status(status))
+        return 0
     if args.check:
         from seal.experiments.pipeline.run import check_run
 
@@ -70,7 +76,12 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--check", action="store_true",
                    help="check the whole plan (every step's options, names, paths) and print what it would run; "
                    "writes nothing")
-    p.add_argument("--json", action="store_true", help="with --check: print the plan as JSON")
+    p.add_argument("--status", action="store_true",
+                   help="where a run in --out stands (for a run carried across sessions): each data / fit step done "
+                   "(with its time), changed or pending; training runs done, in progress (steps of the newest "
+                   "checkpoint) or not started, with the finished runs' mean time and the time left at that pace; "
+                   "evaluation rows stored of those a complete evaluation writes; the report; writes nothing")
+    p.add_argument("--json", action="store_true", help="with --check or --status: print it as JSON")
     add_plugin_option(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_run)

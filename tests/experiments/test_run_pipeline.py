@@ -9,8 +9,7 @@ from pathlib import Path
 import pytest
 import scenario_factory as sf
 import yaml
-from results_builders import episode
-from run_builders import FakeTasks
+from run_builders import FakeTasks, fake_eval, fake_train, fake_train_config, run, write_preset
 
 from seal.core.dataset import Dataset, write_dataset
 from seal.experiments.backends import InlineBackend
@@ -20,60 +19,6 @@ from seal.experiments.pipeline.run import load_run_config, run_pipeline
 from seal.experiments.pipeline.tasks import run_task
 
 CONFIGS = Path(__file__).resolve().parents[2] / "experiments" / "configs"
-
-
-def fake_train_config(config, preset_path, pipeline, seed, dataset, generators) -> dict:
-    gen = None if pipeline == "noadv" else pipeline
-    return {"algo": "td3", "pipeline": pipeline, "seed": seed, "dataset": dataset,
-            "generator": {"name": gen, "kwargs": generators.get(gen, {})} if gen else None}
-
-
-def fake_train(job) -> dict:
-    """Writes what a finished run folder holds (config.yaml, done.json); fails for seed 13."""
-    if job["config"]["seed"] == 13:
-        raise RuntimeError("diverged")
-    out = Path(job["out"])
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "config.yaml").write_text(yaml.safe_dump(job["config"]))
-    (out / "done.json").write_text("{}")
-    return {"run": str(out)}
-
-
-def fake_eval(job) -> dict:
-    """One episode row per (setting, first scenario) for the job's ego, into the job's store."""
-    cfg = yaml.safe_load((Path(job["run"]) / "config.yaml").read_text()) if job["run"] != "replay" else {}
-    pipeline, seed = cfg.get("pipeline", "replay"), cfg.get("seed", 0)
-    with ResultsStore(job["store"]) as store:
-        store.upsert_episodes([
-            episode(run=job["run"], setting=s["name"], pipeline=pipeline, seed=seed) for s in job["settings"]
-        ])
-        for s in job["settings"]:
-            store.upsert_setting(s["dataset"], s["name"], "generator" if s["generator"] else "replay", s["split"],
-                                 s["generator"], job["config"]["generators"].get(s["generator"] or "", {}), 2)
-    return {"run": job["run"]}
-
-
-def write_preset(tmp_path: Path, seeds=(0, 1), **changes) -> Path:
-    preset = {
-        "data": {"generate": {"n": 3, "seed": 0}, "split": {"n_train": 1, "n_eval": 2, "n_hard": 1}},
-        "fit": {"prior": {"epochs": 1, "no_progress": True}, "goose": {"path": "/models/goose.zip"},
-                "skills": {"preset": "quick"}},
-        "generators": {"cat": {"prior": "${fit.prior}", "follow": "replay"}, "rule": {}},
-        "pipelines": ["noadv", "cat"],
-        "seeds": list(seeds),
-        "eval": {"settings": ["normal", "hard", "cat"], "k": 2, "limit": 2},
-        "report": {"plots": False, "reps": 50, "poi_reps": 20},  # few resamples: the statistics are not tested here
-        "train": {"algo": "td3", "total_timesteps": 100},
-        **changes,
-    }
-    path = tmp_path / "preset.yaml"
-    path.write_text(yaml.safe_dump(preset, sort_keys=False))
-    return path
-
-
-def run(preset: Path, out: Path, commands: FakeTasks, train=fake_train) -> dict:
-    return run_pipeline(preset, out, backend=InlineBackend(), task_fn=commands, train_fn=train, eval_fn=fake_eval,
-                        train_config_fn=fake_train_config, progress=False)
 
 
 def test_steps_then_skip_on_rerun(tmp_path: Path) -> None:

@@ -1,0 +1,152 @@
+"""``seal run PRESET --out OUT --status``: where a run of a preset stands, read from its folder; writes nothing.
+
+A preset like ``decisive`` runs for many hours and is carried across sessions (`seal.experiments.pipeline.run`
+resumes it). Before going on, a user wants to know what is done, what is half done and what is left, without
+reading logs: this module reads the same markers the run itself skips on.
+
+* data and fit steps: ``done`` (their marker under OUT/steps holds the parameters the preset gives now; with the
+  seconds the step took), ``stale`` (a marker of other parameters: the step runs again) or ``pending``;
+* training: per planned run folder ``done`` (``done.json``, with its wall time), ``in progress`` (the step of its
+  newest checkpoint, out of its ``total_timesteps``) or ``not started``; the finished runs' mean wall time per
+  ego algorithm, and the time the runs left would take at that mean (one run at a time, as the presets train);
+* evaluation: the rows in OUT/results.sqlite against the rows a complete evaluation of every planned ego and the
+  Replay ego writes (`seal.experiments.evaluation.store_progress.expected_rows`; known once the data exist);
+* report: whether its marker is there.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from seal.core.dataset import MANIFEST
+from seal.experiments.pipeline.references import planned_runs
+from seal.experiments.pipeline.run import load_run_config
+from seal.experiments.pipeline.steps import StepJob, Steps, data_steps, fit_steps
+
+
+def run_status(config_path: str | Path, out: str | Path, sets: Sequence[str] = ()) -> dict[str, Any]:
+    """The state of every step of the preset ``config_path`` in the run folder ``out`` (module docstring)."""
+    config = load_run_config(config_path, sets)
+    out = Path(out).expanduser().resolve()
+    markers = Steps(out)
+    dataset, data_params, data = data_steps(config, out)
+    _, fits = fit_steps(config, out, dataset, data_params)
+    runs = _training(out, config)
+    return {
+        "preset": config["preset"], "out": str(out), "exists": out.is_dir(),
+        "steps": [_step(markers, step) for step in [*data, *fits]],
+        "training": runs,
+        "evaluation": _evaluation(out, config, dataset, runs["runs"]),
+        "report": "done" if markers.marker("report") is not None else "pending",
+    }
+
+
+def _step(markers: Steps, step: StepJob) -> dict[str, Any]:
+    marker = markers.marker(step.name)
+    if marker is None:
+        return {"name": step.name, "state": "pending"}
+    state = "done" if marker.get("params") == markers.digest(step.params) else "stale"
+    return {"name": step.name, "state": state, "seconds": marker.get("seconds")}
+
+
+def _training(out: Path, config: Mapping[str, Any]) -> dict[str, Any]:
+    """Per planned run folder its state and steps; the finished runs' mean wall time per algorithm."""
+    default_algo = (config.get("train") or {}).get("algo", "td3")
+    runs: list[dict[str, Any]] = []
+    for name, (_, _, algo) in planned_runs(config).items():
+        folder = out / "runs" / name
+        row: dict[str, Any] = {"name": name, "algo": algo or default_algo, "total": _total_steps(folder, config, algo)}
+        if (folder / "done.json").is_file():
+            done = json.loads((folder / "done.json").read_text())
+            row.update(state="done", steps=done.get("steps"), wall_s=done.get("wall_s"))
+        elif (folder / "checkpoints" / "latest.json").is_file():
+            latest = json.loads((folder / "checkpoints" / "latest.json").read_text())
+            row.update(state="in progress", steps=int(latest.get("step", 0)))
+        else:
+            row.update(state="not started", steps=0)
+        runs.append(row)
+    mean_s: dict[str, float] = {}
+    for algo in dict.fromkeys(r["algo"] for r in runs):
+        walls = [r["wall_s"] for r in runs if r["algo"] == algo and r["state"] == "done" and r.get("wall_s")]
+        if walls:
+            mean_s[algo] = sum(walls) / len(walls)
+    left_s = 0.0
+    for r in runs:
+        if r["state"] != "done" and r["algo"] in mean_s:
+            left_s += mean_s[r["algo"]] * (1.0 - (r["steps"] or 0) / max(int(r["total"] or 1), 1))
+    return {"runs": runs, "done": sum(r["state"] == "done" for r in runs), "planned": len(runs),
+            "mean_run_s": {k: round(v, 1) for k, v in mean_s.items()},
+            "left_s_estimate": round(left_s, 1) if mean_s else None}
+
+
+def _total_steps(folder: Path, config: Mapping[str, Any], algo: str | None) -> int | None:
+    """A run's ``total_timesteps``: as its own config.yaml records it, else as the preset gives it."""
+    if (folder / "config.yaml").is_file():
+        recorded = yaml.safe_load((folder / "config.yaml").read_text()) or {}
+        if recorded.get("total_timesteps"):
+            return int(recorded["total_timesteps"])
+    per_algo = ((config.get("algo_train") or {}).get(algo) or {}) if algo else {}
+    total = per_algo.get("total_timesteps", (config.get("train") or {}).get("total_timesteps"))
+    return None if total is None else int(total)
+
+
+def _evaluation(out: Path, config: Mapping[str, Any], dataset: str, runs: Sequence[Mapping[str, Any]]
+                ) -> dict[str, Any]:
+    """Rows in the results store, and the rows a complete evaluation of the planned egos writes (None before the
+    data exist)."""
+    from seal.experiments.evaluation.evaluate import parse_settings
+    from seal.experiments.evaluation.results_store import ResultsStore
+    from seal.experiments.evaluation.store_progress import expected_rows
+
+    ev = config.get("eval") or {}
+    egos = [str(out / "runs" / r["name"]) for r in runs] + (["replay"] if ev.get("replay_ego", True) else [])
+    store = out / "results.sqlite"
+    stored = 0
+    complete_egos = None
+    expected = None
+    if Path(dataset, MANIFEST).is_file():
+        settings = parse_settings(ev.get("settings") or ["normal", "hard"], dataset)
+        names = [s.name for s in settings]
+        expected = expected_rows(egos, settings, ev.get("limit"))
+        per_ego = expected // max(len(egos), 1)
+        if store.is_file():
+            with ResultsStore(store) as s:
+                counts = [s.count(run=e, setting=names) for e in egos]
+            stored, complete_egos = sum(counts), sum(c >= per_ego for c in counts)
+    elif store.is_file():
+        with ResultsStore(store) as s:
+            stored = s.count()
+    return {"rows": stored, "expected_rows": expected, "egos": len(egos), "complete_egos": complete_egos}
+
+
+def format_status(status: Mapping[str, Any]) -> str:
+    """The status as a few lines of text."""
+    lines = [f"seal run status: {status['preset']} in {status['out']}" + ("" if status["exists"] else
+                                                                          " (no such folder yet)")]
+    for step in status["steps"]:
+        took = f" ({step['seconds'] / 60:.1f} min)" if step.get("seconds") is not None else ""
+        lines.append(f"  {step['name']:<18} {step['state']}{took}")
+    tr = status["training"]
+    states = [r["state"] for r in tr["runs"]]
+    lines.append(f"  {'training':<18} {tr['done']} of {tr['planned']} runs done, {states.count('in progress')} in "
+                 f"progress, {states.count('not started')} not started")
+    for r in tr["runs"]:
+        if r["state"] == "in progress":
+            total = "?" if r["total"] is None else f"{r['total']:,}"
+            lines.append(f"  {'':<18}   {r['name']}: {r['steps']:,} of {total} steps")
+    if tr["mean_run_s"]:
+        means = ", ".join(f"{algo} {s / 60:.1f} min" for algo, s in tr["mean_run_s"].items())
+        left = tr["left_s_estimate"]
+        lines.append(f"  {'':<18}   finished runs take {means} on average; the runs left ~{left / 3600:.1f} h at "
+                     "that pace (one at a time; algorithms without a finished run not counted)")
+    ev = status["evaluation"]
+    expected = "?" if ev["expected_rows"] is None else f"{ev['expected_rows']:,}"
+    egos = "" if ev["complete_egos"] is None else f" ({ev['complete_egos']} of {ev['egos']} egos complete)"
+    lines.append(f"  {'evaluation':<18} {ev['rows']:,} of {expected} rows{egos}")
+    lines.append(f"  {'report':<18} {status['report']}")
+    return "\n".join(lines)

@@ -1,0 +1,113 @@
+"""The data and fit steps of ``seal run`` as (name, parameters, job) triples, and their done-markers.
+
+`seal.experiments.pipeline.run` runs these steps; `seal.experiments.pipeline.status` reads which of them are done.
+Both plan them here, so a step's parameter hash is computed once, the same way for running and for reporting.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from seal.core.atomic import atomic_write_json
+from seal.experiments.pipeline.references import fit_kind, fits_needed, substitute
+
+logger = logging.getLogger(__name__)
+
+FIT_OUTPUTS = {"prior": "prior.pt", "goose": "goose.zip", "skills": "skills", "objective": "objective",
+               "behavior": "behavior", "probes": "probes"}
+"""Model name -> file or folder written under OUT/models by the fit of that model."""
+
+
+@dataclass(frozen=True)
+class StepJob:
+    """One data or fit step: its marker name, the parameters its marker hashes, and the job that runs it."""
+
+    name: str
+    params: Any
+    job: dict[str, Any]
+
+
+class Steps:
+    """Done-markers under OUT/steps: a step is done when its marker holds the same parameter hash."""
+
+    def __init__(self, out: Path) -> None:
+        self.dir = out / "steps"
+        self.ran: list[str] = []
+        self.skipped: list[str] = []
+
+    @staticmethod
+    def digest(params: Any) -> str:
+        return hashlib.sha256(json.dumps(params, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+    def marker(self, name: str) -> dict[str, Any] | None:
+        """The marker of step ``name`` (``params`` hash, ``seconds``, ``finished``), None without one."""
+        path = self.dir / f"{name}.json"
+        return json.loads(path.read_text()) if path.is_file() else None
+
+    def done(self, name: str, params: Any) -> bool:
+        marker = self.marker(name)
+        return marker is not None and marker.get("params") == self.digest(params)
+
+    def run(self, name: str, params: Any, action: Callable[[], Any]) -> bool:
+        """Run ``action`` unless ``name`` is done with these ``params``; returns True if it ran. The marker is
+        written when ``action`` returns anything but False (False: partly failed, run it again next time)."""
+        if self.done(name, params):
+            logger.info(f"[seal run] {name}: done, skipped")
+            self.skipped.append(name)
+            return False
+        logger.info(f"[seal run] {name}: running")
+        start = time.perf_counter()
+        if action() is False:
+            return True
+        atomic_write_json(self.dir / f"{name}.json", {
+            "params": self.digest(params), "seconds": round(time.perf_counter() - start, 2), "finished": time.time(),
+        })
+        self.ran.append(name)
+        return True
+
+
+def data_steps(config: Mapping[str, Any], out: Path) -> tuple[str, dict[str, Any], list[StepJob]]:
+    """The dataset folder, the data parameters (the fits run again when they change) and the generate / score /
+    split steps into OUT/data (none with ``data.path``: that dataset is used as it is)."""
+    data = config.get("data") or {}
+    data_params = {k: data.get(k) for k in ("path", "generate", "score", "split")}
+    if data.get("path"):
+        return str(Path(data["path"]).expanduser().resolve()), data_params, []
+    dataset = str(out / "data")
+    gen_opts = dict(data.get("generate") or {})
+    score_opts = dict(data.get("score") or {})
+    split_opts = dict(data.get("split") or {})
+    steps = [
+        StepJob("data", gen_opts, {"name": "data", "task": "generate", "dataset": dataset, "options": gen_opts}),
+        StepJob("score", [gen_opts, score_opts],
+                {"name": "score", "task": "score", "dataset": dataset, "options": score_opts}),
+        StepJob("split", [gen_opts, split_opts],
+                {"name": "split", "task": "split", "dataset": dataset, "options": split_opts}),
+    ]
+    return dataset, data_params, steps
+
+
+def fit_steps(config: Mapping[str, Any], out: Path, dataset: str, data_params: Mapping[str, Any]
+              ) -> tuple[dict[str, str], list[StepJob]]:
+    """Model name -> path of every model the generators in use need (dependencies first), and the fit steps of
+    those not given as ``fit.NAME.path``."""
+    models: dict[str, str] = {}
+    steps: list[StepJob] = []
+    for name in fits_needed(config):
+        spec = dict((config.get("fit") or {})[name] or {})
+        if spec.get("path"):
+            models[name] = str(Path(spec["path"]).expanduser().resolve())
+            continue
+        kind, spec = fit_kind(name, spec)
+        models[name] = str(out / "models" / FIT_OUTPUTS.get(name, name))
+        job = {"name": f"fit-{name}", "task": "fit", "model": kind, "dataset": dataset, "out": models[name],
+               "options": substitute(spec, models)}  # e.g. the objective's candidates: "${fit.prior}"
+        steps.append(StepJob(f"fit-{name}", [data_params, job], job))
+    return models, steps
