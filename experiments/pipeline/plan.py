@@ -29,7 +29,7 @@ from seal.experiments.training.config import ALGOS
 RUN_EVAL_KEYS = ("settings", "replay_ego")
 """Keys of a preset's ``eval`` section besides `seal.experiments.evaluation.evaluate.EvalRunsConfig`'s."""
 REPORT_KEYS = {"plots": bool, "videos": int, "video_format": str, "reps": int, "poi_reps": int}
-BACKEND_KEYS = {"name": str, "workers": int, "address": str, "train_workers": int}
+BACKEND_KEYS = {"name": str, "workers": int, "address": str, "train_workers": int, "fit_workers": int}
 DATA_TASKS = ("generate", "score", "split")
 
 
@@ -56,6 +56,9 @@ def check_plan(
     backend = (config.get("backend") or {}).get("name", "local")
     if backend not in ("local", "ray"):
         raise ValueError(f"backend.name must be local or ray, got {backend!r}")
+    fit_workers = (config.get("backend") or {}).get("fit_workers")
+    if fit_workers is not None and fit_workers < 1:
+        raise ValueError(f"backend.fit_workers must be at least 1, got {fit_workers}")
 
 
 def _check_data(data: Mapping[str, Any], out: Path) -> str:

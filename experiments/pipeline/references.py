@@ -83,6 +83,13 @@ def fit_kind(name: str, spec: Mapping[str, Any] | None) -> tuple[str, dict[str, 
     return kind, options
 
 
+def fit_dependencies(spec: Mapping[str, Any] | None) -> list[str]:
+    """The fitted models a ``fit.NAME`` entry's options reference (``"${fit.OTHER}"``): fitted before it; none for
+    a model given as ``path``."""
+    spec = spec or {}
+    return [] if spec.get("path") else list(dict.fromkeys(_refs(dict(spec))))
+
+
 def fits_needed(config: Mapping[str, Any]) -> list[str]:
     """Models referenced (``"${fit.NAME}"``) by the kwargs of the generators in use and by the train section,
     plus the models those fits' options reference in turn (e.g. ``objective: {prior: "${fit.prior}"}``); ordered
@@ -99,8 +106,7 @@ def fits_needed(config: Mapping[str, Any]) -> list[str]:
             raise ValueError(f"fit: circular references {' -> '.join((*chain, name))}")
         if name not in fit:
             raise ValueError(f"the preset references ${{fit.{name}}} but has no fit.{name} entry")
-        spec = fit[name] or {}
-        for dep in ([] if spec.get("path") else _refs(spec)):
+        for dep in fit_dependencies(fit[name]):
             visit(dep, (*chain, name))
         order.append(name)
 

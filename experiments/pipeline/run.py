@@ -49,7 +49,8 @@ The preset's sections (all but ``train`` belong to this module; ``train`` is pas
 * ``report``: ``plots`` (default true), ``videos`` (per generator, default 0), ``video_format``, ``reps`` /
   ``poi_reps`` (bootstrap resamples of the intervals / probabilities of improvement, as ``seal compare``).
 * ``backend``: ``name`` (local | ray), ``workers``, ``address`` (Ray), ``train_workers`` (local: concurrent train
-  jobs, when each trainer already runs several env processes); the command line overrides name and workers.
+  jobs, when each trainer already runs several env processes), ``fit_workers`` (fits run side by side when none
+  uses another's model, default 1: one after the other); the command line overrides name and workers.
 """
 
 from __future__ import annotations
@@ -79,7 +80,7 @@ from seal.experiments.pipeline.references import (
     with_algo,
     with_models,
 )
-from seal.experiments.pipeline.steps import FIT_OUTPUTS, Steps, data_steps, fit_steps
+from seal.experiments.pipeline.steps import FIT_OUTPUTS, Steps, data_steps, fit_steps, run_steps
 from seal.experiments.pipeline.tasks import run_task
 
 logger = logging.getLogger(__name__)
@@ -306,9 +307,11 @@ def _data_steps(run: _Run) -> tuple[str, dict[str, Any]]:
 def _fit_steps(run: _Run, dataset: str, data_params: Mapping[str, Any]) -> dict[str, str]:
     """2. fit the models the generators in use need, dependencies first; returns model name -> path."""
     models, steps = fit_steps(run.config, run.out, dataset, data_params)
-    for step in steps:
+    if steps:
         (run.out / "models").mkdir(exist_ok=True)
-        run.steps.run(step.name, step.params, partial(run.task, step.job))
+    # Fits are single processes, most of them one thread: backend.fit_workers runs independent ones side by side.
+    fit_workers = int((run.config.get("backend") or {}).get("fit_workers") or 1)
+    run_steps(steps, lambda step: run.steps.run(step.name, step.params, partial(run.task, step.job)), fit_workers)
     return models
 
 

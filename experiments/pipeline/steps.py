@@ -10,13 +10,13 @@ import hashlib
 import json
 import logging
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from seal.core.atomic import atomic_write_json
-from seal.experiments.pipeline.references import fit_kind, fits_needed, substitute
+from seal.experiments.pipeline.references import fit_dependencies, fit_kind, fits_needed, substitute
 
 logger = logging.getLogger(__name__)
 
@@ -32,6 +32,8 @@ class StepJob:
     name: str
     params: Any
     job: dict[str, Any]
+    after: tuple[str, ...] = ()
+    """Steps that must finish first (a fit that uses another fit's model)."""
 
 
 class Steps:
@@ -109,5 +111,38 @@ def fit_steps(config: Mapping[str, Any], out: Path, dataset: str, data_params: M
         models[name] = str(out / "models" / FIT_OUTPUTS.get(name, name))
         job = {"name": f"fit-{name}", "task": "fit", "model": kind, "dataset": dataset, "out": models[name],
                "options": substitute(spec, models)}  # e.g. the objective's candidates: "${fit.prior}"
-        steps.append(StepJob(f"fit-{name}", [data_params, job], job))
+        after = tuple(f"fit-{dep}" for dep in fit_dependencies(spec))
+        steps.append(StepJob(f"fit-{name}", [data_params, job], job, after))
     return models, steps
+
+
+def run_steps(steps: Sequence[StepJob], run_one: Callable[[StepJob], Any], workers: int = 1) -> None:
+    """Run ``steps`` (in a dependency order), at most ``workers`` at a time in threads, each once the steps it comes
+    ``after`` have finished; with one worker, one after the other in the given order. A step that fails stops new
+    starts; its error is raised once the steps already running have ended (their markers are kept)."""
+    from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
+
+    workers = max(1, int(workers))
+    names = {s.name for s in steps}
+    pending, finished = list(steps), set()
+    running: dict[Future[Any], StepJob] = {}
+    error: BaseException | None = None
+    with ThreadPoolExecutor(workers) as pool:
+        while pending or running:
+            for step in list(pending):
+                if error is not None or len(running) >= workers:
+                    break
+                if all(dep in finished or dep not in names for dep in step.after):
+                    pending.remove(step)
+                    running[pool.submit(run_one, step)] = step
+            if not running:
+                break  # a failure left the rest unstartable
+            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            for future in done:
+                step = running.pop(future)
+                if future.exception() is None:
+                    finished.add(step.name)
+                elif error is None:
+                    error = future.exception()
+    if error is not None:
+        raise error

@@ -55,6 +55,8 @@ def _nested(base: dict, dotted: str, value: object) -> dict:
     ("train.total_timesteps", "lots", r"train \(noadv, seed 0\): .*total_timesteps"),
     ("report.videos", "many", r"report.videos must be int"),
     ("backend.name", "slurm", r"backend.name must be local or ray"),
+    ("backend.fit_workers", 0, r"backend.fit_workers must be at least 1"),
+    ("backend.fit_workers", "two", r"backend.fit_workers must be int"),
 ])
 def test_a_bad_value_anywhere_fails_before_anything_is_written(
     tmp_path: Path, key: str, value: object, message: str,
