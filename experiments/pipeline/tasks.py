@@ -119,7 +119,7 @@ def fit_prior(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
     from seal.core.atomic import atomic_write_json
     from seal.core.dataset import load_split
     from seal.models.prior.network import PriorConfig
-    from seal.models.prior.train import PriorTrainConfig, fit_prior
+    from seal.models.prior.train import PriorTrainConfig, fit_prior, resumable_state
 
     doc = (yaml.safe_load(Path(o["config"]).read_text()) or {}) if o.get("config") else {}
     if not isinstance(doc, dict) or set(doc) - {"model", "train"}:
@@ -136,7 +136,12 @@ def fit_prior(dataset: str, out: str, o: dict[str, Any]) -> dict[str, Any]:
             "config_file": o.get("config")}
     logger.info(f"fit prior: {info['scenarios']} scenarios from {dataset} (split {split_name})")
     _torch_threads(train_cfg.threads)
-    prior = fit_prior(scenarios, out, model_cfg, train_cfg, data_info=info, resume=bool(o.get("resume")),
+    # Without a `resume` option a fit interrupted with the same settings (a session that ended mid-fit) goes on from
+    # its last epoch: the same model as an uninterrupted fit; a state of other settings is started over.
+    resume = o.get("resume")
+    if resume is None:
+        resume = resumable_state(out, model_cfg, train_cfg)
+    prior = fit_prior(scenarios, out, model_cfg, train_cfg, data_info=info, resume=bool(resume),
                       progress=not o.get("no_progress", False))
     summary = {k: v for k, v in prior.training.items() if not k.endswith("_scenario_ids")}
     atomic_write_json(Path(str(out) + ".json"), {"model_config": prior.config.to_dict(), "training": summary})

@@ -262,6 +262,10 @@ def test_interrupted_training_resumes_to_the_same_model(handful: list[Scenario],
     finally:
         train_mod.logger.removeHandler(interrupt)
     assert train_mod.state_path(out).exists()
+    # what `seal run` goes on from without a resume option: a state of these very settings only
+    assert train_mod.resumable_state(out, TINY, cfg)
+    assert not train_mod.resumable_state(out, TINY, replace(cfg, epochs=4))
+    assert not train_mod.resumable_state(tmp_path / "never.pt", TINY, cfg)
     caplog.clear()
     resumed = fit_prior(handful, out, TINY, cfg, resume=True, progress=False)
     assert any("resuming after epoch 1" in m for m in caplog.messages)
@@ -273,6 +277,9 @@ def test_interrupted_training_resumes_to_the_same_model(handful: list[Scenario],
                           None, {"epoch": 1}, [{"other": 1}, {}])
     with pytest.raises(ValueError, match="another model or training config"):
         fit_prior(handful, out, TINY, cfg, resume=True, progress=False)
+    assert not train_mod.resumable_state(out, TINY, cfg)
+    train_mod.state_path(out).write_bytes(b"cut short")
+    assert not train_mod.resumable_state(out, TINY, cfg)
 
 
 def test_a_budget_that_cuts_the_plan_is_named_as_the_stop_reason(handful: list[Scenario], tmp_path: Path) -> None:

@@ -56,6 +56,20 @@ def state_path(out: str | Path) -> Path:
     return out.with_name(out.name + ".train-state")
 
 
+def resumable_state(out: str | Path, model_cfg: PriorConfig, tc: PriorTrainConfig) -> bool:
+    """Whether ``out`` has the training state of an interrupted `fit_prior` with these very configs: resuming it
+    gives the model an uninterrupted fit gives (the state is saved at epoch ends; each epoch's batch order has its
+    own seed). False without a state, with another config's, or with one that does not read back."""
+    spath = state_path(out)
+    if not spath.exists():
+        return False
+    try:
+        saved = torch.load(spath, map_location="cpu", weights_only=True)
+    except Exception:  # noqa: BLE001 - a damaged state is one to start over from, never to stop on
+        return False
+    return bool(saved.get("configs") == [model_cfg.to_dict(), tc.to_dict()])
+
+
 @dataclass(frozen=True)
 class _FitData:
     """The training / validation scenarios of a fit and their samples."""
