@@ -13,7 +13,7 @@ import pytest
 import scenario_factory as sf
 import yaml
 from results_builders import episode
-from run_builders import FakeTasks
+from run_builders import FakeTasks, fake_train
 
 from seal.adversaries.base import pipeline_names
 from seal.cli import main
@@ -115,15 +115,6 @@ def test_each_run_gets_its_algorithm_and_the_reskill_runs_the_fitted_skills(real
     assert reskill["deadline_obs"] is True and td3["deadline_obs"] is False
 
 
-def _train(job) -> dict:
-    """A finished run folder (config.yaml, done.json) of the job's resolved config."""
-    out = Path(job["out"])
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "config.yaml").write_text(yaml.safe_dump(job["config"]))
-    (out / "done.json").write_text("{}")
-    return {"run": str(out)}
-
-
 def _eval(job) -> dict:
     """Four scenarios per setting: SEAL's ReSkill egos solve all four, every other ego the first two."""
     cfg = yaml.safe_load((Path(job["run"]) / "config.yaml").read_text()) if job["run"] != "replay" else {}
@@ -142,7 +133,7 @@ def test_toy_decisive_runs_end_to_end_and_reports_the_algorithms_apart(tmp_path:
             "report.videos=0", "report.reps=100", "report.poi_reps=50"]
     out = tmp_path / "toy"
     tasks = FakeTasks()
-    summary = run_pipeline(PRESET, out, backend=InlineBackend(), task_fn=tasks, train_fn=_train, eval_fn=_eval,
+    summary = run_pipeline(PRESET, out, backend=InlineBackend(), task_fn=tasks, train_fn=fake_train, eval_fn=_eval,
                            progress=False, sets=sets)
     fits = {Path(c[2]).name: c for c in tasks.calls if c[0] not in ("generate", "score", "split")}
     fitted = [c[0] for c in fits.values()]
