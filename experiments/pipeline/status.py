@@ -5,7 +5,8 @@ resumes it). Before going on, a user wants to know what is done, what is half do
 reading logs: this module reads the same markers the run itself skips on.
 
 * data and fit steps: ``done`` (their marker under OUT/steps holds the parameters the preset gives now; with the
-  seconds the step took), ``stale`` (a marker of other parameters: the step runs again) or ``pending``;
+  seconds the step took), ``stale`` (a marker of other parameters: the step runs again), ``started`` (no marker
+  but its output is there: running now, or stopped part way) or ``pending``;
 * training: per planned run folder ``done`` (``done.json``, with its wall time), ``in progress`` (the step of its
   newest checkpoint, out of its ``total_timesteps``) or ``not started``; the finished runs' mean wall time per
   ego algorithm, and the time the runs left would take at that mean (one run at a time, as the presets train);
@@ -49,7 +50,10 @@ def run_status(config_path: str | Path, out: str | Path, sets: Sequence[str] = (
 def _step(markers: Steps, step: StepJob) -> dict[str, Any]:
     marker = markers.marker(step.name)
     if marker is None:
-        return {"name": step.name, "state": "pending"}
+        # what the step writes is there without its marker: it is running, or was stopped (it resumes or redoes)
+        output = step.job.get("out") or (step.job["dataset"] if step.job.get("task") == "generate" else None)
+        started = output is not None and Path(output).exists()
+        return {"name": step.name, "state": "started" if started else "pending"}
     state = "done" if marker.get("params") == markers.digest(step.params) else "stale"
     return {"name": step.name, "state": state, "seconds": marker.get("seconds")}
 

@@ -46,6 +46,10 @@ def test_status_of_a_run_before_during_and_after(tmp_path: Path) -> None:
     changed = run_status(preset, out, ["data.split.n_eval=1"])
     assert [s["state"] for s in changed["steps"]] == ["done", "done", "stale", "stale"]
 
+    # a fit whose output is there without its marker: running now or stopped part way
+    (out / "steps" / "fit-prior.json").unlink()
+    assert run_status(preset, out)["steps"][-1] == {"name": "fit-prior", "state": "started"}
+
 
 def test_the_command_prints_the_status_as_text_or_json(tmp_path: Path, capsys) -> None:
     preset, out = write_preset(tmp_path), tmp_path / "out"
