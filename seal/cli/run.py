@@ -78,7 +78,7 @@ def register(tree: CommandTree) -> None:
                    "writes nothing")
     p.add_argument("--status", action="store_true",
                    help="where a run in --out stands (for a run carried across sessions): each data / fit step done "
-                   "(with its time), changed or pending; training runs done, in progress (steps of the newest "
+                   "(with its time), changed, started or pending; training runs done, in progress (steps of the newest "
                    "checkpoint) or not started, with the finished runs' mean time and the time left at that pace; "
                    "evaluation rows stored of those a complete evaluation writes; the report; writes nothing")
     p.add_argument("--json", action="store_true", help="with --check or --status: print it as JSON")
