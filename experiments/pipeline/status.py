@@ -28,6 +28,7 @@ from seal.core.dataset import MANIFEST
 from seal.experiments.pipeline.references import planned_runs
 from seal.experiments.pipeline.run import load_run_config
 from seal.experiments.pipeline.steps import StepJob, Steps, data_steps, fit_steps
+from seal.experiments.training.state import CHECKPOINTS, CONFIG, DONE, LATEST, read_done
 
 
 def run_status(config_path: str | Path, out: str | Path, sets: Sequence[str] = ()) -> dict[str, Any]:
@@ -65,11 +66,11 @@ def _training(out: Path, config: Mapping[str, Any]) -> dict[str, Any]:
     for name, (_, _, algo) in planned_runs(config).items():
         folder = out / "runs" / name
         row: dict[str, Any] = {"name": name, "algo": algo or default_algo, "total": _total_steps(folder, config, algo)}
-        if (folder / "done.json").is_file():
-            done = json.loads((folder / "done.json").read_text())
+        if (folder / DONE).is_file():
+            done = read_done(folder)
             row.update(state="done", steps=done.get("steps"), wall_s=done.get("wall_s"))
-        elif (folder / "checkpoints" / "latest.json").is_file():
-            latest = json.loads((folder / "checkpoints" / "latest.json").read_text())
+        elif (folder / CHECKPOINTS / LATEST).is_file():
+            latest = json.loads((folder / CHECKPOINTS / LATEST).read_text())
             row.update(state="in progress", steps=int(latest.get("step", 0)))
         else:
             row.update(state="not started", steps=0)
@@ -90,8 +91,8 @@ def _training(out: Path, config: Mapping[str, Any]) -> dict[str, Any]:
 
 def _total_steps(folder: Path, config: Mapping[str, Any], algo: str | None) -> int | None:
     """A run's ``total_timesteps``: as its own config.yaml records it, else as the preset gives it."""
-    if (folder / "config.yaml").is_file():
-        recorded = yaml.safe_load((folder / "config.yaml").read_text()) or {}
+    if (folder / CONFIG).is_file():
+        recorded = yaml.safe_load((folder / CONFIG).read_text()) or {}
         if recorded.get("total_timesteps"):
             return int(recorded["total_timesteps"])
     per_algo = ((config.get("algo_train") or {}).get(algo) or {}) if algo else {}
