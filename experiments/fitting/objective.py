@@ -28,6 +28,7 @@ Outputs in ``--out``: ``objective.pt`` (+ ``objective.json``), ``labels/``, ``co
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import logging
 import time
@@ -226,8 +227,44 @@ def per_head_ranking(pred: np.ndarray, close: np.ndarray, labels: LabelSet) -> d
     return out
 
 
-def evaluate(model: Any, labels: LabelSet, seed: int = 0) -> dict[str, Any]:
-    """Held-out metrics of the module docstring for ``model`` (an `ObjectiveModel`) on ``labels``."""
+def label_retest(labels: LabelSet, second: LabelSet, scores: dict[str, np.ndarray]) -> dict[str, Any]:
+    """How reproducible the held-out labels are: ``second`` is another draw of the same labels (same scenarios,
+    candidates and ego; another skill-noise seed of the ``seal`` label behaviour). With the logged-adversary episode
+    as the previous roll-out, the mean Spearman of the second draw's ``f_coll + f_diff`` against the first draw's says
+    how much of the label is noise: one draw already ranks the other this well, and a score that predicted the
+    expected label exactly would reach about the square root of it (for correlations, corr(E[y], y) = sqrt(corr(y1,
+    y2))). A score far below it is short of what the labels allow, not held back by their noise. ``scores`` (``[S,
+    N]`` each, e.g. pi_score and closeness) are ranked against the second draw too.
+
+    Raises ValueError when the two label sets are not of the same scenarios and candidates."""
+    from seal.models.objective.metrics import spearman
+
+    same = (list(labels.scenario_ids) == list(second.scenario_ids) and labels.cand_xy.shape == second.cand_xy.shape
+            and np.allclose(labels.cand_xy, second.cand_xy, atol=1e-4)
+            and np.allclose(labels.ego_xy[:, LOGGED_ROW], second.ego_xy[:, LOGGED_ROW], atol=1e-4))
+    if not same:
+        raise ValueError("label retest: the second draw is not of the same scenarios, candidates and logged "
+                         "episodes as the labels (other split, limit, prior or ego); delete its folder and re-run")
+    first_sum = labels.f_coll + labels.f_diff[:, LOGGED_ROW]
+    second_sum = second.f_coll + second.f_diff[:, LOGGED_ROW]
+
+    def mean_rho(a: np.ndarray, b: np.ndarray) -> float:
+        return round(float(spearman(a, b).mean()), 4)
+
+    return {
+        "label_spearman": mean_rho(second_sum, first_sum),
+        "label_spearman_per_head": {"f_coll": mean_rho(second.f_coll, labels.f_coll),
+                                    "f_diff": mean_rho(second.f_diff[:, LOGGED_ROW], labels.f_diff[:, LOGGED_ROW])},
+        "f_diff_above_half_agreement": round(float(np.mean((labels.f_diff[:, LOGGED_ROW] > 0.5)
+                                                           == (second.f_diff[:, LOGGED_ROW] > 0.5))), 4),
+        "scores_on_second_draw": {name: mean_rho(v, second_sum) for name, v in scores.items()},
+        "scenarios": int(labels.n_scenarios),
+    }
+
+
+def evaluate(model: Any, labels: LabelSet, seed: int = 0, retest: LabelSet | None = None) -> dict[str, Any]:
+    """Held-out metrics of the module docstring for ``model`` (an `ObjectiveModel`) on ``labels``; with ``retest``
+    (a second draw of the same labels) also `label_retest`."""
     from seal.models.objective.metrics import ranking_report
     from seal.models.objective.train import PairTensors, predict_pairs
 
@@ -264,13 +301,17 @@ def evaluate(model: Any, labels: LabelSet, seed: int = 0) -> dict[str, Any]:
         "closeness": closeness(labels, prev).mean(axis=1),
         "prior_probability": labels.probs.astype(np.float64),
     }
-    return {
+    report = {
         "mse": {"all_prev": mse(np.ones(len(all_pairs), dtype=bool)), "logged_prev": mse(logged)},
         "ranking_logged_prev": {k: ranking_report(v, sim_logged) for k, v in scores_logged.items()},
         "ranking_per_head": per_head_ranking(pred_grid[:, LOGGED_ROW], close_logged, labels),
         "ranking_k5_prev": {k: ranking_report(v, sim_k) for k, v in scores_k.items()},
         "labels": label_stats(labels),
     }
+    if retest is not None:
+        report["label_retest"] = label_retest(labels, retest, {k: v for k, v in scores_logged.items()
+                                                               if k != "prior_probability"})
+    return report
 
 
 def rank_latency_ms(model: Any, n_calls: int = LATENCY_CALLS, seed: int = 0) -> dict[str, float]:
@@ -361,21 +402,49 @@ def fit_objective(dataset: str | Path, out: str | Path, config: ObjectiveFitConf
     return report
 
 
+def check_retest(config: ObjectiveFitConfig, retest_seed: int | None) -> None:
+    """ValueError unless a second label draw with seed ``retest_seed`` can differ from the first (None: no retest):
+    only the ``seal`` label behaviour draws skill noise; replayed candidates against deterministic egos give the
+    same labels for every seed."""
+    if retest_seed is None:
+        return
+    if config.behavior != "seal":
+        raise ValueError("--retest-seed: the label behaviour is "
+                         f"{config.behavior!r}, whose roll-outs do not depend on the seed (the retest would be 1 by "
+                         "construction); use --behavior seal --skills DIR")
+    if int(retest_seed) == int(config.seed):
+        raise ValueError(f"--retest-seed {retest_seed} is the labels' own seed (--seed {config.seed}); give another")
+
+
 def eval_objective(model_path: str | Path, dataset: str | Path, config: ObjectiveFitConfig, labels_dir: str | Path,
-                   out: str | Path, progress: bool = True) -> dict[str, Any]:
+                   out: str | Path, progress: bool = True, retest_seed: int | None = None,
+                   retest_dir: str | Path | None = None) -> dict[str, Any]:
     """Recompute the held-out report of a saved model on ``config.eval_split`` (labels built or reused in
     ``labels_dir``); writes ``report.json`` / ``report.md`` to ``out``. A ``labels_dir`` holding labels of other
-    settings (e.g. the model's own, built with another seed or behaviour) is left alone: ValueError."""
+    settings (e.g. the model's own, built with another seed or behaviour) is left alone: ValueError.
+
+    With ``retest_seed``, a second draw of the held-out labels (skill-noise seed ``retest_seed``; built or resumed in
+    ``retest_dir``, default ``<labels_dir>-seed<retest_seed>``) gives the report's ``label_retest`` section
+    (`label_retest`: how far any score could get)."""
     from seal.models.objective import ObjectiveModel
 
+    check_retest(config, retest_seed)
     model = ObjectiveModel.load(model_path)
     labels, seconds = labels_for_split(dataset, config.eval_split, config.eval_limit, Path(labels_dir), config,
                                        progress, start_over=False)
+    timings = {"labels_eval_s": seconds}
+    second = None
+    if retest_seed is not None:
+        folder = Path(retest_dir) if retest_dir is not None else Path(labels_dir).with_name(
+            f"{Path(labels_dir).name}-seed{retest_seed}")
+        draw = dataclasses.replace(config, seed=int(retest_seed), labels_from=None)
+        second, timings["labels_retest_s"] = labels_for_split(dataset, config.eval_split, config.eval_limit, folder,
+                                                              draw, progress, start_over=False)
     report: dict[str, Any] = {"model_file": str(model_path), "dataset": str(dataset),
                               "eval_split": config.eval_split, "out": str(out), "model": model.config.to_dict()}
-    report.update(evaluate(model, labels, config.seed))
+    report.update(evaluate(model, labels, config.seed, retest=second))
     report["rank_latency"] = rank_latency_ms(model)
-    report["timings"] = {"labels_eval_s": seconds}
+    report["timings"] = timings
     write_report(Path(out), report)
     return report
 
@@ -420,6 +489,17 @@ def format_report(r: dict[str, Any]) -> str:
                   "| label | pi_score head | closeness |", "|---|---|---|"]
         lines += [f"| {k} | {v['pi_score_head']:.3f} | {v['closeness']:.3f} |"
                   for k, v in r["ranking_per_head"].items()]
+    if "label_retest" in r:
+        rt = r["label_retest"]
+        lines += ["", "## Label reproducibility (a second draw of the held-out labels, another skill-noise seed)", "",
+                  f"Spearman of the two draws' f_coll + f_diff (previous roll-out = logged episode): "
+                  f"**{rt['label_spearman']:.3f}**: one draw ranks the other this well, and a score predicting the "
+                  f"expected label would reach about its square root ({rt['label_spearman'] ** 0.5:.3f}) against one "
+                  f"draw; a score below that is short of what the labels allow, not held back by their noise (f_coll {rt['label_spearman_per_head']['f_coll']:.3f}, f_diff "
+                  f"{rt['label_spearman_per_head']['f_diff']:.3f}; f_diff > 0.5 agrees in "
+                  f"{rt['f_diff_above_half_agreement']:.1%} of the candidates).", "",
+                  "| score | Spearman against the second draw |", "|---|---|"]
+        lines += [f"| {k} | {v:.3f} |" for k, v in rt["scores_on_second_draw"].items()]
     lat = r["rank_latency"]
     lines += ["", f"rank() latency, {lat['candidates']} candidates x K = {lat['rollouts']}, one thread: median "
               f"{lat['median_ms']} ms, p95 {lat['p95_ms']} ms.", "", f"Timings (s): {r['timings']}"]

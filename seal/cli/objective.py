@@ -44,7 +44,8 @@ def cmd_eval_objective(args: argparse.Namespace) -> int:
     config = _config(args)
     labels = Path(args.labels) if args.labels else model.parent / "labels" / config.eval_split
     out = Path(args.out) if args.out else model.parent
-    report = eval_objective(model, args.dataset, config, labels, out, progress=not args.no_progress)
+    report = eval_objective(model, args.dataset, config, labels, out, progress=not args.no_progress,
+                            retest_seed=args.retest_seed, retest_dir=args.retest_labels)
     print(json.dumps(report, indent=2, default=str) if args.json else format_report(report))
     return 0
 
@@ -105,4 +106,10 @@ def register(tree: CommandTree) -> None:
     _common(e)
     e.add_argument("--labels", default=None, help="label folder to build or reuse (default MODEL_DIR/labels/SPLIT)")
     e.add_argument("--out", default=None, help="folder for report.json / report.md (default MODEL's folder)")
+    e.add_argument("--retest-seed", type=int, default=None,
+                   help="also simulate a second draw of the held-out labels with this skill-noise seed (--behavior "
+                   "seal) and report how well the two draws rank each other: how much of the label is noise, and "
+                   "how far a better score could get")
+    e.add_argument("--retest-labels", default=None,
+                   help="label folder of the second draw (default: the --labels folder's name + -seed<N>)")
     e.set_defaults(func=cmd_eval_objective)

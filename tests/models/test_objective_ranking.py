@@ -169,3 +169,50 @@ def test_load_label_folder_reads_chunks_as_they_are_and_checks_the_scenarios(tmp
         load_label_folder(folder, ["a", "b", "c"], n_egos=2)
     with pytest.raises(FileNotFoundError, match="no part_"):
         load_label_folder(tmp_path / "empty", ["a"])
+
+
+def _draw(f_coll: list[list[float]], f_diff_logged: list[list[float]], ids: tuple[str, ...] = ("a", "b")) -> LabelSet:
+    """Labels of two scenarios x 4 candidates with the given f_coll and logged-row f_diff (tracks all zero)."""
+    s, n, t = len(ids), 4, 3
+    z = np.zeros
+    f_diff = z((s, n + 1, n), np.float32)
+    f_diff[:, 0] = f_diff_logged
+    return LabelSet(scenario_ids=np.array(ids), cand_xy=z((s, n, t, 2), np.float32),
+                    cand_heading=z((s, n, t), np.float32), probs=z((s, n), np.float32),
+                    ego_xy=z((s, n + 1, t, 2), np.float32), ego_heading=z((s, n + 1, t), np.float32),
+                    ego_valid=np.ones((s, n + 1, t), bool), f_coll=np.array(f_coll, np.float32), f_diff=f_diff,
+                    crashed=z((s, n), bool), cat_score=z((s, n), np.float32))
+
+
+def test_label_retest_compares_two_draws_of_the_labels_and_ranks_the_scores_against_the_second() -> None:
+    from seal.experiments.fitting.objective import label_retest
+
+    first = _draw([[0.1, 0.2, 0.3, 0.4], [0.4, 0.3, 0.2, 0.1]], [[0, 0, 1, 1], [1, 0, 0, 0]])
+    # Second draw: scenario a keeps its order (sums 0.1, 0.2, 1.3, 1.4 -> 0.1, 0.25, 1.2, 1.45), scenario b's sums
+    # (1.4, 0.3, 0.2, 0.1) are reversed (0.0, 0.1, 0.2, 1.3): Spearman 1 and -1, mean 0.
+    second = _draw([[0.1, 0.25, 0.2, 0.45], [0.0, 0.1, 0.2, 0.3]], [[0, 0, 1, 1], [0, 0, 0, 1]])
+    score = np.array([[1.0, 2.0, 3.0, 4.0], [1.0, 2.0, 3.0, 4.0]])  # ranks as the second draw in both
+    rt = label_retest(first, second, {"score": score})
+    assert rt["label_spearman"] == 0.0
+    # f_coll: a has ranks (0,1,2,3) vs (0,2,1,3): 1 - 6 * 2 / (4 * 15) = 0.8; b is reversed: -1 -> mean -0.1.
+    assert rt["label_spearman_per_head"]["f_coll"] == pytest.approx(-0.1)
+    assert rt["f_diff_above_half_agreement"] == 0.75  # b: candidates 0 and 3 flip
+    assert rt["scores_on_second_draw"] == {"score": 1.0} and rt["scenarios"] == 2
+    assert label_retest(first, first, {})["label_spearman"] == 1.0
+    with pytest.raises(ValueError, match="not of the same scenarios"):
+        label_retest(first, _draw([[0.1] * 4] * 2, [[0] * 4] * 2, ids=("a", "c")), {})
+
+
+def test_a_retest_needs_the_seal_label_behaviour_and_another_seed(tmp_path) -> None:
+    from seal.experiments.fitting.objective import check_retest, resolve_config
+
+    prior = tmp_path / "prior.pt"
+    prior.write_bytes(b"")
+    replay = resolve_config("quick", prior=prior)
+    check_retest(replay, None)
+    with pytest.raises(ValueError, match="do not depend on the seed"):
+        check_retest(replay, 1)
+    seal = resolve_config("quick", prior=prior, behavior="seal", skills=tmp_path, seed=3)
+    check_retest(seal, 4)
+    with pytest.raises(ValueError, match="is the labels' own seed"):
+        check_retest(seal, 3)
