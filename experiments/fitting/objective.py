@@ -495,7 +495,8 @@ def format_report(r: dict[str, Any]) -> str:
                   f"Spearman of the two draws' f_coll + f_diff (previous roll-out = logged episode): "
                   f"**{rt['label_spearman']:.3f}**: one draw ranks the other this well, and a score predicting the "
                   f"expected label would reach about its square root ({rt['label_spearman'] ** 0.5:.3f}) against one "
-                  f"draw; a score below that is short of what the labels allow, not held back by their noise (f_coll {rt['label_spearman_per_head']['f_coll']:.3f}, f_diff "
+                  f"draw; a score below that is short of what the labels allow, not held back by their noise "
+                  f"(f_coll {rt['label_spearman_per_head']['f_coll']:.3f}, f_diff "
                   f"{rt['label_spearman_per_head']['f_diff']:.3f}; f_diff > 0.5 agrees in "
                   f"{rt['f_diff_above_half_agreement']:.1%} of the candidates).", "",
                   "| score | Spearman against the second draw |", "|---|---|"]
