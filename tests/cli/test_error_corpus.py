@@ -128,6 +128,17 @@ def _case_eval_of_a_folder_without_a_run(tmp: Path) -> tuple[list[str], str]:
     return ["eval", "runs", str(tmp / "empty"), "--dataset", str(_dataset(tmp / "ds"))], "empty"
 
 
+def _case_objective_retest_of_deterministic_labels(tmp: Path) -> tuple[list[str], str]:
+    # Replayed candidates against the heuristic ego: every seed gives the same labels, so a retest is refused.
+    return ["eval", "objective", str(tmp / "objective.pt"), str(_dataset(tmp / "ds")), "--candidates", "lanes",
+            "--retest-seed", "1", "--out", str(tmp / "out")], "--retest-seed"
+
+
+def _case_objective_retest_labels_without_a_seed(tmp: Path) -> tuple[list[str], str]:
+    return ["eval", "objective", str(tmp / "objective.pt"), str(_dataset(tmp / "ds")), "--candidates", "lanes",
+            "--retest-labels", str(tmp / "out" / "second"), "--out", str(tmp / "out")], "--retest-labels"
+
+
 CASES = {name[len("_case_"):]: fn for name, fn in list(globals().items()) if name.startswith("_case_")}
 
 
