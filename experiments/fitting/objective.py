@@ -521,4 +521,5 @@ def format_summary(r: dict[str, Any]) -> str:
             f"{p['top1_in_top3']:.2f} (baseline {c['top1_in_top3']:.2f}); K={K_PREV}: Spearman "
             f"{r['ranking_k5_prev']['pi_score']['spearman_mean']:.3f}\n"
             f"rank() {r['rank_latency']['median_ms']} ms median; timings {r['timings']}\n"
+            + (f"fit: {r['fit']['diagnosis']}\n" if "diagnosis" in r.get("fit", {}) else "") +
             f"full report: {Path(r['out']) / 'report.md'}")

@@ -216,3 +216,19 @@ def test_a_retest_needs_the_seal_label_behaviour_and_another_seed(tmp_path) -> N
     check_retest(seal, 4)
     with pytest.raises(ValueError, match="is the labels' own seed"):
         check_retest(seal, 3)
+
+
+def test_fit_diagnosis_tells_over_from_under_fitting_against_closeness() -> None:
+    from seal.models.objective.train import FitResult, fit_diagnosis
+
+    def fit(train: list[float], best_val: float) -> FitResult:
+        return FitResult(history=[{"train_spearman": t} for t in train], best_val_spearman=best_val,
+                         val_closeness_spearman=0.669, train_closeness_spearman=0.558)
+
+    # decisive3's capacity run: training scenarios 0.545 -> 0.655, validation at best 0.656 (closeness 0.558 / 0.669)
+    over = fit_diagnosis(fit([0.545, 0.584, 0.655], 0.656))
+    assert over.startswith("over-fits: up to +0.097") and "-0.013 on validation" in over and "all-but-eval" in over
+    under = fit_diagnosis(fit([0.550, 0.560], 0.660))
+    assert under.startswith("learns nothing beyond closeness") and "+0.002" in under
+    assert fit_diagnosis(fit([0.60], 0.70)) == "ranks validation scenarios better than closeness (+0.031)"
+    assert fit_diagnosis(FitResult()).startswith("no diagnosis")

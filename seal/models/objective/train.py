@@ -393,6 +393,30 @@ def _train_epoch(
     return total / max(seen, 1), False
 
 
+FIT_MARGIN = 0.01
+"""Spearman difference from closeness below which `fit_diagnosis` calls a fit "no better than closeness"."""
+
+
+def fit_diagnosis(result: FitResult, margin: float = FIT_MARGIN) -> str:
+    """One sentence on how the fit compares with closeness, the ranking it starts from (with ``zero_init``):
+    better on validation scenarios; better only on training scenarios (over-fitting: more scenarios or a smaller
+    model); or no better even on training scenarios (under-fitting: more epochs or capacity). Each Spearman is read
+    against closeness on the same scenarios (`FitResult`)."""
+    train_gain = max((float(r["train_spearman"]) - result.train_closeness_spearman for r in result.history),
+                     default=float("nan"))
+    val_gain = result.best_val_spearman - result.val_closeness_spearman
+    if not (np.isfinite(train_gain) and np.isfinite(val_gain)):
+        return "no diagnosis: the fit recorded no Spearman against closeness"
+    if val_gain > margin:
+        return f"ranks validation scenarios better than closeness ({val_gain:+.3f})"
+    if train_gain > margin:
+        return (f"over-fits: up to {train_gain:+.3f} over closeness on training scenarios, {val_gain:+.3f} on "
+                "validation ones; more training scenarios (e.g. --split all-but-eval: every scenario outside the "
+                "held-out groups) or a smaller model (model.hidden, model.dropout)")
+    return (f"learns nothing beyond closeness, even on training scenarios (at best {train_gain:+.3f}; validation "
+            f"{val_gain:+.3f}): more epochs or capacity (train.max_epochs, train.pairs_per_epoch, model.hidden)")
+
+
 def _fit_info(cfg: ObjectiveTrainConfig, result: FitResult, data: _FitData) -> dict[str, Any]:
     """The training record stored with the model."""
     return {"train": cfg.to_dict(), "fit": {"best_epoch": result.best_epoch, "best_val_mse": result.best_val,
@@ -400,7 +424,7 @@ def _fit_info(cfg: ObjectiveTrainConfig, result: FitResult, data: _FitData) -> d
                                             "val_closeness_spearman": result.val_closeness_spearman,
                                             "train_closeness_spearman": result.train_closeness_spearman,
                                             "stop_reason": result.stop_reason, "seconds": result.seconds,
-                                            "epochs": len(result.history)},
+                                            "epochs": len(result.history), "diagnosis": fit_diagnosis(result)},
             "train_scenarios": int(data.train_s.size), "val_scenarios": int(data.val_s.size)}
 
 
