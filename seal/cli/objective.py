@@ -26,7 +26,8 @@ def _config(args: argparse.Namespace) -> ObjectiveFitConfig:
 def cmd_fit_objective(args: argparse.Namespace) -> int:
     import json
 
-    from seal.experiments.fitting.objective import fit_objective, format_summary
+    from seal.experiments.fitting.objective import fit_objective
+    from seal.experiments.fitting.objective_report import format_summary
 
     config = _config(args)
     set_torch_threads(config.threads)
@@ -38,7 +39,8 @@ def cmd_fit_objective(args: argparse.Namespace) -> int:
 def cmd_eval_objective(args: argparse.Namespace) -> int:
     import json
 
-    from seal.experiments.fitting.objective import eval_objective, format_report
+    from seal.experiments.fitting.objective import eval_objective
+    from seal.experiments.fitting.objective_report import format_report
 
     if args.retest_labels is not None and args.retest_seed is None:
         raise ValueError("--retest-labels names the folder of the second label draw: give --retest-seed N too")

@@ -112,7 +112,8 @@ def test_source_spec_needs_exactly_one_source(tmp_path) -> None:
 def test_evaluate_reports_metrics_and_baselines(built) -> None:
     import torch
 
-    from seal.experiments.fitting.objective import K_PREV, closeness, evaluate, format_report
+    from seal.experiments.fitting.objective import closeness, evaluate
+    from seal.experiments.fitting.objective_report import K_PREV, format_report
     from seal.models.objective import ObjectiveConfig, ObjectiveModel
 
     labels, _ = built
