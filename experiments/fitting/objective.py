@@ -402,11 +402,13 @@ def fit_objective(dataset: str | Path, out: str | Path, config: ObjectiveFitConf
     return report
 
 
-def check_retest(config: ObjectiveFitConfig, retest_seed: int | None) -> None:
+def check_retest(config: ObjectiveFitConfig, retest_seed: int | None, retest_dir: str | Path | None = None) -> None:
     """ValueError unless a second label draw with seed ``retest_seed`` can differ from the first (None: no retest):
     only the ``seal`` label behaviour draws skill noise; replayed candidates against deterministic egos give the
-    same labels for every seed."""
+    same labels for every seed. A ``retest_dir`` without a seed is refused too."""
     if retest_seed is None:
+        if retest_dir is not None:
+            raise ValueError("--retest-labels names the folder of the second label draw: give --retest-seed N too")
         return
     if config.behavior != "seal":
         raise ValueError("--retest-seed: the label behaviour is "
@@ -428,7 +430,7 @@ def eval_objective(model_path: str | Path, dataset: str | Path, config: Objectiv
     (`label_retest`: how far any score could get)."""
     from seal.models.objective import ObjectiveModel
 
-    check_retest(config, retest_seed)
+    check_retest(config, retest_seed, retest_dir)
     model = ObjectiveModel.load(model_path)
     labels, seconds = labels_for_split(dataset, config.eval_split, config.eval_limit, Path(labels_dir), config,
                                        progress, start_over=False)

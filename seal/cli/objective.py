@@ -42,8 +42,6 @@ def cmd_eval_objective(args: argparse.Namespace) -> int:
     from seal.experiments.fitting.objective import eval_objective
     from seal.experiments.fitting.objective_report import format_report
 
-    if args.retest_labels is not None and args.retest_seed is None:
-        raise ValueError("--retest-labels names the folder of the second label draw: give --retest-seed N too")
     model = Path(args.model)
     config = _config(args)
     labels = Path(args.labels) if args.labels else model.parent / "labels" / config.eval_split
