@@ -18,6 +18,7 @@ from stable_baselines3.common.logger import CSVOutputFormat
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
 from seal.core.outcome import OUTCOMES, Outcome
 from seal.core.scenario import Scenario
+from seal.experiments.training.numpy_actor import deterministic_actor
 
 
 class ResumableCSVOutputFormat(CSVOutputFormat):
@@ -116,13 +117,18 @@ def evaluate_policy_on(model: Any, env: Any, scenarios: Sequence[Scenario]) -> l
     """One deterministic episode of ``model`` per scenario in ``env`` (a `ScenarioEnv`, logged adversary):
     ``[{scenario_id, outcome, crashed, route_completion, return, steps}]``."""
     rows = []
+    # The weights do not change during the evaluation: a TD3 actor acts through its numpy copy (~10x cheaper).
+    fast = deterministic_actor(model)
     for i, scenario in enumerate(scenarios):
         obs, _ = env.reset(seed=i, options={"scenario_id": scenario.scenario_id})
         done, start = False, True
         info: dict[str, Any] = {}
         while not done:
             # episode_start: a stateful policy (the ReSkill ego's skill schedule) restarts with the episode.
-            action, _ = model.predict(obs, episode_start=np.array([start]), deterministic=True)
+            if fast is not None:
+                action = fast(obs)
+            else:
+                action, _ = model.predict(obs, episode_start=np.array([start]), deterministic=True)
             start = False
             obs, _, terminated, truncated, info = env.step(action)
             done = terminated or truncated

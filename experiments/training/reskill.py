@@ -29,9 +29,10 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from seal.experiments.training.numpy_actor import actor_mlp
 from seal.experiments.training.overlap import find_overlap_env
 from seal.experiments.training.reskill_env import ReSkillEnv, residual_space
-from seal.experiments.training.reskill_policy import ReSkillPolicy, actor_layers, residual_gate
+from seal.experiments.training.reskill_policy import ReSkillPolicy, residual_gate
 from seal.experiments.training.skill_prior import BenignSkills, EgoSkills
 
 RESIDUAL = "residual"
@@ -137,7 +138,7 @@ class ResidualTrainer(BaseCallback):
     def sync(self) -> None:
         """Copy the residual actor and the gate of the current step to every worker."""
         self.gate = self.gate_at(self.num_timesteps)
-        self.training_env.env_method("set_residual", actor_layers(self.residual), self.gate)
+        self.training_env.env_method("set_residual", actor_mlp(self.residual), self.gate)
         self.next_sync = self.num_timesteps + int(self.hyper["residual_sync_every"])
 
     def _on_training_start(self) -> None:
@@ -184,7 +185,7 @@ def policy_factory(config: Mapping[str, Any], residual: Any, skills: EgoSkills) 
 
     def make(high: Any) -> ReSkillPolicy:
         gate = residual_gate(int(high.num_timesteps), int(hyper["residual_start"]), int(hyper["residual_ramp"]))
-        return ReSkillPolicy(high, skills, actor_layers(residual), gate, float(hyper["noise_bound"]),
+        return ReSkillPolicy(high, skills, actor_mlp(residual), gate, float(hyper["noise_bound"]),
                              float(hyper["residual_bound"]))
 
     return make
@@ -195,7 +196,7 @@ def load_reskill_policy(run: Path, config: Mapping[str, Any], high: Any, residua
     hyper = config["hyperparams"]
     skills = load_skills(hyper)
     gate = residual_gate(int(steps), int(hyper["residual_start"]), int(hyper["residual_ramp"]))
-    return ReSkillPolicy(high, skills, actor_layers(residual), gate, float(hyper["noise_bound"]),
+    return ReSkillPolicy(high, skills, actor_mlp(residual), gate, float(hyper["noise_bound"]),
                          float(hyper["residual_bound"]))
 
 

@@ -23,7 +23,8 @@ from typing import Any, SupportsFloat
 import gymnasium as gym
 import numpy as np
 
-from seal.experiments.training.reskill_policy import Layers, combine, residual_input, run_actor
+from seal.experiments.training.numpy_actor import NumpyMLP
+from seal.experiments.training.reskill_policy import combine, residual_input
 from seal.experiments.training.skill_prior import EgoSkills, noise_of
 
 RESIDUAL_KEYS = ("obs", "action", "reward", "next_obs", "done", "truncated")
@@ -54,15 +55,15 @@ class ReSkillEnv(gym.Wrapper):
         self.residual_noise_std = float(residual_noise_std)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (self.skills.latent_dim,), np.float32)
         self.rng = np.random.default_rng(seed)
-        self.layers: Layers | None = None
+        self.residual_actor: NumpyMLP | None = None
         self.gate = 0.0
         self._obs: np.ndarray | None = None
         self._pending: tuple[np.ndarray, np.ndarray, float] | None = None
 
     # ---------------------------------------------------------------------------- trainer-facing methods
-    def set_residual(self, layers: Layers | None, gate: float) -> None:
-        """The residual actor's weights (`seal.experiments.training.reskill_policy.actor_layers`) and gate."""
-        self.layers, self.gate = layers, float(gate)
+    def set_residual(self, actor: NumpyMLP | None, gate: float) -> None:
+        """The residual actor's weights (`seal.experiments.training.numpy_actor.actor_mlp`) and gate."""
+        self.residual_actor, self.gate = actor, float(gate)
 
     def get_state(self) -> dict[str, np.ndarray]:
         """The closed-loop env's state plus ``reskill_rng`` (JSON of the residual noise rng)."""
@@ -82,8 +83,8 @@ class ReSkillEnv(gym.Wrapper):
         return obs, info
 
     def _residual(self, x: np.ndarray) -> np.ndarray:
-        assert self.layers is not None
-        r = run_actor(self.layers, x)
+        assert self.residual_actor is not None
+        r = self.residual_actor(x)
         if self.residual_noise_std > 0:
             r = r + self.rng.normal(0.0, self.residual_noise_std, r.shape).astype(np.float32)
         return np.clip(r, -1.0, 1.0).astype(np.float32)
@@ -92,7 +93,7 @@ class ReSkillEnv(gym.Wrapper):
         if self._obs is None:
             raise RuntimeError("ReSkillEnv.step before reset")
         z = self.skills.skill(noise_of(np.asarray(action).reshape(-1), self.noise_bound), self._obs)
-        active = self.layers is not None and self.gate > 0.0
+        active = self.residual_actor is not None and self.gate > 0.0
         rows: list[tuple[Any, ...]] = []
         total, steps = 0.0, 0
         terminated = truncated = False

@@ -15,8 +15,9 @@ from seal.core.dataset import Dataset, write_dataset
 from seal.envs.scenario_env import ScenarioEnv
 from seal.experiments.training import state as ts
 from seal.experiments.training.config import load_train_config
+from seal.experiments.training.numpy_actor import NumpyMLP
 from seal.experiments.training.reskill_env import ReSkillEnv
-from seal.experiments.training.reskill_policy import ReSkillPolicy, combine, residual_gate, run_actor
+from seal.experiments.training.reskill_policy import ReSkillPolicy, combine, residual_gate
 from seal.experiments.training.skill_prior import BenignSkills, noise_of
 from seal.models.skills.io import VAE_FILE, prior_file, save_model
 from seal.models.skills.realnvp import ConditionalRealNVP, RealNVPConfig
@@ -75,8 +76,8 @@ def test_residual_starts_as_no_correction_and_learns(tmp_path: Path, skills_dir:
     correction moves it off zero (the zeroed layer still receives gradient)."""
     from stable_baselines3.common.logger import Logger
 
+    from seal.experiments.training.numpy_actor import actor_mlp
     from seal.experiments.training.reskill import build_residual_model
-    from seal.experiments.training.reskill_policy import actor_layers
     from seal.experiments.training.train import build_model
 
     config = _tiny_config(_dataset(tmp_path), skills_dir)
@@ -84,11 +85,11 @@ def test_residual_starts_as_no_correction_and_learns(tmp_path: Path, skills_dir:
     config["hyperparams"]["residual"]["policy_delay"] = 1
     residual = build_residual_model(config, BenignSkills(skills_dir), build_model)
     residual.set_logger(Logger(folder=None, output_formats=[]))
-    layers = actor_layers(residual)
+    actor = actor_mlp(residual)
     rng = np.random.default_rng(0)
     x = rng.normal(0, 3, (50, residual.observation_space.shape[0])).astype(np.float32)
     for row in x:
-        assert np.array_equal(run_actor(layers, row), np.zeros(2, np.float32))
+        assert np.array_equal(actor(row), np.zeros(2, np.float32))
     with torch.no_grad():
         assert torch.count_nonzero(residual.actor_target(torch.as_tensor(x))) == 0
     buffer = residual.replay_buffer
@@ -96,7 +97,7 @@ def test_residual_starts_as_no_correction_and_learns(tmp_path: Path, skills_dir:
         a = rng.uniform(-1, 1, (1, 2)).astype(np.float32)
         buffer.add(row[None], row[None], a, np.array([a[0, 0]]), np.array([1.0]), [{}])
     residual.train(gradient_steps=20, batch_size=16)
-    moved = np.stack([run_actor(actor_layers(residual), row) for row in x[:10]])
+    moved = np.stack([actor_mlp(residual)(row) for row in x[:10]])
     assert np.abs(moved).max() > 1e-4
 
 
@@ -113,9 +114,9 @@ def test_residual_is_bounded_by_gate_and_bound() -> None:
     np.testing.assert_allclose(combine(np.array([0.5, 0.0]), np.array([1.0, -1.0]), 1.0, 0.2), [0.7, -0.2])
     assert [residual_gate(s, 100, 50) for s in (0, 99, 100, 125, 150, 1000)] == [0.0, 0.0, 0.0, 0.5, 1.0, 1.0]
     assert residual_gate(100, 100, 0) == 1.0
-    layers = [(np.eye(3, dtype=np.float32) * 10, np.zeros(3, np.float32)), (np.ones((2, 3), np.float32),
-                                                                              np.zeros(2, np.float32))]
-    out = run_actor(layers, np.array([1.0, -1.0, 2.0], np.float32))
+    actor = NumpyMLP(((np.eye(3, dtype=np.float32) * 10, np.zeros(3, np.float32)),
+                      (np.ones((2, 3), np.float32), np.zeros(2, np.float32))), (("ReLU", ()), ("Tanh", ())))
+    out = actor(np.array([1.0, -1.0, 2.0], np.float32))
     np.testing.assert_allclose(out, np.tanh([30.0, 30.0]), rtol=1e-6)
 
 
@@ -133,7 +134,7 @@ def test_skill_env_plays_whole_skills_and_returns_residual_transitions(skills_di
 
     skills = BenignSkills(skills_dir)
     env = ReSkillEnv(ClosedLoopEnv(ScenarioEnv([sf.highway_scenario(0)]), None), skills, 2.0, 0.2, 0.0, seed=0)
-    layers = [(np.full((2, 106), 0.01, np.float32), np.array([0.3, -0.3], np.float32))]
+    layers = NumpyMLP(((np.full((2, 106), 0.01, np.float32), np.array([0.3, -0.3], np.float32)),), (("Tanh", ()),))
     env.set_residual(layers, 0.5)
     obs, _ = env.reset(seed=0)
     u = np.full(4, 0.3, np.float32)
@@ -306,17 +307,17 @@ def test_time_aware_reskill_run_learns_and_evaluates_on_the_deadline_observation
     assert ego.policy.high.observation_space.shape == (DEADLINE_OBS_DIM,)
     high_seen: list[np.ndarray] = []
     skill_seen: list[int] = []
-    predict, skill = ego.policy.high.predict, ego.policy.skills.skill
+    high_action, skill = ego.policy.high_action, ego.policy.skills.skill
 
-    def recording_predict(obs, **kwargs):  # type: ignore[no-untyped-def]
+    def recording_high_action(obs):  # type: ignore[no-untyped-def]
         high_seen.append(np.asarray(obs).copy())
-        return predict(obs, **kwargs)
+        return high_action(obs)
 
     def recording_skill(noise, obs):  # type: ignore[no-untyped-def]
         skill_seen.append(np.asarray(obs).size)
         return skill(noise, obs)
 
-    ego.policy.high.predict, ego.policy.skills.skill = recording_predict, recording_skill
+    ego.policy.high_action, ego.policy.skills.skill = recording_high_action, recording_skill
     scenario = sf.lane_change_scenario()
     env = ScenarioEnv([scenario])
     rollout = run_episode(env, scenario, ego)
