@@ -9,7 +9,8 @@ reading logs: this module reads the same markers the run itself skips on.
   but its output is there: running now, or stopped part way) or ``pending``;
 * training: per planned run folder ``done`` (``done.json``, with its wall time), ``in progress`` (the step of its
   newest checkpoint, out of its ``total_timesteps``) or ``not started``; the finished runs' mean wall time per
-  ego algorithm, and the time the runs left would take at that mean (one run at a time, as the presets train);
+  ego algorithm, and the time the runs left would take at that mean, ``backend.train_workers`` runs at a time on
+  the local backend (one otherwise);
 * evaluation: the rows in OUT/results.sqlite against the rows a complete evaluation of every planned ego and the
   Replay ego writes (`seal.experiments.evaluation.store_progress.expected_rows`; known once the data exist);
 * report: whether its marker is there.
@@ -84,9 +85,19 @@ def _training(out: Path, config: Mapping[str, Any]) -> dict[str, Any]:
     for r in runs:
         if r["state"] != "done" and r["algo"] in mean_s:
             left_s += mean_s[r["algo"]] * (1.0 - (r["steps"] or 0) / max(int(r["total"] or 1), 1))
+    concurrent = _concurrent_runs(config)
     return {"runs": runs, "done": sum(r["state"] == "done" for r in runs), "planned": len(runs),
-            "mean_run_s": {k: round(v, 1) for k, v in mean_s.items()},
-            "left_s_estimate": round(left_s, 1) if mean_s else None}
+            "mean_run_s": {k: round(v, 1) for k, v in mean_s.items()}, "concurrent_runs": concurrent,
+            "left_s_estimate": round(left_s / concurrent, 1) if mean_s else None}
+
+
+def _concurrent_runs(config: Mapping[str, Any]) -> int:
+    """Training runs `seal run` plays side by side: ``backend.train_workers`` on the local backend, else one (a
+    Ray cluster's concurrency is not known from the preset)."""
+    backend = config.get("backend") or {}
+    if backend.get("name", "local") != "local" or not backend.get("train_workers"):
+        return 1
+    return max(int(backend["train_workers"]), 1)
 
 
 def _total_steps(folder: Path, config: Mapping[str, Any], algo: str | None) -> int | None:
@@ -147,8 +158,9 @@ def format_status(status: Mapping[str, Any]) -> str:
     if tr["mean_run_s"]:
         means = ", ".join(f"{algo} {s / 60:.1f} min" for algo, s in tr["mean_run_s"].items())
         left = tr["left_s_estimate"]
+        at_a_time = "one at a time" if tr["concurrent_runs"] == 1 else f"{tr['concurrent_runs']} at a time"
         lines.append(f"  {'':<18}   finished runs take {means} on average; the runs left ~{left / 3600:.1f} h at "
-                     "that pace (one at a time; algorithms without a finished run not counted)")
+                     f"that pace ({at_a_time}; algorithms without a finished run not counted)")
     ev = status["evaluation"]
     expected = "?" if ev["expected_rows"] is None else f"{ev['expected_rows']:,}"
     egos = "" if ev["complete_egos"] is None else f" ({ev['complete_egos']} of {ev['egos']} egos complete)"

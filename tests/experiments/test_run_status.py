@@ -39,6 +39,8 @@ def test_status_of_a_run_before_during_and_after(tmp_path: Path) -> None:
     (runs / "cat-s1" / "checkpoints" / "latest.json").write_text(json.dumps({"step": 40, "dir": "step_40"}))
     mid = run_status(preset, out)["training"]
     assert mid["done"] == 3 and mid["mean_run_s"] == {"td3": 70.0} and mid["left_s_estimate"] == 42.0
+    # two local train workers play the runs left side by side: half the time
+    assert run_status(preset, out, ["backend.train_workers=2"])["training"]["left_s_estimate"] == 21.0
     assert [r for r in mid["runs"] if r["name"] == "cat-s1"] == [
         {"name": "cat-s1", "algo": "td3", "total": 100, "state": "in progress", "steps": 40}]
 
