@@ -35,61 +35,61 @@ Activation = tuple[str, tuple[Any, ...]]
 """An activation as data (picklable, for the env workers): the ``torch.nn`` class name and its parameters."""
 
 
+def _elu(x: np.ndarray, alpha: float, scale: float = 1.0) -> np.ndarray:
+    """``alpha * (exp(scale * x) - 1)`` for x <= 0, x above (ELU: scale 1; CELU: scale 1 / alpha)."""
+    return np.where(x > 0.0, x, alpha * np.expm1(np.minimum(x, 0.0) * scale))
+
+
+def _gelu(x: np.ndarray, approximate: str) -> np.ndarray:
+    if approximate == "tanh":
+        return 0.5 * x * (1.0 + np.tanh(math.sqrt(2.0 / math.pi) * (x + 0.044715 * x**3)))
+    return 0.5 * x * (1.0 + _erf(x / math.sqrt(2.0)))
+
+
+_APPLY: dict[str, Callable[[np.ndarray, tuple[Any, ...]], np.ndarray]] = {
+    "ReLU": lambda x, p: np.maximum(x, 0.0),
+    "Tanh": lambda x, p: np.tanh(x),
+    "Identity": lambda x, p: x,
+    "Sigmoid": lambda x, p: 1.0 / (1.0 + np.exp(-x)),
+    "SiLU": lambda x, p: x / (1.0 + np.exp(-x)),
+    "LeakyReLU": lambda x, p: np.where(x >= 0.0, x, p[0] * x),
+    "PReLU": lambda x, p: np.where(x >= 0.0, x, p[0] * x),
+    "ELU": lambda x, p: _elu(x, p[0]),
+    "CELU": lambda x, p: _elu(x, p[0], 1.0 / p[0]),
+    "SELU": lambda x, p: _SELU_SCALE * _elu(x, _SELU_ALPHA),
+    "Softplus": lambda x, p: _softplus(x, *p),
+    "Mish": lambda x, p: x * np.tanh(_softplus(x)),
+    "Hardtanh": lambda x, p: np.clip(x, p[0], p[1]),
+    "Hardswish": lambda x, p: x * np.clip(x + 3.0, 0.0, 6.0) / 6.0,
+    "GELU": lambda x, p: _gelu(x, p[0]),
+}
+"""Each activation's numpy function of (input, parameters), as torch computes it."""
+
+_PARAMS: dict[str, Callable[[Any], tuple[Any, ...]]] = {
+    "LeakyReLU": lambda m: (float(m.negative_slope),),
+    "PReLU": lambda m: (m.weight.detach().cpu().numpy().astype(np.float32).copy(),),
+    "ELU": lambda m: (float(m.alpha),),
+    "CELU": lambda m: (float(m.alpha),),
+    "Softplus": lambda m: (float(m.beta), float(m.threshold)),
+    "Hardtanh": lambda m: (float(m.min_val), float(m.max_val)),
+    "GELU": lambda m: (str(m.approximate),),
+}
+"""The parameters an activation module carries (the others have none)."""
+
+
 def activation_of(module: Any) -> Activation:
     """The `Activation` of a ``torch.nn`` activation module (with its slopes, alphas, bounds); ValueError for one
     `apply_activation` cannot compute."""
     name = type(module).__name__
-    params: tuple[Any, ...] = ()
-    if name == "LeakyReLU":
-        params = (float(module.negative_slope),)
-    elif name == "PReLU":
-        params = (module.weight.detach().cpu().numpy().astype(np.float32).copy(),)
-    elif name in ("ELU", "CELU"):
-        params = (float(module.alpha),)
-    elif name == "Softplus":
-        params = (float(module.beta), float(module.threshold))
-    elif name == "Hardtanh":
-        params = (float(module.min_val), float(module.max_val))
-    elif name == "GELU":
-        params = (str(module.approximate),)
-    elif name not in ("ReLU", "Tanh", "Identity", "Sigmoid", "SiLU", "SELU", "Mish", "Hardswish"):
+    if name not in _APPLY:
         raise ValueError(f"no numpy version of the activation {name}")
-    return name, params
+    return name, _PARAMS[name](module) if name in _PARAMS else ()
 
 
 def apply_activation(activation: Activation, x: np.ndarray) -> np.ndarray:
     """``x`` through `Activation` ``activation``, as torch computes it."""
-    name, p = activation
-    if name == "ReLU":
-        return np.maximum(x, 0.0)
-    if name == "Tanh":
-        return np.tanh(x)
-    if name == "Identity":
-        return x
-    if name == "Sigmoid":
-        return 1.0 / (1.0 + np.exp(-x))
-    if name == "SiLU":
-        return x / (1.0 + np.exp(-x))
-    if name in ("LeakyReLU", "PReLU"):
-        return np.where(x >= 0.0, x, p[0] * x)
-    if name in ("ELU", "CELU"):
-        scale = 1.0 if name == "ELU" else 1.0 / p[0]  # CELU: alpha * (exp(x / alpha) - 1)
-        return np.where(x > 0.0, x, p[0] * np.expm1(np.minimum(x, 0.0) * scale))
-    if name == "SELU":
-        return _SELU_SCALE * np.where(x > 0.0, x, _SELU_ALPHA * np.expm1(np.minimum(x, 0.0)))
-    if name == "Softplus":
-        return _softplus(x, *p)
-    if name == "Mish":
-        return x * np.tanh(_softplus(x))
-    if name == "Hardtanh":
-        return np.clip(x, p[0], p[1])
-    if name == "Hardswish":
-        return x * np.clip(x + 3.0, 0.0, 6.0) / 6.0
-    if name == "GELU" and p[0] == "tanh":
-        return 0.5 * x * (1.0 + np.tanh(math.sqrt(2.0 / math.pi) * (x + 0.044715 * x**3)))
-    if name == "GELU":
-        return 0.5 * x * (1.0 + _erf(x / math.sqrt(2.0)))
-    raise ValueError(f"no numpy version of the activation {name}")
+    name, params = activation
+    return _APPLY[name](x, params)
 
 
 @dataclass(frozen=True)
