@@ -2,10 +2,26 @@
 
 from __future__ import annotations
 
+import os
+from collections.abc import Iterator
+
 import pytest
 import scenario_factory as sf
 
 from seal.core.scenario import Scenario
+
+
+@pytest.fixture(scope="session", autouse=True)
+def sb3_logs_in_pytest_tmp(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """Tests that call an SB3 model's ``learn`` without a logger of their own get SB3's default one, which makes an
+    (empty) ``SB3-<date>`` folder in the system temp dir on every call; point it at pytest's temp dir instead."""
+    old = os.environ.get("SB3_LOGDIR")
+    os.environ["SB3_LOGDIR"] = str(tmp_path_factory.mktemp("sb3-logs"))
+    yield
+    if old is None:
+        os.environ.pop("SB3_LOGDIR", None)
+    else:
+        os.environ["SB3_LOGDIR"] = old
 
 
 @pytest.fixture(scope="session")
