@@ -16,7 +16,10 @@
    held-out split has no crash pair).
 
 Outputs in ``--out``: ``behavior.pt`` (the full variant of the first seed: what ``cat-rcg`` / ``seal-rcg`` load),
-``variants/<variant>-s<seed>.pt``, ``report.json``, ``report.md``, ``train_log.csv``, ``config.yaml``.
+``variants/<variant>-s<seed>.pt``, ``report.json``, ``report.md``, ``train_log.csv``, ``config.yaml``. Until the
+report is written each finished training stage is also kept in ``stages/``: a fit that was interrupted, started
+again with the same settings, goes on after its last finished stage and writes the same models
+(`seal.experiments.fitting.behavior_stages`; the report lists the stages it loaded, ``resumed_stages``).
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ from seal.models.behavior.train import BehaviorTrainConfig
 
 if typing.TYPE_CHECKING:
     from seal.experiments.fitting.behavior_data import SampleSet
+    from seal.experiments.fitting.behavior_stages import StageStore
     from seal.models.behavior.model import BehaviorModel
 
 logger = logging.getLogger(__name__)
@@ -175,10 +179,11 @@ def _unsafe_cache(model: BehaviorModel, data: Data, cache_max: int, seed: int) -
     return {"everyday_unsafe": int(rows.size), "crash_unsafe": int(crash_rows.size)}
 
 
-def fit_variants(data: Data, config: BehaviorFitConfig, seed: int, bar: Any = None
+def fit_variants(data: Data, config: BehaviorFitConfig, seed: int, bar: Any = None, stages: StageStore | None = None
                  ) -> tuple[dict[str, BehaviorModel], list[dict]]:
     """The four variants of one seed (see the module docstring) and their training log rows; ``bar`` (a tqdm
-    bar) advances once per training stage."""
+    bar) advances once per training stage; ``stages``: where finished stages are kept and loaded from (None:
+    train every stage, keep none)."""
     import torch
 
     from seal.models.behavior.model import BehaviorModel
@@ -193,24 +198,40 @@ def fit_variants(data: Data, config: BehaviorFitConfig, seed: int, bar: Any = No
     log: list[dict] = []
     for contrastive, base, tuned in ((False, "no_cl", "no_cl_ft"), (True, "cl", "full")):
         tcfg = BehaviorTrainConfig(**{**config.train_config(seed).to_dict(), "contrastive": contrastive})
-        torch.manual_seed(seed)
-        net = BehaviorNet(net_cfg)
-        start = time.monotonic()
-        protos, rows = pretrain(net, train_t, tcfg)
+        stored = None if stages is None else stages.load(base, seed)
+        if stored is None:
+            torch.manual_seed(seed)
+            net = BehaviorNet(net_cfg)
+            start = time.monotonic()
+            protos, rows = pretrain(net, train_t, tcfg)
+            info = {"variant": base, "seed": seed, "train_seconds": round(time.monotonic() - start, 1)}
+            models[base] = BehaviorModel(net_cfg, net, protos, lora=False, info=info)
+            if stages is not None:
+                stages.save(base, seed, models[base], rows)
+        else:
+            models[base], rows = stored
         if bar is not None:
             bar.update()
         log += [{"variant": base, "seed": seed, **r} for r in rows]
-        info = {"variant": base, "seed": seed, "train_seconds": round(time.monotonic() - start, 1)}
-        models[base] = BehaviorModel(net_cfg, net, protos, lora=False, info=info)
-        tuned_net = copy.deepcopy(net)
-        start = time.monotonic()
-        tuned_protos, rows = finetune(tuned_net, crash_t, tcfg, protos)
+        stored = None if stages is None else stages.load(tuned, seed)
+        if stored is None:
+            base_protos = models[base].prototypes
+            if base_protos is None:  # only a stage file written by something else can lack them
+                raise ValueError(f"fit behavior: the pre-trained stage {base}-s{seed} has no prototypes; delete "
+                                 "the stages folder of --out to train it again")
+            tuned_net = copy.deepcopy(models[base].net)
+            start = time.monotonic()
+            tuned_protos, rows = finetune(tuned_net, crash_t, tcfg, base_protos)
+            models[tuned] = BehaviorModel(net_cfg, tuned_net, tuned_protos, lora=True,
+                                          info={"variant": tuned, "seed": seed,
+                                                "finetune_seconds": round(time.monotonic() - start, 1)})
+            if stages is not None:
+                stages.save(tuned, seed, models[tuned], rows)
+        else:
+            models[tuned], rows = stored
         if bar is not None:
             bar.update()
         log += [{"variant": tuned, "seed": seed, **r} for r in rows]
-        models[tuned] = BehaviorModel(net_cfg, tuned_net, tuned_protos, lora=True,
-                                      info={"variant": tuned, "seed": seed,
-                                            "finetune_seconds": round(time.monotonic() - start, 1)})
     for m in models.values():
         m.info["unsafe_cache"] = _unsafe_cache(m, data, config.cache_max, seed)
         m.info["delta"] = data.delta
@@ -255,6 +276,8 @@ def fit_behavior(dataset: str | Path, out: str | Path, config: BehaviorFitConfig
     stages and analyses (4 stages + 4 analyses per seed)."""
     from tqdm import tqdm
 
+    from seal.experiments.fitting.behavior_stages import StageStore
+
     out = Path(out)
     (out / "variants").mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(out / "config.yaml", yaml.safe_dump(config.to_dict(), sort_keys=False).encode())
@@ -262,12 +285,15 @@ def fit_behavior(dataset: str | Path, out: str | Path, config: BehaviorFitConfig
     data = load_data(dataset, config)
     logger.info("samples: train %d, held-out %d, crash %d (delta %.3f)", len(data.train), len(data.held_out),
                 len(data.crash), data.delta)
+    stages = StageStore(out, {"config": config.to_dict(), "dataset": str(Path(dataset).resolve()),
+                              "samples": [len(data.train), len(data.held_out), len(data.crash)],
+                              "delta": data.delta})
     metrics: dict[str, list[dict[str, float]]] = {v: [] for v in VARIANTS}
     crash_metrics: dict[str, list[dict[str, float]]] = {v: [] for v in VARIANTS}
     log: list[dict] = []
     bar = tqdm(total=8 * len(config.seeds), desc="fit behavior", unit="stage", disable=not progress)
     for seed in config.seeds:
-        models, rows = fit_variants(data, config, seed, bar)
+        models, rows = fit_variants(data, config, seed, bar, stages)
         log += rows
         for name, model in models.items():
             model.save(out / "variants" / f"{name}-s{seed}.pt")
@@ -297,9 +323,11 @@ def fit_behavior(dataset: str | Path, out: str | Path, config: BehaviorFitConfig
     report["full_beats"] = _full_beats(table)
     if report["crash_table"] is not None:
         report["full_beats_on_crash"] = _full_beats(report["crash_table"])
+    report["resumed_stages"] = stages.loaded
     atomic_write_json(out / "report.json", report)
     atomic_write_bytes(out / "report.md", format_summary(report).encode())
     _write_log(out / "train_log.csv", log)
+    stages.finish()
     return report
 
 

@@ -90,7 +90,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"seal: error: {message} (SEAL_DEBUG=1 shows the traceback)", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("seal: interrupted (an unfinished dataset build resumes when re-run)", file=sys.stderr)
+        print("seal: interrupted (what had finished is kept: run the same command again to go on from there; "
+              "`seal train` with --resume)", file=sys.stderr)
         return 130
 
 

@@ -88,3 +88,65 @@ def test_fit_behavior_errors_name_the_culprit(dataset: Path, tmp_path: Path, cap
     assert main(["fit", "behavior", str(dataset), "--out", str(tmp_path / "o"), "--split", "train",
                  "--set", "crash.near_miss_m=-1", *TINY]) == 2
     assert "crash set is empty" in capsys.readouterr().err
+
+
+def _state(path: Path) -> dict:
+    from seal.models.behavior.model import BehaviorModel
+
+    m = BehaviorModel.load(path)
+    return {"net": m.net.state_dict(), "cache": m.unsafe_cache, "centroids": m.prototypes.centroids}
+
+
+def _same(a: dict, b: dict) -> bool:
+    import torch
+
+    return (all(torch.equal(a["net"][k], b["net"][k]) for k in a["net"]) and np.array_equal(a["cache"], b["cache"])
+            and torch.equal(a["centroids"], b["centroids"]))
+
+
+def test_an_interrupted_fit_goes_on_after_its_last_stage_and_writes_the_same_models(
+        dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys) -> None:
+    import seal.models.behavior.train as train
+
+    args = ["--split", "train", *TINY, "--json"]
+    assert main(["fit", "behavior", str(dataset), "--out", str(tmp_path / "whole"), *args]) == 0
+    whole = json.loads(capsys.readouterr().out)
+    assert whole["resumed_stages"] == [] and not (tmp_path / "whole" / "stages").exists()
+
+    real_finetune, calls = train.finetune, []
+
+    def interrupted_finetune(*a, **k):  # the session ends during the second fine-tuning (the 4th stage)
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real_finetune(*a, **k)
+
+    out = tmp_path / "resumed"
+    monkeypatch.setattr(train, "finetune", interrupted_finetune)
+    assert main(["fit", "behavior", str(dataset), "--out", str(out), *args]) == 130  # seal's exit code on Ctrl-C
+    assert sorted(p.name for p in (out / "stages").glob("*.pt")) == ["cl-s0.pt", "no_cl-s0.pt", "no_cl_ft-s0.pt"]
+    monkeypatch.setattr(train, "finetune", real_finetune)
+    capsys.readouterr()
+
+    assert main(["fit", "behavior", str(dataset), "--out", str(out), *args]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["resumed_stages"] == ["no_cl-s0", "no_cl_ft-s0", "cl-s0"]
+    assert report["table_7_5"] == whole["table_7_5"]
+    for v in ("no_cl", "no_cl_ft", "cl", "full"):
+        assert _same(_state(out / "variants" / f"{v}-s0.pt"), _state(tmp_path / "whole" / "variants" / f"{v}-s0.pt"))
+    assert (out / "train_log.csv").read_text() == (tmp_path / "whole" / "train_log.csv").read_text()
+    assert not (out / "stages").exists()
+
+
+def test_stages_of_other_settings_are_trained_again(dataset: Path, tmp_path: Path, capsys) -> None:
+    from seal.experiments.fitting.behavior_stages import StageStore
+
+    out = tmp_path / "b"
+    old = StageStore(out, {"config": "other settings"})
+    (old.folder / "cl-s0.pt").write_bytes(b"a stage of other settings")
+    assert main(["fit", "behavior", str(dataset), "--out", str(out), "--split", "train", *TINY, "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["resumed_stages"] == []
+    # Same settings, an unreadable stage file: trained again, not an error.
+    store = StageStore(out, {"config": "x"})
+    (store.folder / "cl-s0.pt").write_bytes(b"truncated")
+    assert store.load("cl", 0) is None and store.load("full", 0) is None and store.loaded == []
