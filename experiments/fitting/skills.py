@@ -21,7 +21,9 @@ Outputs in ``--out``: ``vae.pt``, ``prior_benign.pt``, ``prior_adversarial.pt`` 
 ``demos_<source>.npz`` (unless ``--demos`` puts them elsewhere), ``config.yaml`` (resolved), ``metrics.json``,
 ``embedding.png`` and per-model CSV logs. Each model stage is skipped when its file exists and was trained from
 the same data and settings (its recorded fingerprint), so an interrupted run resumes after its last finished
-stage.
+stage; within a model's training, ``<model file>.state`` keeps the loop's state after every epoch, and a run
+interrupted part way goes on after its last finished epoch with the same result (`seal.models.skills.train.fit_loop`;
+the file is removed once the model is saved).
 """
 
 from __future__ import annotations
@@ -50,6 +52,8 @@ from seal.models.skills.vae import VAEConfig
 logger = logging.getLogger(__name__)
 
 PRESETS = presets.SKILLS_PRESETS
+STATE_SUFFIX = ".state"
+"""Suffix of a model file's per-epoch training state, kept until the model is saved."""
 
 
 @dataclass(frozen=True)
@@ -154,8 +158,11 @@ def _fit_vae(demos: Demonstrations, rows: Rows, counts: dict[str, int], vae_cfg:
     vae = SkillVAE(vae_cfg)
     train_rows = np.concatenate([rows["train", "benign"], rows["train", "adversarial"]])
     val_rows = np.concatenate([rows["val", "benign"], rows["val", "adversarial"]])
-    fit = train_vae(vae, demos.obs, demos.actions, train_rows, val_rows, vae_train, out / "vae_log.csv", progress)
+    state = out / f"{VAE_FILE}{STATE_SUFFIX}"
+    fit = train_vae(vae, demos.obs, demos.actions, train_rows, val_rows, vae_train, out / "vae_log.csv", progress,
+                    state, vae_fp)
     save_model(vae, out / VAE_FILE, {"fingerprint": vae_fp, "fit": _fit_info(fit), "windows": counts})
+    state.unlink(missing_ok=True)
     logger.info(f"vae: {fit.stop_reason}; best epoch {fit.best_epoch} (val loss {fit.best_val:.4f})")
     return vae, vae_fp, False
 
@@ -188,10 +195,12 @@ def _fit_priors(z: Rows, cond: Rows, counts: dict[str, int], prior_cfg: RealNVPC
             prior = ConditionalRealNVP(prior_cfg)
             if from_benign:
                 prior.load_state_dict(priors["benign"].state_dict())
+            state = out / f"{prior_file(name)}{STATE_SUFFIX}"
             fit = train_prior(prior, z["train", name], cond["train", name], z["val", name], cond["val", name],
                               prior_train, out / f"prior_{name}_log.csv", progress, f"prior {name}",
-                              fit_norm=not from_benign)
+                              fit_norm=not from_benign, state_path=state, state_key=fp)
             save_model(prior, out / prior_file(name), {"fingerprint": fp, "fit": _fit_info(fit), "windows": counts})
+            state.unlink(missing_ok=True)
             logger.info(f"prior {name}: {fit.stop_reason}; best epoch {fit.best_epoch} (val NLL {fit.best_val:.3f})")
         priors[name] = prior
     return priors, reused

@@ -134,6 +134,38 @@ def _validated(model: torch.nn.Module, validate: Callable[[], dict[str, float]])
         return validate()
 
 
+STATE_FORMAT = "seal-skill-fit-state"
+
+
+def _save_state(path: Path, key: str, epoch: int, model: torch.nn.Module, opt: torch.optim.Optimizer,
+                rng: np.random.Generator, history: list[dict[str, float]], progress: dict[str, Any],
+                elapsed_s: float) -> None:
+    """Everything `fit_loop` needs to go on after ``epoch`` exactly as if it had not stopped (atomic write);
+    ``progress``: best validation loss, best epoch, epochs without improvement, best weights, and why the loop
+    stopped after this epoch (None: it goes on)."""
+    state = {"format": STATE_FORMAT, "key": key, "epoch": epoch, "model": model.state_dict(),
+             "optimizer": opt.state_dict(), "numpy_rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
+             "history": history, "progress": progress, "elapsed_s": elapsed_s}
+    buf = io.BytesIO()
+    torch.save(state, buf)
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def _load_state(path: Path | None, key: str) -> dict[str, Any] | None:
+    """The state `_save_state` left at ``path`` for the same ``key`` (data and settings), else None."""
+    if path is None or not path.is_file():
+        return None
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # a foreign or damaged file: train from the start (it is overwritten)
+        logger.warning(f"{path} does not load ({type(exc).__name__}): training from the first epoch")
+        return None
+    if not isinstance(state, dict) or state.get("format") != STATE_FORMAT or state.get("key") != key:
+        logger.info(f"{path} is the state of other data or settings: training from the first epoch")
+        return None
+    return state
+
+
 def fit_loop(
     model: torch.nn.Module,
     n_train: int,
@@ -143,10 +175,17 @@ def fit_loop(
     csv_path: str | Path | None = None,
     desc: str = "train",
     progress: bool = True,
+    state_path: str | Path | None = None,
+    state_key: str = "",
 ) -> FitResult:
     """Generic loop: ``batch_loss(indices)`` over shuffled training indices ``0..n_train-1``, ``validate()``
     returning a dict with ``"loss"`` (lower is better) after each epoch; the best weights are restored at the end.
-    One INFO line per epoch goes to this module's logger."""
+    One INFO line per epoch goes to this module's logger.
+
+    With ``state_path`` the loop's whole state (weights, optimiser, both random generators, history, best epoch,
+    time used) is written there after every epoch, and a loop started with a state of the same ``state_key`` (a
+    fingerprint of the data and settings) goes on after that epoch: an interrupted fit ends with the weights an
+    uninterrupted one reaches. The caller removes the file once it has saved the model."""
     if n_train < 1:
         raise ValueError(f"{desc}: no training windows")
     torch.manual_seed(cfg.seed)
@@ -157,14 +196,31 @@ def fit_loop(
     n_batches = max(1, math.ceil(per_epoch / cfg.batch_size))
     budget = None if cfg.max_minutes is None else 60.0 * cfg.max_minutes
     csv_file = None if csv_path is None else Path(csv_path)
-    t0 = time.perf_counter()
-    val0 = _validated(model, validate)
-    history: list[dict[str, float]] = [{"epoch": 0, **{f"val_{k}": round(v, 6) for k, v in val0.items()}}]
-    best_val, best_epoch, bad = val0["loss"], 0, 0
-    logger.info(f"{desc} epoch 0: val loss {val0['loss']:.4f} (starting weights)")
-    best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+    state_file = None if state_path is None else Path(state_path)
+    saved = _load_state(state_file, state_key)
+    if saved is None:
+        t0 = time.perf_counter()
+        val0 = _validated(model, validate)
+        history: list[dict[str, float]] = [{"epoch": 0, **{f"val_{k}": round(v, 6) for k, v in val0.items()}}]
+        best_val, best_epoch, bad = val0["loss"], 0, 0
+        logger.info(f"{desc} epoch 0: val loss {val0['loss']:.4f} (starting weights)")
+        best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+        first = 1
+    else:
+        model.load_state_dict(saved["model"])
+        opt.load_state_dict(saved["optimizer"])
+        rng.bit_generator.state = saved["numpy_rng"]
+        torch.set_rng_state(saved["torch_rng"])
+        history = list(saved["history"])
+        done = saved["progress"]
+        best_val, best_epoch, bad, best_state = done["best_val"], done["best_epoch"], done["bad"], done["best_state"]
+        t0 = time.perf_counter() - float(saved["elapsed_s"])
+        first = int(saved["epoch"]) + 1
+        logger.info(f"{desc}: going on after epoch {saved['epoch']} from {state_file}")
     stop = f"completed {cfg.max_epochs} epochs"
-    for epoch in range(1, cfg.max_epochs + 1):
+    if saved is not None and saved["progress"]["stop"] is not None:  # it had stopped: nothing left to train
+        stop, first = saved["progress"]["stop"], cfg.max_epochs + 1
+    for epoch in range(first, cfg.max_epochs + 1):
         t_epoch = time.perf_counter()
         order = rng.permutation(n_train)[:per_epoch]
         sums = _train_epoch(model, opt, order, n_batches, batch_loss, cfg, f"{desc} {epoch}/{cfg.max_epochs}",
@@ -186,11 +242,17 @@ def fit_loop(
         logger.info(f"{desc} epoch {epoch}: train loss {row['train_loss']:.4f}, val loss {val['loss']:.4f} "
                     f"({epoch_s:.1f} s)" + (" *" if improved else ""))
         elapsed = time.perf_counter() - t0
+        ended = None
         if bad >= cfg.patience:
-            stop = f"early stop: no better validation loss for {cfg.patience} epochs"
-            break
-        if budget is not None and epoch < cfg.max_epochs and elapsed + epoch_s > budget:
-            stop = f"time budget of {cfg.max_minutes:g} min reached"
+            ended = f"early stop: no better validation loss for {cfg.patience} epochs"
+        elif budget is not None and epoch < cfg.max_epochs and elapsed + epoch_s > budget:
+            ended = f"time budget of {cfg.max_minutes:g} min reached"
+        if state_file is not None:
+            _save_state(state_file, state_key, epoch, model, opt, rng, history,
+                        {"best_val": best_val, "best_epoch": best_epoch, "bad": bad, "best_state": best_state,
+                         "stop": ended}, elapsed)
+        if ended is not None:
+            stop = ended
             break
     model.load_state_dict(best_state)
     model.eval()
@@ -215,9 +277,11 @@ def fit_norm_from_rows(vae: SkillVAE, obs: np.ndarray, actions: np.ndarray, rows
 def train_vae(
     vae: SkillVAE, obs: np.ndarray, actions: np.ndarray, train_rows: np.ndarray, val_rows: np.ndarray,
     cfg: SkillTrainConfig, csv_path: str | Path | None = None, progress: bool = True,
+    state_path: str | Path | None = None, state_key: str = "",
 ) -> FitResult:
     """Train ``vae`` on windows starting at ``train_rows`` of the demonstration rows ``obs [M, D]`` /
-    ``actions [M, 2]``; validation loss = recon (posterior mean) + beta KL on ``val_rows``."""
+    ``actions [M, 2]``; validation loss = recon (posterior mean) + beta KL on ``val_rows``. ``state_path``,
+    ``state_key``: per-epoch state to go on from (`fit_loop`)."""
     h = vae.config.horizon
     fit_norm_from_rows(vae, obs, actions, train_rows, seed=cfg.seed)
     val_o, val_a = _windows(obs, actions, val_rows, h)
@@ -236,7 +300,7 @@ def train_vae(
         n = max(1, val_o.shape[0])
         return {"loss": (rec + vae.config.beta * kl) / n, "recon": rec / n, "kl": kl / n}
 
-    return fit_loop(vae, train_rows.size, batch_loss, validate, cfg, csv_path, "vae", progress)
+    return fit_loop(vae, train_rows.size, batch_loss, validate, cfg, csv_path, "vae", progress, state_path, state_key)
 
 
 @torch.no_grad()
@@ -254,11 +318,12 @@ def encode_windows(vae: SkillVAE, obs: np.ndarray, actions: np.ndarray, rows: np
 def train_prior(
     prior: ConditionalRealNVP, z_train: np.ndarray, cond_train: np.ndarray, z_val: np.ndarray, cond_val: np.ndarray,
     cfg: SkillTrainConfig, csv_path: str | Path | None = None, progress: bool = True, desc: str = "prior",
-    fit_norm: bool = True,
+    fit_norm: bool = True, state_path: str | Path | None = None, state_key: str = "",
 ) -> FitResult:
     """Fit ``prior`` by maximum likelihood of latents ``z [N, L]`` given states ``cond [N, D]``; the loss is the
     mean negative log-likelihood (nats per window). ``fit_norm`` False keeps the prior's standardisation (when
-    fine-tuning a trained prior: refitting it would change the function being fine-tuned)."""
+    fine-tuning a trained prior: refitting it would change the function being fine-tuned). ``state_path``,
+    ``state_key``: per-epoch state to go on from (`fit_loop`)."""
     if fit_norm:
         prior.fit_norm(z_train, cond_train)
     zt, ct = torch.as_tensor(z_train, dtype=torch.float32), torch.as_tensor(cond_train, dtype=torch.float32)
@@ -271,4 +336,4 @@ def train_prior(
     def validate() -> dict[str, float]:
         return {"loss": float(-prior.log_prob(zv, cv).mean())} if zv.shape[0] else {"loss": math.inf}
 
-    return fit_loop(prior, zt.shape[0], batch_loss, validate, cfg, csv_path, desc, progress)
+    return fit_loop(prior, zt.shape[0], batch_loss, validate, cfg, csv_path, desc, progress, state_path, state_key)
