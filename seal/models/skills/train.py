@@ -166,6 +166,28 @@ def _load_state(path: Path | None, key: str) -> dict[str, Any] | None:
     return state
 
 
+def _start(model: torch.nn.Module, opt: torch.optim.Optimizer, rng: np.random.Generator,
+           validate: Callable[[], dict[str, float]], saved: dict[str, Any] | None, desc: str
+           ) -> tuple[list[dict[str, float]], dict[str, Any], float]:
+    """Where `fit_loop` starts: from ``saved`` (its state after an epoch: weights, optimiser and generators are
+    restored in place) or afresh (epoch 0's validation of the starting weights). Returns the history, the progress
+    (`_save_state`) and the seconds already used."""
+    if saved is None:
+        t0 = time.perf_counter()
+        val0 = _validated(model, validate)
+        logger.info(f"{desc} epoch 0: val loss {val0['loss']:.4f} (starting weights)")
+        progress = {"best_val": val0["loss"], "best_epoch": 0, "bad": 0, "stop": None,
+                    "best_state": {k: v.detach().clone() for k, v in model.state_dict().items()}}
+        return ([{"epoch": 0, **{f"val_{k}": round(v, 6) for k, v in val0.items()}}], progress,
+                time.perf_counter() - t0)
+    model.load_state_dict(saved["model"])
+    opt.load_state_dict(saved["optimizer"])
+    rng.bit_generator.state = saved["numpy_rng"]
+    torch.set_rng_state(saved["torch_rng"])
+    logger.info(f"{desc}: going on after epoch {saved['epoch']} (saved state)")
+    return list(saved["history"]), dict(saved["progress"]), float(saved["elapsed_s"])
+
+
 def fit_loop(
     model: torch.nn.Module,
     n_train: int,
@@ -197,29 +219,12 @@ def fit_loop(
     budget = None if cfg.max_minutes is None else 60.0 * cfg.max_minutes
     csv_file = None if csv_path is None else Path(csv_path)
     state_file = None if state_path is None else Path(state_path)
-    saved = _load_state(state_file, state_key)
-    if saved is None:
-        t0 = time.perf_counter()
-        val0 = _validated(model, validate)
-        history: list[dict[str, float]] = [{"epoch": 0, **{f"val_{k}": round(v, 6) for k, v in val0.items()}}]
-        best_val, best_epoch, bad = val0["loss"], 0, 0
-        logger.info(f"{desc} epoch 0: val loss {val0['loss']:.4f} (starting weights)")
-        best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
-        first = 1
-    else:
-        model.load_state_dict(saved["model"])
-        opt.load_state_dict(saved["optimizer"])
-        rng.bit_generator.state = saved["numpy_rng"]
-        torch.set_rng_state(saved["torch_rng"])
-        history = list(saved["history"])
-        done = saved["progress"]
-        best_val, best_epoch, bad, best_state = done["best_val"], done["best_epoch"], done["bad"], done["best_state"]
-        t0 = time.perf_counter() - float(saved["elapsed_s"])
-        first = int(saved["epoch"]) + 1
-        logger.info(f"{desc}: going on after epoch {saved['epoch']} from {state_file}")
-    stop = f"completed {cfg.max_epochs} epochs"
-    if saved is not None and saved["progress"]["stop"] is not None:  # it had stopped: nothing left to train
-        stop, first = saved["progress"]["stop"], cfg.max_epochs + 1
+    history, done, elapsed_s = _start(model, opt, rng, validate, _load_state(state_file, state_key), desc)
+    t0 = time.perf_counter() - elapsed_s
+    best_val, best_epoch, bad, best_state = done["best_val"], done["best_epoch"], done["bad"], done["best_state"]
+    stop = done["stop"] or f"completed {cfg.max_epochs} epochs"
+    # a loop that had stopped has nothing left to train
+    first = cfg.max_epochs + 1 if done["stop"] is not None else int(history[-1]["epoch"]) + 1
     for epoch in range(first, cfg.max_epochs + 1):
         t_epoch = time.perf_counter()
         order = rng.permutation(n_train)[:per_epoch]
