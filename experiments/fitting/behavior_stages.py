@@ -3,21 +3,22 @@
 A fit trains four stages per seed (two pre-trainings, each then fine-tuned on the crash set): 46.5 min in all for
 the decisive preset on the machine of session 27, and a session that ended part way lost all of it. After each stage
 its network, prototypes and training-log rows are written to ``<out>/stages/<variant>-s<seed>.pt`` (a behaviour model
-file), beside ``stages/settings.json``: the fit's config, the dataset and the sizes of its samples. A fit started
-again with the same settings loads the stages that are there instead of training them; every stage seeds its own
-training (`seal.models.behavior.train`), so the result is the model an uninterrupted fit writes. A fit with other
-settings starts over (the stage files are removed first). The folder is removed once the fit has written its report.
+file), beside ``stages/settings.json``: the fingerprint (`seal.core.chunked.fingerprint`) of the fit's config, the
+dataset and the sizes of its samples. A fit started again with the same settings loads the stages that are there
+instead of training them; every stage seeds its own training (`seal.models.behavior.train`), so the result is the
+model an uninterrupted fit writes. A fit with other settings starts over (the stage files are removed first). The
+folder is removed once the fit has written its report.
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import shutil
 from pathlib import Path
 from typing import Any
 
 from seal.core.atomic import atomic_write_bytes
+from seal.core.chunked import fingerprint
 from seal.models.behavior.model import BehaviorFileError, BehaviorModel
 
 logger = logging.getLogger(__name__)
@@ -26,10 +27,6 @@ STAGES_DIR = "stages"
 SETTINGS_FILE = "settings.json"
 LOG_KEY = "train_log"
 """Key of the stage's training-log rows in a stage file's info (not in the variant files the fit writes)."""
-
-
-def _canonical(settings: dict[str, Any]) -> str:
-    return json.dumps(settings, sort_keys=True, default=str)
 
 
 class StageStore:
@@ -45,7 +42,7 @@ class StageStore:
         self.folder = Path(out) / STAGES_DIR
         self.loaded: list[str] = []
         """Names (``<variant>-s<seed>``) of the stages loaded instead of trained, in order."""
-        text = _canonical(settings)
+        text = fingerprint(settings)
         path = self.folder / SETTINGS_FILE
         stored = path.read_text() if path.is_file() else None
         if stored != text:
