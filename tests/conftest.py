@@ -24,6 +24,19 @@ def sb3_logs_in_pytest_tmp(tmp_path_factory: pytest.TempPathFactory) -> Iterator
         os.environ["SB3_LOGDIR"] = old
 
 
+@pytest.fixture(scope="session", autouse=True)
+def one_torch_thread() -> Iterator[None]:
+    """One torch thread per test process, as the CLI's fits and workers set for themselves: ``pytest -n auto``
+    runs a process per core, and torch's own threads on top of that oversubscribe the cores (a small GRU fit took
+    8x longer with two threads per process on this 2-core machine under load)."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
 @pytest.fixture(scope="session")
 def lane_change() -> Scenario:
     return sf.lane_change_scenario()

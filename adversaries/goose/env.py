@@ -15,8 +15,9 @@ drawn (nothing to learn from them).
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import gymnasium as gym
@@ -93,6 +94,8 @@ class GooseEnv(gym.Env):
         self.observation_space = observation_space(self.goose_spec)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(N_ACTION,), dtype=np.float32)
         self._starts: dict[str, ScenarioStart] = {}
+        self._started: dict[str, bool] = {}
+        """Every scenario started so far: whether its logged adversary reached the goal (`start_counts`)."""
         self._curve: GooseCurve | None = None
         self._updates = 0
         self.last_rollout: Rollout | None = None
@@ -110,6 +113,7 @@ class GooseEnv(gym.Env):
             achieved = achieved_goal(rollout)
             hit = ScenarioStart(curve, rollout, achieved, bool(goal_reached(achieved, self.goose_spec.goal_array)))
             self._starts[scenario_id] = hit
+            self._started[scenario_id] = hit.solved
         return hit
 
     def _draw(self) -> str:
@@ -160,9 +164,37 @@ class GooseEnv(gym.Env):
     @property
     def start_counts(self) -> tuple[int, int]:
         """(scenarios started so far, of which the logged adversary already reached the goal)."""
-        return len(self._starts), sum(s.solved for s in self._starts.values())
+        return len(self._started), sum(self._started.values())
 
     @property
     def curve(self) -> GooseCurve | None:
         """The current curve of the running episode."""
         return self._curve
+
+    # ------------------------------------------------------------------------------------------ resume
+    def get_state(self) -> dict[str, np.ndarray]:
+        """What `set_state` needs to go on exactly from here (``seal fit goose`` checkpoints): the env rng, the
+        running episode (scenario, edited control points and weights, updates made) and which scenarios were
+        started (solved or not, for `start_counts`). Numpy arrays only (saved with ``allow_pickle=False``)."""
+        meta = {
+            "rng": self.np_random.bit_generator.state, "updates": self._updates,
+            "scenario_id": None if self._curve is None else self._curve.scenario_id,
+            "started": self._started,
+        }
+        curve = self._curve
+        return {
+            "meta": np.array(json.dumps(meta)),
+            "ctrl": np.zeros((0, 2)) if curve is None else np.asarray(curve.ctrl, dtype=np.float64),
+            "weights": np.zeros(0) if curve is None else np.asarray(curve.weights, dtype=np.float64),
+        }
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        """Restore `get_state`'s arrays. Start roll-outs are recomputed when a scenario comes up (deterministic)."""
+        meta = json.loads(str(state["meta"]))
+        self.np_random.bit_generator.state = meta["rng"]
+        self._started.update({str(k): bool(v) for k, v in meta["started"].items()})
+        self._updates = int(meta["updates"])
+        sid = meta["scenario_id"]
+        self._curve = None if sid is None else replace(
+            self.start(sid).curve, ctrl=np.array(state["ctrl"], dtype=np.float64),
+            weights=np.array(state["weights"], dtype=np.float64))

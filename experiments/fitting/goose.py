@@ -5,6 +5,10 @@ Outputs: the agent file ``--out`` (`seal.adversaries.goose.agent`, written atomi
 resolved ``config.yaml``, SB3's ``progress.csv`` (+ TensorBoard events when tensorboard is installed),
 ``success.csv`` (goal success rate per ``log_every`` environment steps = observed roll-outs), ``eval.json``
 (held-out success of the zero / random / untrained / trained policies) and ``summary.json``.
+
+The fit learns in chunks of ``checkpoint_every`` roll-outs and checkpoints after each (`seal.experiments.fitting.
+goose_state`): the same command run again after a kill goes on from the last checkpoint and writes the same agent
+as an uninterrupted fit.
 """
 
 from __future__ import annotations
@@ -27,9 +31,11 @@ from seal.adversaries.goose.agent import GooseAgent, load_goose_agent, policy_kw
 from seal.adversaries.goose.env import GooseEnv
 from seal.adversaries.goose.spec import GooseSpec
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
+from seal.core.chunked import fingerprint
 from seal.core.config import load_config, overrides_field, to_dict
 from seal.experiments import presets
 from seal.experiments.evaluation.goose_eval import evaluate, random_actor, zero_actor
+from seal.experiments.fitting import goose_state
 
 logger = logging.getLogger(__name__)
 
@@ -84,6 +90,9 @@ class GooseFitConfig:
     """Use the first N held-out scenarios (None: all)."""
     log_every: int = 500
     """Env steps per success.csv row."""
+    checkpoint_every: int = 1000
+    """Env steps between checkpoints of a running fit (0: none); a fit run again with the same settings goes on
+    from the last one. Does not change what is learnt."""
     spec: dict[str, Any] = overrides_field(GooseSpec)
     """`GooseSpec` overrides."""
 
@@ -91,6 +100,8 @@ class GooseFitConfig:
         for key in ("total_steps", "batch_size", "buffer_size", "log_every", "gru_hidden", "train_freq"):
             if int(getattr(self, key)) < 1:
                 raise ValueError(f"{key} must be >= 1, got {getattr(self, key)}")
+        if int(self.checkpoint_every) < 0:
+            raise ValueError(f"checkpoint_every must be >= 0, got {self.checkpoint_every}")
         GooseSpec.from_dict(self.spec or {}, where="config key 'spec'")
 
 
@@ -117,16 +128,13 @@ class _Progress:
 
         outer = self
 
-        class Callback(BaseCallback):
+        class Callback(BaseCallback):  # the fit learns in chunks: `close` comes once, after the last
             def _on_training_start(self) -> None:
                 outer.start(self.num_timesteps)
 
             def _on_step(self) -> bool:
                 outer.on_step(self.num_timesteps, self.locals["dones"], self.locals["infos"])
                 return True
-
-            def _on_training_end(self) -> None:
-                outer.close(self.num_timesteps)
 
         self.callback = Callback()
         self.total, self.log_every, self.path, self.show = total, log_every, path, progress
@@ -135,10 +143,29 @@ class _Progress:
         self._all: list[bool] = []
         self._bar: Any = None
         self._t0 = time.perf_counter()
+        self._elapsed_before = 0.0
+        """Training seconds of the sessions before this one (a resumed fit)."""
 
     def start(self, steps: int) -> None:
-        self._t0 = time.perf_counter()
-        self._bar = tqdm(total=self.total, initial=steps, desc="fit goose", unit="roll-out", disable=not self.show)
+        if self._bar is None:  # the first chunk of this session
+            self._t0 = time.perf_counter()
+            self._bar = tqdm(total=self.total, initial=steps, desc="fit goose", unit="roll-out",
+                             disable=not self.show)
+
+    @property
+    def elapsed_s(self) -> float:
+        """Training seconds so far, earlier sessions of a resumed fit included."""
+        return self._elapsed_before + (time.perf_counter() - self._t0 if self._bar is not None else 0.0)
+
+    def get_state(self) -> dict[str, Any]:
+        """The curve so far, as JSON (checkpoints)."""
+        return {"rows": self.rows, "window": self._window, "all": self._all, "elapsed_s": self.elapsed_s}
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        self.rows = [dict(r) for r in state["rows"]]
+        self._window = [(bool(a), float(b)) for a, b in state["window"]]
+        self._all = [bool(a) for a in state["all"]]
+        self._elapsed_before = float(state["elapsed_s"])
 
     def on_step(self, steps: int, dones: np.ndarray, infos: list[dict[str, Any]]) -> None:
         for done, info in zip(dones, infos, strict=True):
@@ -151,7 +178,7 @@ class _Progress:
             self._flush(steps)
 
     def _flush(self, steps: int) -> None:
-        elapsed = time.perf_counter() - self._t0
+        elapsed = self.elapsed_s
         w = self._window
         row = {
             "steps": steps,
@@ -205,6 +232,39 @@ def build_model(env: GooseEnv, config: GooseFitConfig, spec: GooseSpec) -> Any:
     return TD3("MultiInputPolicy", env, action_noise=noise, **common)
 
 
+def _logger(run: Path, resumed_step: int | None) -> Any:
+    """SB3's logger into the run folder: ``progress.csv`` (a resumed fit keeps its rows up to the checkpoint) and
+    TensorBoard events when tensorboard is installed."""
+    from stable_baselines3.common.logger import Logger, TensorBoardOutputFormat
+
+    from seal.experiments.training.callbacks import ResumableCSVOutputFormat
+    from seal.experiments.training.state import truncate_progress
+
+    progress_csv = run / "progress.csv"
+    if resumed_step is None:
+        progress_csv.unlink(missing_ok=True)
+    else:
+        truncate_progress(progress_csv, resumed_step)
+    formats: list[Any] = [ResumableCSVOutputFormat(str(progress_csv))]
+    if importlib.util.find_spec("tensorboard") is not None:
+        formats.append(TensorBoardOutputFormat(str(run)))
+    return Logger(folder=str(run), output_formats=formats)
+
+
+def _learn_in_chunks(model: Any, total: int, every: int, tracker: _Progress, checkpoint: Any) -> None:
+    """``model.learn`` up to ``total`` env steps in chunks of ``every`` (0: one chunk), ``checkpoint()`` after each
+    chunk but the last. With SB3's one-step train frequency a chunk boundary changes nothing that is learnt: the
+    next chunk goes on from the same observation, buffer and counters (``reset_num_timesteps=False``)."""
+    while model.num_timesteps < total:
+        done = int(model.num_timesteps)
+        chunk = total - done if every <= 0 else min(every - done % every, total - done)
+        model.learn(total_timesteps=chunk, callback=tracker.callback, reset_num_timesteps=done == 0,
+                    progress_bar=False)
+        if model.num_timesteps < total:
+            checkpoint()
+    tracker.close(int(model.num_timesteps))
+
+
 def default_run_dir(out: str | Path) -> Path:
     out = Path(out)
     return out.with_name(out.stem + "_run")
@@ -217,8 +277,6 @@ def fit_goose(
     """Train, save the agent to ``out``, evaluate; returns the summary (also written to the run folder).
 
     The caller sets torch's threads (the CLI: one, `FIT_THREADS`)."""
-    from stable_baselines3.common.logger import configure
-
     spec = GooseSpec.from_dict(config.spec or {}, where="config key 'spec'")
     train = _scenarios(dataset, config.split, config.limit)
     held_scenarios = None
@@ -232,33 +290,44 @@ def fit_goose(
 
     env = GooseEnv(train, spec)
     model = build_model(env, config, spec)
-    formats = ["csv"] + (["tensorboard"] if importlib.util.find_spec("tensorboard") is not None else [])
-    model.set_logger(configure(str(run), formats))
-
     held_out = None if held_scenarios is None else GooseEnv(held_scenarios, spec, skip_solved=False)
     ids = [s.scenario_id for s in held_out.scenarios] if held_out is not None else []
+    fit_fp = fingerprint({"config": {k: v for k, v in to_dict(config).items() if k != "checkpoint_every"},
+                          "dataset": str(Path(dataset).resolve()), "out": str(out.resolve()),
+                          "train": [s.scenario_id for s in train], "eval": ids})
+    resumed = goose_state.read_checkpoint(run, fit_fp)
+    model.set_logger(_logger(run, None if resumed is None else int(resumed["step"])))
+    tracker = _Progress(int(config.total_steps), int(config.log_every), run / "success.csv", progress)
 
     evaluation: dict[str, Any] = {}
-    if held_out is not None:
+    if resumed is not None:
+        goose_state.restore(run, model, env, resumed)
+        tracker.set_state(resumed["tracker"])
+        evaluation = resumed["baseline"]
+        logger.info(f"resuming the fit from its checkpoint at {resumed['step']} of {config.total_steps} roll-outs")
+    elif held_out is not None:
         logger.info(f"held-out baseline on {len(ids)} {config.eval_split} scenarios (zero, random, untrained)")
         untrained = GooseAgent(model.policy, spec, config.algo)
         evaluation.update(evaluate(held_out, ids, {
             "zero": zero_actor, "random": random_actor(int(config.seed)), "untrained": untrained.act,
         }, progress))
 
-    tracker = _Progress(int(config.total_steps), int(config.log_every), run / "success.csv", progress)
-    start = time.perf_counter()
-    model.learn(total_timesteps=int(config.total_steps), callback=tracker.callback)
-    train_s = time.perf_counter() - start
+    def checkpoint() -> None:
+        goose_state.write_checkpoint(run, model, env, {
+            "fingerprint": fit_fp, "tracker": tracker.get_state(), "baseline": evaluation})
+
+    _learn_in_chunks(model, int(config.total_steps), int(config.checkpoint_every), tracker, checkpoint)
+    train_s = tracker.elapsed_s
     drawn, solved = env.start_counts
     summary_train = {
         "train_scenarios": len(train), "train_solved_at_start": solved, "train_scenarios_drawn": drawn,
-        "train_seconds": round(train_s, 1),
+        "train_seconds": round(train_s, 1), "resumed_from_step": None if resumed is None else int(resumed["step"]),
         "env_steps": int(model.num_timesteps), "steps_per_s": round(model.num_timesteps / train_s, 2),
         "success_curve": tracker.rows,
     }
     save_goose_agent(out, model.policy, config.algo, spec, list(config.net_arch), config.gru_hidden,
                      summary={k: v for k, v in summary_train.items() if k != "success_curve"})
+    goose_state.remove(run)
 
     if held_out is not None:
         logger.info(f"held-out evaluation of the trained agent (as saved in {out}) on {len(ids)} scenarios")

@@ -65,6 +65,9 @@ def test_preset_resolves_to_recorded_values(key: str) -> None:
         # Added after the recording (issue 25): SB3 policy_kwargs besides net_arch, none by default.
         if "policy_kwargs" in resolved["hyperparams"]:
             assert resolved["hyperparams"].pop("policy_kwargs") == {}
+    if key.startswith("goose/"):
+        # Added after the recording: checkpoints of a running fit (they change nothing that is learnt).
+        assert resolved.pop("checkpoint_every") == 1000
     assert resolved == RECORDED[key]
 
 
