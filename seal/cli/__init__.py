@@ -26,8 +26,8 @@ EXIT_BROKEN_PIPE = 141
 #: Modules whose ``register(tree)`` adds commands, in the order they appear in ``seal --help``.
 COMMAND_MODULES = (
     "seal.cli.data", "seal.cli.bench", "seal.cli.generators", "seal.cli.importers", "seal.cli.goose", "seal.cli.prior",
-    "seal.cli.skills", "seal.cli.evaluate", "seal.cli.compare", "seal.cli.run", "seal.cli.train",
-    "seal.cli.objective", "seal.cli.steering", "seal.cli.behavior", "seal.cli.background",
+    "seal.cli.skills", "seal.cli.evaluate", "seal.cli.avoidability", "seal.cli.compare", "seal.cli.run",
+    "seal.cli.train", "seal.cli.objective", "seal.cli.steering", "seal.cli.behavior", "seal.cli.background",
 )
 
 

@@ -1,0 +1,233 @@
+"""``seal eval avoidability``: were an ego's crashes avoidable? A hindsight search over other ego plans.
+
+For each scenario of a setting the ego plays the evaluation protocol exactly as ``seal eval runs`` does
+(`seal.experiments.evaluation.protocol`: the normal episode, then the K generator passes; the last one scored). When
+the scored episode ends in a crash, the scored pass's adversary behaviour is played again from the same env seed
+against other ego plans: the reference ego itself (the crash must come back, else the row says "not reproducible"),
+the heuristic driver, and `AvoidabilityConfig.n_plans` plans that drive like the heuristic driver with a
+piecewise-constant offset added to its acceleration (and, on some segments, its steering): full braking or full
+throttle from each segment on, then random offsets. A crash is *avoidable* when one of them finishes the episode
+without a crash and on the road, and *avoidable reaching the goal* when one also completes the route.
+
+What this measures and what it does not: the plans know the adversary's future (it is replayed: open loop for
+CAT-style generators, reacting to the plan for SEAL's skills), so "avoidable" is a hindsight bound, what no
+reactive driver is promised to reach; and the plans are a sample, so "not avoidable" means "none of the plans
+tried avoided it", not a proof. Crashes are split by whom the ego touched: the adversary, or other traffic (which
+replays its log and does not react to the ego unless the setting is ``normal-reactive``).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from seal.core.scenario import Scenario
+from seal.envs.heuristic import HeuristicDriver
+from seal.envs.rollout import Rollout
+from seal.envs.scenario_env import ScenarioEnv
+
+FAILED = ("crash", "out_of_road")
+
+
+@dataclass(frozen=True)
+class AvoidabilityConfig:
+    """How other ego plans are searched for a crashed episode."""
+
+    n_plans: int = 64
+    """Plans tried per crash besides the reference ego and the heuristic driver (the first 2 x ``segments`` are full
+    braking / full throttle from each segment on, the rest random)."""
+    segments: int = 6
+    """Pieces of the episode horizon over which an offset stays constant."""
+    max_accel_offset: float = 2.0
+    """Largest acceleration offset of a random plan (normalised action units; the action is clipped to [-1, 1], so
+    2 can override any heuristic acceleration)."""
+    max_steer_offset: float = 0.3
+    """Largest steering offset of a random plan (normalised action units, x the largest steering angle)."""
+    steer_share: float = 0.5
+    """Share of a random plan's segments that get a steering offset (the others keep the heuristic steering)."""
+    seed: int = 0
+    """Seed of the random plans (with the scenario index)."""
+
+    def __post_init__(self) -> None:
+        if self.n_plans < 0 or self.segments < 1:
+            raise ValueError(f"n_plans must be >= 0 and segments >= 1, got {self.n_plans} and {self.segments}")
+        if not 0.0 <= self.steer_share <= 1.0:
+            raise ValueError(f"steer_share must be in [0, 1], got {self.steer_share}")
+
+
+class PlanEgo:
+    """The heuristic driver plus a piecewise-constant offset ``[segments, 2]`` (steering, acceleration) on its
+    normalised action, each segment ``segment_steps`` env steps long from the episode's first step."""
+
+    name = "plan"
+
+    def __init__(self, offsets: np.ndarray, segment_steps: int) -> None:
+        self.offsets = np.asarray(offsets, dtype=np.float64)
+        self.segment_steps = max(1, int(segment_steps))
+        self.driver = HeuristicDriver()
+        self._first_step: int | None = None
+
+    def reset(self, scenario: Scenario) -> None:
+        self._first_step = None
+
+    def act(self, observation: np.ndarray, step: int) -> np.ndarray:
+        if self._first_step is None:
+            self._first_step = step
+        segment = min((step - self._first_step) // self.segment_steps, len(self.offsets) - 1)
+        action = self.driver.act(np.asarray(observation, dtype=np.float64)) + self.offsets[segment]
+        return np.clip(action, -1.0, 1.0)
+
+
+def plan_offsets(config: AvoidabilityConfig, rng: np.random.Generator) -> list[np.ndarray]:
+    """The ``n_plans`` offset profiles ``[segments, 2]`` (see `AvoidabilityConfig.n_plans`)."""
+    n = config.segments
+    plans: list[np.ndarray] = []
+    for first in range(n):
+        for accel in (-2.0, 2.0):  # full braking / full throttle from segment `first` on, heuristic steering
+            offsets = np.zeros((n, 2))
+            offsets[first:, 1] = accel
+            plans.append(offsets)
+    plans = plans[: config.n_plans]
+    while len(plans) < config.n_plans:
+        offsets = np.zeros((n, 2))
+        offsets[:, 1] = rng.uniform(-config.max_accel_offset, config.max_accel_offset, n)
+        steer = rng.random(n) < config.steer_share
+        offsets[steer, 0] = rng.uniform(-config.max_steer_offset, config.max_steer_offset, int(steer.sum()))
+        plans.append(offsets)
+    return plans
+
+
+@dataclass
+class ProbeRow:
+    """One scenario's scored episode and, for a crash, what the search found."""
+
+    scenario_id: str
+    outcome: str
+    crash_with: str = ""
+    """``adversary`` (the ego touched the adversary), ``other`` (only other traffic) or empty (no crash)."""
+    crash_step: int | None = None
+    reproducible: bool | None = None
+    """The reference ego crashed again when the adversary was played again from the same seed."""
+    heuristic_outcome: str | None = None
+    avoidable: bool | None = None
+    avoidable_reaching_goal: bool | None = None
+    plans_tried: int = 0
+    seconds: float = 0.0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def _outcome(rollout: Rollout) -> str:
+    return str(getattr(rollout.outcome, "value", rollout.outcome))
+
+
+def probe_scenario(
+    env: ScenarioEnv, scenario: Scenario, index: int, ego: Any, generator: Any, k: int, seed: int,
+    config: AvoidabilityConfig,
+) -> ProbeRow:
+    """The scored episode of the ``index``-th scenario of its split (generator None: the normal episode) and, if it
+    crashed, the search of the module docstring."""
+    from seal.experiments.evaluation import protocol
+    from seal.experiments.evaluation.episodes import run_episode
+
+    start = time.perf_counter()
+    normal = protocol.normal_episode(env, scenario, index, ego, seed)
+    episode_seed = protocol.episode_seed_of(seed, index)
+    behavior, scored = None, normal
+    if generator is not None:
+        last = protocol.generator_passes(env, scenario, index, ego, generator, k, seed, normal)[-1]
+        behavior, scored, episode_seed = last.generation.behavior, last.rollout, episode_seed + k
+    row = ProbeRow(scenario.scenario_id, _outcome(scored))
+    if row.outcome != "crash":
+        row.seconds = round(time.perf_counter() - start, 2)
+        return row
+    row.crash_with = "adversary" if any(agent == scored.adv_id for _, agent in scored.ego_crashes) else "other"
+    row.crash_step = int(scored.ego_crashes[0][0]) if scored.ego_crashes else None
+    again = run_episode(env, scenario, ego, behavior, seed=episode_seed)
+    row.reproducible = _outcome(again) == row.outcome and again.ego_crashes == scored.ego_crashes
+    if row.reproducible:
+        row.heuristic_outcome = _outcome(run_episode(env, scenario, PlanEgo(np.zeros((1, 2)), 1), behavior,
+                                                     seed=episode_seed))
+        outcomes = [row.heuristic_outcome]
+        segment_steps = int(np.ceil(int(env.config["horizon_steps"]) / config.segments))
+        for offsets in plan_offsets(config, np.random.default_rng([config.seed, index])):
+            if "success" in outcomes:
+                break
+            plan = PlanEgo(offsets, segment_steps)
+            outcomes.append(_outcome(run_episode(env, scenario, plan, behavior, seed=episode_seed)))
+            row.plans_tried += 1
+        row.avoidable = any(o not in FAILED for o in outcomes)
+        row.avoidable_reaching_goal = "success" in outcomes
+    row.seconds = round(time.perf_counter() - start, 2)
+    return row
+
+
+def summarize(rows: Sequence[ProbeRow]) -> dict[str, Any]:
+    """Counts and shares: crashes by whom the ego touched, and of the reproducible ones how many were avoidable."""
+    out: dict[str, Any] = {"scenarios": len(rows), "crashes": sum(r.outcome == "crash" for r in rows)}
+    for group in ("adversary", "other"):
+        crashed = [r for r in rows if r.crash_with == group]
+        checked = [r for r in crashed if r.reproducible]
+        n = len(checked)
+        out[group] = {
+            "crashes": len(crashed), "reproducible": n,
+            "avoidable": sum(bool(r.avoidable) for r in checked),
+            "avoidable_reaching_goal": sum(bool(r.avoidable_reaching_goal) for r in checked),
+            "heuristic_avoids": sum(r.heuristic_outcome not in FAILED for r in checked),
+            "avoidable_share": round(sum(bool(r.avoidable) for r in checked) / n, 4) if n else None,
+            "avoidable_reaching_goal_share": (
+                round(sum(bool(r.avoidable_reaching_goal) for r in checked) / n, 4) if n else None),
+        }
+    return out
+
+
+def run_avoidability(
+    ego_spec: str, setting: Any, config: Mapping[str, Any], search: AvoidabilityConfig, algo: str | None = None,
+    progress: bool = True,
+) -> list[ProbeRow]:
+    """Probe every scenario of ``setting`` (a `seal.experiments.evaluation.evaluate.Setting`; ``config``: a resolved
+    eval config with its ``generators``) for the ego ``ego_spec`` (`make_ego`'s spec)."""
+    from tqdm import tqdm
+
+    from seal.experiments.evaluation.worker_cache import cached_ego, cached_env, cached_generator, cached_split
+
+    if setting.reactive:
+        env = cached_env(setting.dataset, setting.split, config, reactive=True)
+    else:
+        env = cached_env(setting.dataset, setting.split, config)
+    scenarios = cached_split(setting.dataset, setting.split, config.get("limit"))
+    ego = cached_ego(ego_spec, algo)
+    generator = cached_generator(ego_spec, setting.generator, config) if setting.generator else None
+    rows = []
+    with tqdm(total=len(scenarios), desc=f"avoidability {setting.name}", unit="scenario", disable=not progress) as bar:
+        for index, scenario in enumerate(scenarios):
+            rows.append(probe_scenario(env, scenario, index, ego, generator, int(config["k"]), int(config["seed"]),
+                                       search))
+            bar.update(1)
+            bar.set_postfix(crashes=sum(r.outcome == "crash" for r in rows), refresh=False)
+    return rows
+
+
+def row_dicts(rows: Sequence[ProbeRow]) -> list[dict[str, Any]]:
+    """Rows as flat dicts (CSV / JSON)."""
+    return [{k: v for k, v in asdict(r).items() if k != "extra"} for r in rows]
+
+
+def format_summary(summary: Mapping[str, Any], ego: str, setting: str) -> str:
+    """The summary as a small table."""
+    lines = [f"ego {ego}, setting {setting}: {summary['crashes']} crashes in {summary['scenarios']} scenarios",
+             f"{'crashes with':<16}{'n':>6}{'replayed':>10}{'avoidable':>16}{'...reaching goal':>18}"
+             f"{'heuristic avoids':>18}"]
+    for group, label in (("adversary", "the adversary"), ("other", "other traffic")):
+        g = summary[group]
+        n = g["reproducible"] or 1
+        lines.append(f"{label:<16}{g['crashes']:>6}{g['reproducible']:>10}"
+                     f"{g['avoidable']:>7} ({100 * g['avoidable'] / n:4.1f} %)"
+                     f"{g['avoidable_reaching_goal']:>9} ({100 * g['avoidable_reaching_goal'] / n:4.1f} %)"
+                     f"{g['heuristic_avoids']:>18}")
+    lines.append("avoidable = some ego plan, knowing the adversary's future, ends without a crash and on the road "
+                 "(a hindsight bound)")
+    return "\n".join(lines)
