@@ -184,31 +184,67 @@ def summarize(rows: Sequence[ProbeRow]) -> dict[str, Any]:
     return out
 
 
+CHUNK_SCENARIOS = 4
+"""Scenarios per job when the probe is spread over worker processes."""
+
+
+def probe_chunk(job: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """Probe the scenarios ``job["indices"]`` of a setting (a backend job; keys: ``ego``, ``algo``, ``setting``
+    (`Setting` fields), ``config``, ``search`` (`AvoidabilityConfig` fields), ``session``); rows as dicts with
+    their scenario index."""
+    from seal.core.workers import torch_threads
+    from seal.experiments.evaluation.evaluate import Setting
+    from seal.experiments.evaluation.worker_cache import (
+        cached_ego,
+        cached_env,
+        cached_generator,
+        cached_split,
+        use_session,
+    )
+
+    torch_threads(1)
+    use_session(str(job["session"]))
+    setting, config = Setting(**job["setting"]), job["config"]
+    search = AvoidabilityConfig(**job["search"])
+    env = cached_env(setting.dataset, setting.split, config, reactive=setting.reactive)
+    scenarios = cached_split(setting.dataset, setting.split, config.get("limit"))
+    ego = cached_ego(job["ego"], job.get("algo"))
+    generator = cached_generator(job["ego"], setting.generator, config) if setting.generator else None
+    rows = []
+    for index in job["indices"]:
+        row = probe_scenario(env, scenarios[index], index, ego, generator, int(config["k"]), int(config["seed"]),
+                             search)
+        rows.append({"index": index, **row_dicts([row])[0]})
+    return rows
+
+
 def run_avoidability(
     ego_spec: str, setting: Any, config: Mapping[str, Any], search: AvoidabilityConfig, algo: str | None = None,
-    progress: bool = True,
+    progress: bool = True, workers: int = 1,
 ) -> list[ProbeRow]:
     """Probe every scenario of ``setting`` (a `seal.experiments.evaluation.evaluate.Setting`; ``config``: a resolved
-    eval config with its ``generators``) for the ego ``ego_spec`` (`make_ego`'s spec)."""
-    from tqdm import tqdm
+    eval config with its ``generators``) for the ego ``ego_spec`` (`make_ego`'s spec), in chunks of
+    `CHUNK_SCENARIOS` over ``workers`` processes (1: this one). A scenario's episodes and plans depend only on the
+    scenario, its index, the ego, the generator and the seeds, so the rows are the same for any ``workers``."""
+    import dataclasses
+    import uuid
 
-    from seal.experiments.evaluation.worker_cache import cached_ego, cached_env, cached_generator, cached_split
+    from seal.experiments.backends import InlineBackend, LocalBackend
+    from seal.experiments.evaluation.worker_cache import cached_split
 
-    if setting.reactive:
-        env = cached_env(setting.dataset, setting.split, config, reactive=True)
-    else:
-        env = cached_env(setting.dataset, setting.split, config)
-    scenarios = cached_split(setting.dataset, setting.split, config.get("limit"))
-    ego = cached_ego(ego_spec, algo)
-    generator = cached_generator(ego_spec, setting.generator, config) if setting.generator else None
-    rows = []
-    with tqdm(total=len(scenarios), desc=f"avoidability {setting.name}", unit="scenario", disable=not progress) as bar:
-        for index, scenario in enumerate(scenarios):
-            rows.append(probe_scenario(env, scenario, index, ego, generator, int(config["k"]), int(config["seed"]),
-                                       search))
-            bar.update(1)
-            bar.set_postfix(crashes=sum(r.outcome == "crash" for r in rows), refresh=False)
-    return rows
+    n = len(cached_split(setting.dataset, setting.split, config.get("limit")))
+    session = uuid.uuid4().hex
+    jobs = [{"ego": ego_spec, "algo": algo, "setting": dataclasses.asdict(setting), "config": dict(config),
+             "search": dataclasses.asdict(search), "session": session,
+             "indices": list(range(i, min(i + CHUNK_SCENARIOS, n)))} for i in range(0, n, CHUNK_SCENARIOS)]
+    backend: Any = LocalBackend(workers) if workers > 1 else InlineBackend()
+    results = backend.map(probe_chunk, jobs, desc=f"avoidability {setting.name}", unit="scenario",
+                          sizes=[len(j["indices"]) for j in jobs], progress=progress)
+    failed = [r for r in results if not r.ok]
+    if failed:
+        raise RuntimeError(f"avoidability: {len(failed)} of {len(jobs)} chunks failed; first: {failed[0].error}")
+    rows = sorted((row for r in results for row in r.value), key=lambda row: row["index"])
+    return [ProbeRow(**{k: v for k, v in row.items() if k != "index"}) for row in rows]
 
 
 def row_dicts(rows: Sequence[ProbeRow]) -> list[dict[str, Any]]:

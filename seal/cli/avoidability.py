@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 
 from seal.cli.args import CliError, add_plugin_option, add_set_option, non_negative_int, positive_int
 from seal.cli.tree import CommandTree
@@ -34,7 +35,9 @@ def cmd_eval_avoidability(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else None
     if out is not None and out.exists() and not out.is_dir():
         raise CliError(f"--out {out}: exists and is not a directory")
-    rows = av.run_avoidability(ego.ego, setting, config, search, algo=ego.algo, progress=not args.no_progress)
+    workers = args.workers or os.cpu_count() or 1
+    rows = av.run_avoidability(ego.ego, setting, config, search, algo=ego.algo, progress=not args.no_progress,
+                               workers=workers)
     summary = {"ego": ego.ego, "setting": setting.name, "search": dataclasses.asdict(search),
                "k": int(config["k"]), "seed": int(config["seed"]), **av.summarize(rows)}
     if out is not None:
@@ -85,6 +88,9 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--plans", type=non_negative_int("--plans"), default=64,
                    help="ego plans tried per crash besides the heuristic driver (default 64)")
     p.add_argument("--plan-seed", type=int, default=0, help="seed of the random plans (default 0)")
+    p.add_argument("--workers", type=positive_int("--workers"), default=None,
+                   help="worker processes over which the scenarios are spread (default: the CPU count; 1 = in this "
+                   "process); the rows are the same for any count")
     p.add_argument("--out", default=None, help="folder for avoidability.csv and summary.json")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -137,7 +137,7 @@ def test_command_writes_rows_and_summary(stopped_adv: Scenario, lane_change: Sce
     ds.update_manifest(splits={"eval": [stopped_adv.scenario_id, lane_change.scenario_id]})
     out = tmp_path / "avo"
     code = main(["eval", "avoidability", "heuristic", "--setting", "normal", "--dataset", str(tmp_path / "ds"),
-                 "--plans", "4", "--out", str(out), "--no-progress", "--json"])
+                 "--plans", "4", "--out", str(out), "--no-progress", "--json", "--workers", "1"])
     assert code == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["scenarios"] == 2 and summary["setting"] == "normal" and summary["search"]["n_plans"] == 4
@@ -146,3 +146,21 @@ def test_command_writes_rows_and_summary(stopped_adv: Scenario, lane_change: Sce
     assert lines[0].startswith("scenario_id,outcome,crash_with") and len(lines) == 3
     assert main(["eval", "avoidability", "heuristic", "--setting", "nope", "--dataset", str(tmp_path / "ds")]) == 2
     assert "unknown setting 'nope'" in capsys.readouterr().err
+
+
+def test_rows_are_the_same_on_two_workers(stopped_adv: Scenario, lane_change: Scenario, highway: list[Scenario],
+                                          tmp_path: Path) -> None:
+    from seal.core.dataset import write_dataset
+    from seal.experiments.evaluation.evaluate import parse_settings, resolve_eval_config
+
+    scenarios = [stopped_adv, lane_change, *highway]
+    ds = write_dataset(tmp_path / "ds", scenarios)
+    ds.update_manifest(splits={"eval": [s.scenario_id for s in scenarios]})
+    (setting,) = parse_settings(["rule"], tmp_path / "ds")
+    config = resolve_eval_config(k=2)
+    search = av.AvoidabilityConfig(n_plans=3)
+    one = av.run_avoidability("heuristic", setting, config, search, progress=False, workers=1)
+    two = av.run_avoidability("heuristic", setting, config, search, progress=False, workers=2)
+    strip = [{**av.row_dicts([r])[0], "seconds": 0} for r in one]
+    assert [r.scenario_id for r in one] == [s.scenario_id for s in scenarios]
+    assert strip == [{**av.row_dicts([r])[0], "seconds": 0} for r in two]
