@@ -234,9 +234,10 @@ def run_avoidability(
 
     n = len(cached_split(setting.dataset, setting.split, config.get("limit")))
     session = uuid.uuid4().hex
-    jobs = [{"ego": ego_spec, "algo": algo, "setting": dataclasses.asdict(setting), "config": dict(config),
-             "search": dataclasses.asdict(search), "session": session,
-             "indices": list(range(i, min(i + CHUNK_SCENARIOS, n)))} for i in range(0, n, CHUNK_SCENARIOS)]
+    common = {"ego": ego_spec, "algo": algo, "setting": dataclasses.asdict(setting), "config": dict(config),
+              "search": dataclasses.asdict(search), "session": session}
+    jobs: list[dict[str, Any]] = [{**common, "indices": list(range(i, min(i + CHUNK_SCENARIOS, n)))}
+                                  for i in range(0, n, CHUNK_SCENARIOS)]
     backend: Any = LocalBackend(workers) if workers > 1 else InlineBackend()
     results = backend.map(probe_chunk, jobs, desc=f"avoidability {setting.name}", unit="scenario",
                           sizes=[len(j["indices"]) for j in jobs], progress=progress)
