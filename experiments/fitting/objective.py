@@ -48,7 +48,7 @@ from seal.experiments import presets
 from seal.experiments.fitting.objective_report import K_PREV, write_report
 from seal.models.objective.labels import LOGGED_ROW, LabelSet
 from seal.models.objective.network import ObjectiveConfig
-from seal.models.objective.train import ObjectiveTrainConfig
+from seal.models.objective.train import ObjectiveTrainConfig, fit_diagnosis
 
 logger = logging.getLogger(__name__)
 
@@ -383,6 +383,8 @@ def fit_objective(dataset: str | Path, out: str | Path, config: ObjectiveFitConf
     model, fit = train_objective(train_labels, ObjectiveConfig.from_dict(config.model), train_cfg,
                                  on_step=on_step)
     bar.close()
+    if config.split == "all-but-eval":  # the diagnosis would otherwise suggest the split this fit already uses
+        model.info["fit"]["diagnosis"] = fit_diagnosis(fit, whole_pool=True)
     timings["training_s"] = fit.seconds
     _write_log(out / "train_log.csv", fit.history)
     report = {

@@ -228,6 +228,8 @@ def test_fit_diagnosis_tells_over_from_under_fitting_against_closeness() -> None
     # decisive3's capacity run: training scenarios 0.545 -> 0.655, validation at best 0.656 (closeness 0.558 / 0.669)
     over = fit_diagnosis(fit([0.545, 0.584, 0.655], 0.656))
     assert over.startswith("over-fits: up to +0.097") and "-0.013 on validation" in over and "all-but-eval" in over
+    pooled = fit_diagnosis(fit([0.545, 0.584, 0.655], 0.656), whole_pool=True)
+    assert "all-but-eval" not in pooled and "bigger scenario pool" in pooled and pooled.startswith("over-fits")
     under = fit_diagnosis(fit([0.550, 0.560], 0.660))
     assert under.startswith("learns nothing beyond closeness") and "+0.002" in under
     assert fit_diagnosis(fit([0.60], 0.70)) == "ranks validation scenarios better than closeness (+0.031)"

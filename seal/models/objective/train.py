@@ -397,11 +397,12 @@ FIT_MARGIN = 0.01
 """Spearman difference from closeness below which `fit_diagnosis` calls a fit "no better than closeness"."""
 
 
-def fit_diagnosis(result: FitResult, margin: float = FIT_MARGIN) -> str:
+def fit_diagnosis(result: FitResult, margin: float = FIT_MARGIN, whole_pool: bool = False) -> str:
     """One sentence on how the fit compares with closeness, the ranking it starts from (with ``zero_init``):
     better on validation scenarios; better only on training scenarios (over-fitting: more scenarios or a smaller
     model); or no better even on training scenarios (under-fitting: more epochs or capacity). Each Spearman is read
-    against closeness on the same scenarios (`FitResult`)."""
+    against closeness on the same scenarios (`FitResult`). ``whole_pool``: the fit already trained on every
+    scenario outside the held-out groups (``--split all-but-eval``), so more scenarios means a bigger pool."""
     train_gain = max((float(r["train_spearman"]) - result.train_closeness_spearman for r in result.history),
                      default=float("nan"))
     val_gain = result.best_val_spearman - result.val_closeness_spearman
@@ -410,9 +411,11 @@ def fit_diagnosis(result: FitResult, margin: float = FIT_MARGIN) -> str:
     if val_gain > margin:
         return f"ranks validation scenarios better than closeness ({val_gain:+.3f})"
     if train_gain > margin:
+        more = ("a bigger scenario pool (the fit already uses every scenario outside the held-out groups; "
+                "seal data generate --n)" if whole_pool else "more training scenarios (e.g. --split all-but-eval: "
+                "every scenario outside the held-out groups)")
         return (f"over-fits: up to {train_gain:+.3f} over closeness on training scenarios, {val_gain:+.3f} on "
-                "validation ones; more training scenarios (e.g. --split all-but-eval: every scenario outside the "
-                "held-out groups) or a smaller model (model.hidden, model.dropout)")
+                f"validation ones; {more} or a smaller model (model.hidden, model.dropout)")
     return (f"learns nothing beyond closeness, even on training scenarios (at best {train_gain:+.3f}; validation "
             f"{val_gain:+.3f}): more epochs or capacity (train.max_epochs, train.pairs_per_epoch, model.hidden)")
 
