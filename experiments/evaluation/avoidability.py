@@ -209,7 +209,8 @@ def probe_chunk(job: Mapping[str, Any]) -> list[dict[str, Any]]:
     env = cached_env(setting.dataset, setting.split, config, reactive=setting.reactive)
     scenarios = cached_split(setting.dataset, setting.split, config.get("limit"))
     ego = cached_ego(job["ego"], job.get("algo"))
-    generator = cached_generator(job["ego"], setting.generator, config) if setting.generator else None
+    generator = (cached_generator(job["ego"], setting.generator, config, setting=setting.name)
+                 if setting.generator else None)
     rows = []
     for index in job["indices"]:
         row = probe_scenario(env, scenarios[index], index, ego, generator, int(config["k"]), int(config["seed"]),

@@ -12,6 +12,9 @@ Each ego (a trained run folder, plus the Replay ego by default) is evaluated on 
   passes against the same ego, each roll-out appended to the scenario's queue; the last pass is scored
   (`seal.experiments.evaluation.protocol`, the same episodes as ``seal eval generators`` and the report's videos).
   The normal episode is shared with the ``normal`` setting and every generator setting (egos are deterministic).
+* ``<generator>-reactive`` (``cat-reactive``, ...): the same with the reactive background of ``normal-reactive``
+  (the normal episode of the queue too): how many of an ego's crashes under the generator the replayed background
+  caused (an ego that brakes for the adversary is run into by a logged car that does not).
 * ``real:DIR``: an imported dataset (``seal data import ...``): its ``eval`` split if it has one, else every
   scenario; replayed adversary.
 
@@ -35,6 +38,8 @@ from seal.experiments.evaluation.results_store import ResultsStore
 
 REPLAY_SETTINGS = ("normal", "hard", "normal-reactive")
 REACTIVE_SETTING = "normal-reactive"
+REACTIVE_SUFFIX = "-reactive"
+"""``<generator>-reactive``: a generator setting with the reactive background of ``normal-reactive``."""
 REACTIVE_BACKGROUNDS = ("idm", "rapid")
 REAL_PREFIX = "real:"
 BUILTIN_EGOS = ("replay", "heuristic")
@@ -125,10 +130,12 @@ def parse_settings(spec: str | Sequence[str], dataset: str | Path | None) -> lis
             settings.append(Setting(name, base, split, reactive=name == REACTIVE_SETTING))
         elif name in available_generators():
             settings.append(Setting(name, base, "eval", generator=name))
+        elif name.endswith(REACTIVE_SUFFIX) and name[: -len(REACTIVE_SUFFIX)] in available_generators():
+            settings.append(Setting(name, base, "eval", generator=name[: -len(REACTIVE_SUFFIX)], reactive=True))
         else:
             raise ValueError(
-                f"--settings: unknown setting {name!r}; use normal, hard, normal-reactive, real:DIR or a generator "
-                f"name ({', '.join(available_generators())})"
+                f"--settings: unknown setting {name!r}; use normal, hard, normal-reactive, real:DIR, a generator "
+                f"name ({', '.join(available_generators())}) or GENERATOR-reactive (reactive background)"
             )
     return settings
 
@@ -271,7 +278,8 @@ def plan_ego(store: ResultsStore, ego: EgoSpec, settings: Sequence[Setting], con
     for s in settings:
         kwargs = dict(config["generators"].get(s.generator, {})) if s.generator else {}
         if s.reactive:
-            kwargs = {"background": config.get("background", "idm"), "background_model": config.get("background_model")}
+            kwargs = {**kwargs, "background": config.get("background", "idm"),
+                      "background_model": config.get("background_model")}
         record = (s.dataset, s.name, s.kind, s.split, s.generator, {**_shared_for(s, shared), **kwargs},
                   k if s.generator else 0, seed)
         if differences := store.setting_differences(*record):
@@ -322,19 +330,22 @@ def play_items(
         env, scenario = cached_env(dataset, split, config), scenarios[i]
         logged = LoggedAdversary.of(scenario)
         normal = protocol.normal_episode(env, scenario, i, policy, seed)
+        reactive_env: Any = None
+        reactive_normal: Any = None
         rows = []
         for name in missing:
             s = by_name[name]
             row = _base_row(ego, s, scenario.scenario_id, k if s.generator else 0)
-            if s.reactive:
+            if s.reactive and reactive_normal is None:  # shared by normal-reactive and the -reactive settings
                 reactive_env = cached_env(dataset, split, config, reactive=True)
-                rollout = protocol.normal_episode(reactive_env, scenario, i, policy, seed)
-                row.update(episode_metrics(scenario, rollout, (), logged))
-            elif s.generator is None:
-                row.update(episode_metrics(scenario, normal, (), logged))
+                reactive_normal = protocol.normal_episode(reactive_env, scenario, i, policy, seed)
+            if s.generator is None:
+                row.update(episode_metrics(scenario, reactive_normal if s.reactive else normal, (), logged))
             else:
-                generator = cached_generator(ego.run, s.generator, config)
-                rollout, times = protocol.scored_pass(env, scenario, i, policy, generator, k, seed, normal)
+                # A generator of its own per setting: some keep per-scenario state across the K passes.
+                generator = cached_generator(ego.run, s.generator, config, setting=s.name)
+                rollout, times = protocol.scored_pass(reactive_env if s.reactive else env, scenario, i, policy,
+                                                      generator, k, seed, reactive_normal if s.reactive else normal)
                 row.update(episode_metrics(scenario, rollout, times, logged))
             rows.append(row)
             written[name] += 1

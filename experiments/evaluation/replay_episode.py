@@ -41,6 +41,9 @@ class EpisodeSpec:
         split: the split the scenario was evaluated in (None: found with `find_split`).
         algo: SB3 algorithm of an ego model file that does not record it.
         env: `ScenarioEnv` config overrides.
+        background: reactive background traffic of the setting (``idm`` / ``rapid``: ``normal-reactive`` and the
+            ``-reactive`` generator settings), None for the replayed log.
+        background_model: RAPID model file of ``background="rapid"``.
     """
 
     dataset: str
@@ -53,6 +56,8 @@ class EpisodeSpec:
     split: str | None = None
     algo: str | None = None
     env: Mapping[str, Any] = field(default_factory=dict)
+    background: str | None = None
+    background_model: str | None = None
 
 
 class EpisodeSpecError(SealError):
@@ -79,7 +84,14 @@ def play(spec: EpisodeSpec) -> tuple[Scenario, Rollout, Ego]:
     if index is None:
         raise EpisodeSpecError(f"scenario {spec.scenario_id!r} is not in split {split!r} of {spec.dataset}")
     ego = make_ego(spec.ego, spec.algo) if isinstance(spec.ego, str) else spec.ego
-    env = ScenarioEnv(scenarios, config=dict(spec.env))
+    env_config, background_model = dict(spec.env), None
+    if spec.background is not None:
+        env_config["background"] = spec.background
+        if spec.background == "rapid":
+            from seal.models.rapid import load_rapid
+
+            background_model = load_rapid(str(spec.background_model))
+    env = ScenarioEnv(scenarios, config=env_config, background_model=background_model)
     try:
         scenario = scenarios[index]
         rollout = normal_episode(env, scenario, index, ego, spec.seed)

@@ -74,12 +74,14 @@ def cached_env(dataset: str, split: str | None, config: Mapping[str, Any], react
     return envs[key]
 
 
-def cached_generator(run: str, name: str, config: Mapping[str, Any]) -> Any:
-    """The generator of setting ``name`` for ego ``run`` (built once per ego, as one process does)."""
+def cached_generator(run: str, name: str, config: Mapping[str, Any], setting: str = "") -> Any:
+    """Generator ``name`` for ego ``run`` (built once per ego, as one process does); ``setting``: one instance per
+    setting that uses it (``cat`` and ``cat-reactive`` each get their own: some generators keep per-scenario
+    state across the K passes)."""
     from seal.experiments.evaluation.protocol import build_generator
 
     kwargs = config["generators"].get(name, {})
-    gens, key = _CACHE["generators"], (run, name, json.dumps(kwargs, sort_keys=True, default=str))
+    gens, key = _CACHE["generators"], (run, name, setting, json.dumps(kwargs, sort_keys=True, default=str))
     if key not in gens:
         shared = {"prior": config.get("prior"), "candidates": config.get("candidates")}
         gens[key] = build_generator(name, kwargs, shared)

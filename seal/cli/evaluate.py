@@ -73,7 +73,8 @@ def register(tree: CommandTree) -> None:
         "logged adversary), hard (hard split), a generator name such as cat, goose, seal, rule (the Normal eval "
         "scenarios: one normal episode, then K sequential perturbation passes against the same ego, the last "
         "scored), normal-reactive (normal with reacting background traffic: --set background=idm, or "
-        "background=rapid with background_model=FILE), real:DIR (an imported dataset, its eval split or every "
+        "background=rapid with background_model=FILE), GENERATOR-reactive (a generator setting with that "
+        "background), real:DIR (an imported dataset, its eval split or every "
         "scenario, logged adversary). One row per "
         "(run, dataset, setting, scenario) goes into the SQLite --store; scenarios already there are skipped, so "
         "re-running adds only what is missing.",
@@ -88,7 +89,8 @@ def register(tree: CommandTree) -> None:
     add_plugin_option(p)
     p.add_argument("--settings", default="normal,hard",
                    help="comma-separated: normal, hard, normal-reactive, GENERATOR (cat, goose, seal, rule, replay), "
-                   "real:DIR (default normal,hard)")
+                   "GENERATOR-reactive (with the reactive background of normal-reactive), real:DIR "
+                   "(default normal,hard)")
     p.add_argument("--store", default="results.sqlite", help="SQLite results store (default results.sqlite)")
     p.add_argument("--dataset", default=None,
                    help="dataset with eval / hard splits (default: the 'dataset' of the first run's config.yaml)")

@@ -212,3 +212,42 @@ def test_background_presets_resolve() -> None:
     assert (standard.limit, standard.dim, standard.epochs, standard.seed) == (200, 64, 2, 5)
     with pytest.raises(ConfigError, match="drop_intent"):
         resolve_config("quick", sets=["drop_intent=1.5"])
+
+
+def test_generator_reactive_setting_plays_the_passes_with_reactive_background(dataset: Path, tmp_path: Path) -> None:
+    from seal.adversaries.base import make_generator
+    from seal.core.dataset import load_split
+    from seal.experiments.evaluation import protocol
+    from seal.experiments.evaluation.replay_episode import EpisodeSpec, play
+    from seal.experiments.training.egos import make_ego
+
+    (setting,) = parse_settings("rule-reactive", dataset)
+    assert (setting.generator, setting.reactive, setting.split, setting.kind) == ("rule", True, "eval", "generator")
+    with pytest.raises(ValueError, match="GENERATOR-reactive"):
+        parse_settings("nope-reactive", dataset)
+    store_path = tmp_path / "g.sqlite"
+    config = resolve_eval_config(k=2)
+    results = evaluate_runs(["heuristic"], "rule,rule-reactive", store_path, dataset=dataset, config=config,
+                            progress=False, replay_ego=False, workers=1)
+    assert results[0]["written"] == {"rule": 2, "rule-reactive": 2}
+    with ResultsStore(store_path) as store:
+        info = {s["setting"]: s for s in store.settings()}
+        assert info["rule-reactive"]["kwargs"]["background"] == "idm" and "background" not in info["rule"]["kwargs"]
+        rows = {(r["setting"], r["scenario_id"]): r for r in store.episodes()}
+    # Each row is the scored pass of the K passes played in its own env (queue started by that env's normal episode).
+    scenarios = load_split(dataset, "eval")
+    ego = make_ego("heuristic")
+    for reactive in (False, True):
+        env = ScenarioEnv(scenarios, config={"background": "idm"} if reactive else {})
+        for i, scenario in enumerate(scenarios):
+            normal = protocol.normal_episode(env, scenario, i, ego, 0)
+            rollout, _ = protocol.scored_pass(env, scenario, i, ego, make_generator("rule"), 2, 0, normal)
+            row = rows[("rule-reactive" if reactive else "rule", scenario.scenario_id)]
+            # Exact: the two backgrounds differ here only in the 7th digit of the return.
+            assert row["episode_return"] == rollout.episode_return and row["outcome"] == rollout.outcome
+            # The failure videos replay the same episode from the setting's record.
+            spec = EpisodeSpec(dataset=str(dataset), scenario_id=scenario.scenario_id, generator="rule", k=2,
+                               split="eval", background="idm" if reactive else None)
+            assert play(spec)[1].episode_return == rollout.episode_return
+    assert all(rows[("rule", s.scenario_id)]["episode_return"] != rows[("rule-reactive", s.scenario_id)][
+        "episode_return"] for s in scenarios)

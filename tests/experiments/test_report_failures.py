@@ -172,3 +172,26 @@ def test_eval_curves_from_the_runs_periodic_evaluations(tmp_path: Path) -> None:
     path = plot_eval_curves(runs, tmp_path / "eval_curves.png")
     assert path is not None and path.stat().st_size > 0
     assert plot_eval_curves(runs[1:], tmp_path / "none.png") is None
+
+
+def test_failure_videos_of_reactive_settings_replay_with_their_background(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from seal.experiments.evaluation import replay_episode
+    from seal.experiments.report.failure_videos import render_failure_videos
+
+    specs = []
+    monkeypatch.setattr(replay_episode, "render", lambda spec, out: specs.append(spec))
+    failures = [{"run": "heuristic", "pipeline": "heuristic", "dataset": "/d", "setting": s, "setting_name": s,
+                 "scenario_id": "a", "outcome": "crash"} for s in ("cat", "cat-reactive", "normal-reactive")]
+    settings = [
+        {"dataset": "/d", "setting": "cat", "generator": "cat", "kwargs": {"stride": 5}, "k": 5, "seed": 0},
+        {"dataset": "/d", "setting": "cat-reactive", "generator": "cat", "k": 5, "seed": 0,
+         "kwargs": {"stride": 5, "background": "idm", "background_model": None}},
+        {"dataset": "/d", "setting": "normal-reactive", "generator": None, "k": 0, "seed": 0,
+         "kwargs": {"background": "rapid", "background_model": "m.pt"}},
+    ]
+    render_failure_videos(failures, [], settings, tmp_path / "v", progress=False)
+    by = {(s.generator, s.background): s for s in specs}
+    assert set(by) == {("cat", None), ("cat", "idm"), (None, "rapid")}
+    assert by[("cat", "idm")].kwargs == {"stride": 5} == by[("cat", None)].kwargs  # the generator's own options
+    assert by[(None, "rapid")].background_model == "m.pt" and by[(None, "rapid")].kwargs == {}
