@@ -100,8 +100,9 @@ class GooseFitConfig:
         for key in ("total_steps", "batch_size", "buffer_size", "log_every", "gru_hidden", "train_freq"):
             if int(getattr(self, key)) < 1:
                 raise ValueError(f"{key} must be >= 1, got {getattr(self, key)}")
-        if int(self.checkpoint_every) < 0:
-            raise ValueError(f"checkpoint_every must be >= 0, got {self.checkpoint_every}")
+        if int(self.checkpoint_every) < 0 or int(self.checkpoint_every) % int(self.train_freq):
+            raise ValueError(f"checkpoint_every must be 0 or a multiple of train_freq ({self.train_freq}), got "
+                             f"{self.checkpoint_every}")
         GooseSpec.from_dict(self.spec or {}, where="config key 'spec'")
 
 
@@ -253,8 +254,9 @@ def _logger(run: Path, resumed_step: int | None) -> Any:
 
 def _learn_in_chunks(model: Any, total: int, every: int, tracker: _Progress, checkpoint: Any) -> None:
     """``model.learn`` up to ``total`` env steps in chunks of ``every`` (0: one chunk), ``checkpoint()`` after each
-    chunk but the last. With SB3's one-step train frequency a chunk boundary changes nothing that is learnt: the
-    next chunk goes on from the same observation, buffer and counters (``reset_num_timesteps=False``)."""
+    chunk but the last. A chunk is a whole number of SB3's collect-then-train cycles (``every`` is a multiple of
+    ``train_freq``), so its boundary changes nothing that is learnt: the next chunk goes on from the same
+    observation, buffer and counters (``reset_num_timesteps=False``)."""
     while model.num_timesteps < total:
         done = int(model.num_timesteps)
         chunk = total - done if every <= 0 else min(every - done % every, total - done)

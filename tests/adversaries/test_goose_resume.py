@@ -127,6 +127,12 @@ def test_other_settings_or_a_damaged_checkpoint_start_over(dataset: Path, uninte
     assert changed["resumed_from_step"] is None and "other settings" in caplog.text
 
 
+def test_checkpoints_come_between_whole_train_cycles() -> None:
+    with pytest.raises(ValueError, match="multiple of train_freq"):
+        _config(train_freq=4, checkpoint_every=10)
+    assert _config(train_freq=5, checkpoint_every=10).checkpoint_every == 10
+
+
 def test_env_state_round_trip(lane_change: Scenario, highway: list[Scenario]) -> None:
     from seal.adversaries.goose.env import GooseEnv
 
