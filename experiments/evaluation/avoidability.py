@@ -19,6 +19,7 @@ replays its log and does not react to the ego unless the setting is ``normal-rea
 from __future__ import annotations
 
 import time
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
@@ -101,6 +102,14 @@ def plan_offsets(config: AvoidabilityConfig, rng: np.random.Generator) -> list[n
     return plans
 
 
+def plan_label(i: int, config: AvoidabilityConfig) -> str:
+    """What the ``i``-th plan of `plan_offsets` does: ``brake@J`` / ``throttle@J`` (from segment J on) or
+    ``random``."""
+    if i < min(2 * config.segments, config.n_plans):
+        return f"{'brake' if i % 2 == 0 else 'throttle'}@{i // 2}"
+    return "random"
+
+
 @dataclass
 class ProbeRow:
     """One scenario's scored episode and, for a crash, what the search found."""
@@ -116,6 +125,10 @@ class ProbeRow:
     avoidable: bool | None = None
     avoidable_reaching_goal: bool | None = None
     plans_tried: int = 0
+    first_avoiding_plan: str = ""
+    """`plan_label` of the first plan (in the search's order) that avoided the crash; empty: none."""
+    first_goal_plan: str = ""
+    """`plan_label` of the first plan that also reached the goal (the search stops there); empty: none."""
     seconds: float = 0.0
     extra: dict[str, Any] = field(default_factory=dict)
 
@@ -161,6 +174,9 @@ def probe_scenario(
             row.plans_tried += 1
         row.avoidable = any(o not in FAILED for o in outcomes)
         row.avoidable_reaching_goal = "success" in outcomes
+        labels = ["heuristic", *(plan_label(i, config) for i in range(row.plans_tried))]
+        row.first_avoiding_plan = next((lab for lab, o in zip(labels, outcomes, strict=True) if o not in FAILED), "")
+        row.first_goal_plan = next((lab for lab, o in zip(labels, outcomes, strict=True) if o == "success"), "")
     row.seconds = round(time.perf_counter() - start, 2)
     return row
 
@@ -177,6 +193,9 @@ def summarize(rows: Sequence[ProbeRow]) -> dict[str, Any]:
             "avoidable": sum(bool(r.avoidable) for r in checked),
             "avoidable_reaching_goal": sum(bool(r.avoidable_reaching_goal) for r in checked),
             "heuristic_avoids": sum(r.heuristic_outcome not in FAILED for r in checked),
+            # How the goal was reached: the kind of the first plan that did (heuristic, brake, throttle, random).
+            "first_goal_plan": dict(sorted(Counter(r.first_goal_plan.split("@")[0] for r in checked
+                                                   if r.first_goal_plan).items())),
             "avoidable_share": round(sum(bool(r.avoidable) for r in checked) / n, 4) if n else None,
             "avoidable_reaching_goal_share": (
                 round(sum(bool(r.avoidable_reaching_goal) for r in checked) / n, 4) if n else None),
@@ -266,6 +285,11 @@ def format_summary(summary: Mapping[str, Any], ego: str, setting: str) -> str:
                      f"{g['avoidable']:>7} ({100 * g['avoidable'] / n:4.1f} %)"
                      f"{g['avoidable_reaching_goal']:>9} ({100 * g['avoidable_reaching_goal'] / n:4.1f} %)"
                      f"{g['heuristic_avoids']:>18}")
+    for group, label in (("adversary", "the adversary"), ("other", "other traffic")):
+        kinds = summary[group].get("first_goal_plan") or {}
+        if kinds:
+            lines.append(f"reaching the goal past {label}, first by: "
+                         + ", ".join(f"{k} {v}" for k, v in sorted(kinds.items(), key=lambda kv: -kv[1])))
     lines.append("avoidable = some ego plan, knowing the adversary's future, ends without a crash and on the road "
                  "(a hindsight bound)")
     return "\n".join(lines)

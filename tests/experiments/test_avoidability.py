@@ -93,6 +93,9 @@ def test_a_car_stopped_ahead_is_avoidable(stopped_adv: Scenario) -> None:
     # It stops behind the car (the route's end lies beyond it): the search goes on for a plan reaching the goal.
     assert row.heuristic_outcome == "timeout" and row.plans_tried == 8
     assert row.avoidable_reaching_goal is False
+    assert row.first_avoiding_plan == "heuristic" and row.first_goal_plan == ""
+    assert [av.plan_label(i, av.AvoidabilityConfig(n_plans=14, segments=6)) for i in (0, 1, 2, 11, 12)] == [
+        "brake@0", "throttle@0", "brake@1", "throttle@5", "random"]
 
 
 def test_an_adversary_on_the_ego_itself_is_not_avoidable(stopped_adv: Scenario) -> None:
@@ -102,7 +105,7 @@ def test_an_adversary_on_the_ego_itself_is_not_avoidable(stopped_adv: Scenario) 
                             config=av.AvoidabilityConfig(n_plans=6))
     assert row.outcome == "crash" and row.crash_with == "adversary" and row.crash_step == CURRENT_STEP + 1
     assert row.reproducible and row.avoidable is False and row.avoidable_reaching_goal is False
-    assert row.plans_tried == 6
+    assert row.plans_tried == 6 and row.first_avoiding_plan == row.first_goal_plan == ""
 
 
 def test_an_episode_without_crash_is_not_searched(stopped_adv: Scenario) -> None:
@@ -113,8 +116,8 @@ def test_an_episode_without_crash_is_not_searched(stopped_adv: Scenario) -> None
 
 def test_summary_counts_by_whom_the_ego_touched() -> None:
     R = av.ProbeRow
-    rows = [R("a", "crash", "adversary", 20, True, "crash", True, True, 3),
-            R("b", "crash", "adversary", 30, True, "success", True, True, 0),
+    rows = [R("a", "crash", "adversary", 20, True, "crash", True, True, 3, "brake@0", "throttle@0"),
+            R("b", "crash", "adversary", 30, True, "success", True, True, 0, "heuristic", "heuristic"),
             R("c", "crash", "adversary", 30, True, "crash", False, False, 64),
             R("d", "crash", "adversary", 30, False),
             R("e", "crash", "other", 40, True, "crash", True, False, 64),
@@ -122,10 +125,12 @@ def test_summary_counts_by_whom_the_ego_touched() -> None:
     s = av.summarize(rows)
     assert s["scenarios"] == 6 and s["crashes"] == 5
     assert s["adversary"] == {"crashes": 4, "reproducible": 3, "avoidable": 2, "avoidable_reaching_goal": 2,
-                              "heuristic_avoids": 1, "avoidable_share": 0.6667, "avoidable_reaching_goal_share": 0.6667}
+                              "heuristic_avoids": 1, "first_goal_plan": {"heuristic": 1, "throttle": 1},
+                              "avoidable_share": 0.6667, "avoidable_reaching_goal_share": 0.6667}
     assert s["other"]["avoidable"] == 1 and s["other"]["avoidable_reaching_goal"] == 0
     text = av.format_summary(s, "heuristic", "cat")
     assert "5 crashes in 6 scenarios" in text and "2 (66.7 %)" in text
+    assert "past the adversary, first by: heuristic 1, throttle 1" in text
 
 
 def test_command_writes_rows_and_summary(stopped_adv: Scenario, lane_change: Scenario, tmp_path: Path,
