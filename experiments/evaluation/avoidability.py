@@ -21,7 +21,7 @@ from __future__ import annotations
 import time
 from collections import Counter
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -130,7 +130,6 @@ class ProbeRow:
     first_goal_plan: str = ""
     """`plan_label` of the first plan that also reached the goal (the search stops there); empty: none."""
     seconds: float = 0.0
-    extra: dict[str, Any] = field(default_factory=dict)
 
 
 def _outcome(rollout: Rollout) -> str:
@@ -270,7 +269,7 @@ def run_avoidability(
 
 def row_dicts(rows: Sequence[ProbeRow]) -> list[dict[str, Any]]:
     """Rows as flat dicts (CSV / JSON)."""
-    return [{k: v for k, v in asdict(r).items() if k != "extra"} for r in rows]
+    return [asdict(r) for r in rows]
 
 
 def format_summary(summary: Mapping[str, Any], ego: str, setting: str) -> str:
