@@ -59,6 +59,19 @@ class EpisodeSpec:
     background: str | None = None
     background_model: str | None = None
 
+    @classmethod
+    def of_setting(cls, setting: Mapping[str, Any], scenario_id: str, ego: Any, algo: str | None = None
+                   ) -> EpisodeSpec:
+        """The episode of ``scenario_id`` in an evaluation setting as the results store records it (its
+        ``settings`` table row: dataset, split, generator, kwargs with the reactive background's ``background`` /
+        ``background_model`` for the reactive settings, k, seed)."""
+        kwargs = dict(setting.get("kwargs") or {})
+        background, background_model = kwargs.pop("background", None), kwargs.pop("background_model", None)
+        return cls(dataset=str(setting["dataset"]), scenario_id=scenario_id, ego=ego,
+                   generator=setting.get("generator"), kwargs=kwargs, k=int(setting.get("k") or 1),
+                   seed=int(setting.get("seed") or 0), split=setting.get("split"), algo=algo,
+                   background=background, background_model=background_model)
+
 
 class EpisodeSpecError(SealError):
     """The scenario, split, ego or generator of an episode to replay does not exist."""

@@ -123,15 +123,13 @@ def render_generator_videos(
 ) -> list[Path]:
     """For every generator setting, ``per_generator`` videos of its scored pass against one ego (the first
     trained run, else the Replay ego, else another built-in ego), preferring scenarios where the ego crashed;
-    re-simulated with the same seeds, generator kwargs and K as the evaluation
-    (`seal.experiments.evaluation.protocol`;
+    re-simulated with the same seeds, generator kwargs, K and background as the evaluation
+    (`seal.experiments.evaluation.replay_episode.play`;
     `ScenarioEnv` config overrides of the evaluation are not recorded, the default env is used)."""
     from tqdm import tqdm
 
-    from seal.core.dataset import load_split
     from seal.envs.render import render_rollout, write_video
-    from seal.envs.scenario_env import ScenarioEnv
-    from seal.experiments.evaluation.protocol import build_generator, normal_episode, scored_pass
+    from seal.experiments.evaluation.replay_episode import EpisodeSpec, EpisodeSpecError, play
     from seal.experiments.training.egos import make_ego
 
     if fmt not in ("mp4", "gif"):
@@ -151,22 +149,15 @@ def render_generator_videos(
             continue
         # failures first (crash, then any other), never a success before an off-road episode
         eps.sort(key=lambda r: (not r["crash"], r["outcome"] == "success", not r["adv_collision"], r["scenario_id"]))
-        scenarios = load_split(s["dataset"], s["split"])
-        index = {sc.scenario_id: i for i, sc in enumerate(scenarios)}
-        generator = build_generator(s["generator"], s["kwargs"], {})
-        env = ScenarioEnv(scenarios)
         for ep in eps[:per_generator]:
-            i = index.get(ep["scenario_id"])
-            if i is None:
+            try:  # the episode as evaluated: same split index, seeds, generator options, K and background
+                sc, rollout, _ = play(EpisodeSpec.of_setting(s, ep["scenario_id"], policy))
+            except EpisodeSpecError:
                 continue
-            sc = scenarios[i]
-            normal = normal_episode(env, sc, i, policy, int(s["seed"]))
-            rollout, _ = scored_pass(env, sc, i, policy, generator, int(s["k"]), int(s["seed"]), normal)
             name = f"{s['setting']}_{Path(ego_run['run']).name}_{sc.scenario_id}.{fmt}"
             frames = render_rollout(rollout, sc.road, sc, adversary_label=f"{s['setting']} (pass {s['k']} of {s['k']})",
                                     ego_label=Path(str(ego_run["run"])).name)
             paths.append(write_video(frames, out / name))
-        env.close()
     return paths
 
 

@@ -54,14 +54,8 @@ def render_failure_videos(
         if setting is None:
             logger.info(f"no video of {f['scenario_id']} ({f['setting']}): the store has no record of the setting")
             continue
-        kwargs = dict(setting.get("kwargs") or {})
-        background, background_model = kwargs.pop("background", None), kwargs.pop("background_model", None)
-        spec = EpisodeSpec(
-            dataset=f["dataset"], scenario_id=f["scenario_id"], ego=spec_ego, generator=setting.get("generator"),
-            kwargs=kwargs, k=int(setting.get("k") or 1), seed=int(setting.get("seed") or 0),
-            split=setting.get("split"), algo=algo if algo and algo != "reskill" else None,
-            background=background, background_model=background_model,
-        )
+        spec = EpisodeSpec.of_setting({**setting, "dataset": f["dataset"]}, f["scenario_id"], spec_ego,
+                                      algo if algo and algo != "reskill" else None)
         # pipeline labels tell egos apart (cat@step_2000, dir/model); the run's name tells seeds apart
         ego = f"{_slug(str(f['pipeline']))}_{_slug(Path(str(f['run'])).name)}"
         name = f"{f['outcome']}_{_slug(f['setting'])}_{ego}_{f['scenario_id']}.{fmt}"

@@ -245,9 +245,15 @@ def test_generator_reactive_setting_plays_the_passes_with_reactive_background(da
             row = rows[("rule-reactive" if reactive else "rule", scenario.scenario_id)]
             # Exact: the two backgrounds differ here only in the 7th digit of the return.
             assert row["episode_return"] == rollout.episode_return and row["outcome"] == rollout.outcome
-            # The failure videos replay the same episode from the setting's record.
-            spec = EpisodeSpec(dataset=str(dataset), scenario_id=scenario.scenario_id, generator="rule", k=2,
-                               split="eval", background="idm" if reactive else None)
+            # The report's videos replay the same episode from the setting's record in the store.
+            spec = EpisodeSpec.of_setting(info["rule-reactive" if reactive else "rule"], scenario.scenario_id,
+                                          "heuristic")
+            assert spec.background == ("idm" if reactive else None) and "background" not in spec.kwargs
             assert play(spec)[1].episode_return == rollout.episode_return
     assert all(rows[("rule", s.scenario_id)]["episode_return"] != rows[("rule-reactive", s.scenario_id)][
         "episode_return"] for s in scenarios)
+    from seal.experiments.report.write import write_report
+
+    report = write_report(store_path, tmp_path / "rep", plots=False, videos=1, progress=False, n_boot=50,
+                          n_boot_poi=50)  # the videos rebuild each generator from its record (no background kwarg)
+    assert {Path(v).name.split("_")[0] for v in report["videos"]} == {"rule", "rule-reactive"}
