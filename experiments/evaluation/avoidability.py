@@ -151,7 +151,7 @@ def probe_scenario(
     behavior, scored = None, normal
     if generator is not None:
         last = protocol.generator_passes(env, scenario, index, ego, generator, k, seed, normal)[-1]
-        behavior, scored, episode_seed = last.generation.behavior, last.rollout, episode_seed + k
+        behavior, scored, episode_seed = last.generation.behavior, last.rollout, last.seed
     row = ProbeRow(scenario.scenario_id, _outcome(scored))
     if row.outcome != "crash":
         row.seconds = round(time.perf_counter() - start, 2)

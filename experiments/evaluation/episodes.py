@@ -20,10 +20,12 @@ from seal.experiments.training.egos import Ego
 
 @dataclass
 class PassRecord:
-    """One perturbation pass: what the generator produced and the episode that followed."""
+    """One perturbation pass: what the generator produced, the episode that followed and its env seed (playing
+    ``generation.behavior`` from that seed again gives the same episode for a deterministic ego)."""
 
     generation: Generation
     rollout: Rollout
+    seed: int
 
 
 def run_episode(
@@ -58,5 +60,5 @@ def perturbation_passes(
         generation = generator.generate(scenario, history.queue(scenario), rng)
         rollout = run_episode(env, scenario, ego, generation.behavior, seed=seed + 1 + i)
         history.append(scenario, rollout)
-        records.append(PassRecord(generation, rollout))
+        records.append(PassRecord(generation, rollout, seed + 1 + i))
     return records

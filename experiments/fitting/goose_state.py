@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from seal.core.atomic import atomic_write, atomic_write_json
+from seal.core.atomic import atomic_write_json
 from seal.experiments.training import state as ts
 
 logger = logging.getLogger(__name__)
@@ -36,11 +36,6 @@ logger = logging.getLogger(__name__)
 CHECKPOINT = "checkpoint"
 _BUFFER_ARRAYS = ("actions", "rewards", "dones", "timeouts", "ep_start", "ep_length")
 _OBS_PREFIX = ("observations", "next_observations")
-
-
-def _npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    save: Any = np.savez  # numpy's stub types the keyword arrays as its allow_pickle flag
-    atomic_write(path, lambda f: save(f, **arrays))
 
 
 def _read_npz(path: Path) -> dict[str, np.ndarray]:
@@ -56,14 +51,6 @@ def _monitor(model: Any) -> Any:
     return env
 
 
-def _check_model_zip(path: Path) -> None:
-    """Raise unless ``path`` is a whole SB3 model file (zip members pass their CRC check, ``data`` present)."""
-    with zipfile.ZipFile(path) as zf:
-        bad = zf.testzip()
-        if bad is not None or "data" not in zf.namelist():
-            raise ValueError(f"{path.name} is damaged")
-
-
 def save_her_buffer(buffer: Any, path: Path) -> None:
     """The filled part of an SB3 ``HerReplayBuffer`` (dict observations) as an ``.npz``."""
     n = buffer.buffer_size if buffer.full else buffer.pos
@@ -73,7 +60,7 @@ def save_her_buffer(buffer: Any, path: Path) -> None:
             arrays[f"{prefix}/{key}"] = np.asarray(value)[:n]
     arrays["current_ep_start"] = np.asarray(buffer._current_ep_start)
     arrays["meta"] = np.array([buffer.pos, int(buffer.full), buffer.buffer_size, buffer.n_envs], dtype=np.int64)
-    _npz(path, arrays)
+    ts.write_npz(path, arrays)
 
 
 def load_her_buffer(buffer: Any, path: Path) -> None:
@@ -104,9 +91,9 @@ def write_checkpoint(run: Path, model: Any, env: Any, extra: dict[str, Any]) -> 
     save_her_buffer(model.replay_buffer, tmp / "buffer.npz")
     last_obs = {f"obs/{k}": np.asarray(v) for k, v in model._last_obs.items()}
     monitor = {"monitor_rewards": np.asarray(_monitor(model).rewards, dtype=np.float64)}
-    _npz(tmp / "env.npz", {**env.get_state(), **last_obs, **monitor})
+    ts.write_npz(tmp / "env.npz", {**env.get_state(), **last_obs, **monitor})
     rng_json, rng_arrays = ts.rng_state(model)
-    _npz(tmp / "rng.npz", rng_arrays)
+    ts.write_npz(tmp / "rng.npz", rng_arrays)
     atomic_write_json(tmp / "state.json", {
         "step": int(model.num_timesteps), "n_updates": int(model._n_updates), "episode_num": int(model._episode_num),
         "rng": rng_json, **extra,
@@ -137,9 +124,8 @@ def read_checkpoint(run: Path, fingerprint: str) -> dict[str, Any] | None:
         if state.get("fingerprint") != fingerprint:
             logger.warning(f"{folder} was written with other settings (config, dataset or agent file): starting over")
             return None
-        for name in ("buffer.npz", "env.npz", "rng.npz"):
-            _read_npz(folder / name)
-        _check_model_zip(folder / "model.zip")
+        for name in ("model.zip", "buffer.npz", "env.npz", "rng.npz"):
+            ts.check_zip_whole(folder / name)
     except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile) as exc:
         logger.warning(f"{folder} does not read back ({type(exc).__name__}: {exc}): starting over")
         return None

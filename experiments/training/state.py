@@ -126,7 +126,7 @@ def load_replay_buffer(buffer: Any, path: Path) -> None:
         buffer.pos, buffer.full = pos, bool(full)
 
 
-def _write_npz(path: Path, arrays: Mapping[str, Any], compressed: bool = False) -> None:
+def write_npz(path: Path, arrays: Mapping[str, Any], compressed: bool = False) -> None:
     """``arrays`` as an ``.npz`` at ``path``, atomically."""
     save: Any = np.savez_compressed if compressed else np.savez
     atomic_write(path, lambda f: save(f, **arrays))
@@ -204,9 +204,9 @@ def _write_checkpoint_files(tmp: Path, step: int, model: Any, worker_states: lis
         save_replay_buffer(other.replay_buffer, tmp / f"{name}_replay_buffer.npz")
         models[name] = {"n_updates": int(getattr(other, "_n_updates", 0))}
     for i, worker in enumerate(worker_states):
-        _write_npz(tmp / f"worker_{i}.npz", worker, compressed=True)
+        write_npz(tmp / f"worker_{i}.npz", worker, compressed=True)
     rng_json, rng_arrays = rng_state(model)
-    _write_npz(tmp / "rng.npz", rng_arrays)
+    write_npz(tmp / "rng.npz", rng_arrays)
     state = {
         "step": step, "n_updates": int(getattr(model, "_n_updates", 0)),
         "episode_num": int(getattr(model, "_episode_num", 0)), "n_workers": len(worker_states),
@@ -269,6 +269,18 @@ def _pointer_target(pointer: Path, problems: list[str]) -> Path | None:
     return pointer.parent / name
 
 
+def check_zip_whole(path: Path) -> None:
+    """Raise `zipfile.BadZipFile` (or OSError) unless every member of the zip (``.npz`` or SB3 ``.zip``) at ``path``
+    reads back (a truncated or bit-flipped file fails its CRC check)."""
+    with zipfile.ZipFile(path) as zf:
+        bad = zf.testzip()
+        # SB3's zips hold torch archives, zips themselves: a cut one can still open as its inner archive.
+        if path.name.endswith(".zip") and "data" not in zf.namelist():
+            raise zipfile.BadZipFile("no 'data' entry (a truncated Stable-Baselines3 file)")
+    if bad is not None:
+        raise zipfile.BadZipFile(f"member {bad} fails its CRC check")
+
+
 def checkpoint_problem(folder: Path, buffers: Collection[str] = ()) -> str | None:
     """Why the checkpoint ``folder`` cannot be resumed from (naming the file), or None when every file it needs
     reads back: ``state.json``, ``rng.npz``, each ``worker_<i>.npz``, each ``*.zip`` (SB3 model files, with their
@@ -281,13 +293,7 @@ def checkpoint_problem(folder: Path, buffers: Collection[str] = ()) -> str | Non
         files += sorted({p.name for p in folder.glob("*.zip")} | set(buffers))
         for name in dict.fromkeys(files):
             path = folder / name
-            with zipfile.ZipFile(path) as zf:
-                bad = zf.testzip()
-                # SB3's zips hold torch archives, zips themselves: a cut one can still open as its inner archive.
-                if name.endswith(".zip") and "data" not in zf.namelist():
-                    raise zipfile.BadZipFile("no 'data' entry (a truncated Stable-Baselines3 file)")
-            if bad is not None:
-                raise zipfile.BadZipFile(f"member {bad} fails its CRC check")
+            check_zip_whole(path)
     except (OSError, UnicodeDecodeError, ValueError, TypeError, KeyError, zipfile.BadZipFile, EOFError) as exc:
         reason = "missing" if isinstance(exc, FileNotFoundError) else f"damaged ({type(exc).__name__}: {exc})"
         return f"{path} is {reason}"

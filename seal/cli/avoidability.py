@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import os
 
-from seal.cli.args import CliError, add_plugin_option, add_set_option, non_negative_int, positive_int
+from seal.cli.args import CliError, add_plugin_option, non_negative_int, positive_int
+from seal.cli.evaluate import add_eval_config_options, eval_config_from_args
 from seal.cli.tree import CommandTree
 
 
@@ -18,16 +19,11 @@ def cmd_eval_avoidability(args: argparse.Namespace) -> int:
 
     from seal.core.atomic import atomic_write_bytes, atomic_write_json
     from seal.experiments.evaluation import avoidability as av
-    from seal.experiments.evaluation.evaluate import default_dataset, parse_settings, read_run, resolve_eval_config
-    from seal.experiments.evaluation.generators import apply_generator_options
+    from seal.experiments.evaluation.evaluate import default_dataset, parse_settings, read_run
 
     try:
         ego = read_run(args.ego, args.algo)
-        config = resolve_eval_config(args.config, run_configs=[ego.config], k=args.k, limit=args.limit,
-                                     seed=args.seed, prior=args.prior, candidates=args.candidates, sets=args.set)
-        for option in args.gen_opt:
-            config["generators"].setdefault(option.partition(".")[0], {})
-        apply_generator_options(config["generators"], args.gen_opt)
+        config = eval_config_from_args(args, [ego.config])
         (setting,) = parse_settings([args.setting], args.dataset or default_dataset([ego]))
         search = av.AvoidabilityConfig(n_plans=args.plans, seed=args.plan_seed)
     except (ValueError, RuntimeError, FileNotFoundError) as exc:
@@ -75,16 +71,7 @@ def register(tree: CommandTree) -> None:
     add_plugin_option(p)
     p.add_argument("--dataset", default=None,
                    help="dataset with eval / hard splits (default: the 'dataset' of the run's config.yaml)")
-    p.add_argument("--limit", type=positive_int("--limit"), default=None, help="first N scenarios of the split")
-    p.add_argument("--k", type=positive_int("--k"), default=None, help="perturbation passes = queue length (5)")
-    p.add_argument("--seed", type=int, default=None, help="episode / generator rng seed, as seal eval runs (0)")
-    p.add_argument("--config", default=None, help="eval YAML as for seal eval runs (generators kwargs, prior, ...)")
-    add_set_option(p, "k=3 or generators.cat.stride=10")
-    p.add_argument("--prior", default=None, help="trajectory prior for candidate-based generators (cat, seal)")
-    p.add_argument("--candidates", default=None, help="built-in candidate source instead of a prior: lanes | "
-                   "constant_velocity")
-    p.add_argument("--gen-opt", action="append", default=[], metavar="NAME.KEY=VALUE",
-                   help="constructor option of one generator, repeatable, e.g. cat.prior=prior.pt")
+    add_eval_config_options(p)
     p.add_argument("--plans", type=non_negative_int("--plans"), default=64,
                    help="ego plans tried per crash besides the heuristic driver (default 64)")
     p.add_argument("--plan-seed", type=int, default=0, help="seed of the random plans (default 0)")

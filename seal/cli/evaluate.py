@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import os
+from typing import Any
 
 from seal.cli.args import CliError, add_plugin_option, add_set_option, positive_int
 from seal.cli.tree import CommandTree
@@ -29,21 +30,13 @@ def cmd_eval_runs(args: argparse.Namespace) -> int:
         # Spawn the workers first: their start-up then runs while this process imports and plans.
         backend = LocalBackend(workers, warm=WORKER_WARM_MODULES).start()
     try:
-        from seal.experiments.evaluation.evaluate import read_run, resolve_eval_config
-        from seal.experiments.evaluation.generators import apply_generator_options
+        from seal.experiments.evaluation.evaluate import read_run
         from seal.experiments.evaluation.parallel import evaluate_runs
 
         runs = [*args.runs, *args.ego]
         try:
             egos = [read_run(r, args.algo) for r in runs]
-            config = resolve_eval_config(
-                args.config, run_configs=[e.config for e in egos], k=args.k, limit=args.limit, seed=args.seed,
-                prior=args.prior, candidates=args.candidates, sets=args.set,
-            )
-            for option in args.gen_opt:
-                name = option.partition(".")[0]
-                config["generators"].setdefault(name, {})
-            apply_generator_options(config["generators"], args.gen_opt)
+            config = eval_config_from_args(args, [e.config for e in egos])
             if args.backend == "ray":
                 backend = make_backend("ray", address=args.address, ray_local_cpus=args.ray_local_cpus)
         except (ValueError, RuntimeError, FileNotFoundError) as exc:
@@ -61,6 +54,38 @@ def cmd_eval_runs(args: argparse.Namespace) -> int:
         print(f"{r['run']}: new episodes {written}")
     print(f"results in {args.store} (seal compare --store {args.store} --out REPORT_DIR)")
     return 0
+
+
+def add_eval_config_options(p: argparse.ArgumentParser) -> None:
+    """The evaluation protocol's options (`eval_config_from_args`): --limit, --k, --seed, --config, --set, --prior,
+    --candidates, --gen-opt."""
+    p.add_argument("--limit", type=positive_int("--limit"), default=None, help="first N scenarios of each split")
+    p.add_argument("--k", type=positive_int("--k"), default=None, help="perturbation passes = queue length (5)")
+    p.add_argument("--seed", type=int, default=None, help="episode / generator rng seed, same for every ego (0)")
+    p.add_argument("--config", default=None,
+                   help="YAML with generators kwargs (generators: {goose: {model: F}, cat: {prior: F}}), prior, "
+                   "candidates, k, limit, seed, env; a `seal run` preset's eval section also works. Default: the "
+                   "generator kwargs recorded in the runs' config.yaml")
+    add_set_option(p, "k=3 or generators.cat.stride=10")
+    p.add_argument("--prior", default=None, help="trajectory prior for candidate-based generators (cat, seal)")
+    p.add_argument("--candidates", default=None, help="built-in candidate source instead of a prior: lanes | "
+                   "constant_velocity")
+    p.add_argument("--gen-opt", action="append", default=[], metavar="NAME.KEY=VALUE",
+                   help="constructor option of one generator, repeatable, e.g. goose.model=goose.zip")
+
+
+def eval_config_from_args(args: argparse.Namespace, run_configs: list[dict[str, Any]]) -> dict[str, Any]:
+    """The resolved evaluation config of `add_eval_config_options`' options (`resolve_eval_config`, then each
+    --gen-opt); raises ValueError naming a bad option."""
+    from seal.experiments.evaluation.evaluate import resolve_eval_config
+    from seal.experiments.evaluation.generators import apply_generator_options
+
+    config = resolve_eval_config(args.config, run_configs=run_configs, k=args.k, limit=args.limit, seed=args.seed,
+                                 prior=args.prior, candidates=args.candidates, sets=args.set)
+    for option in args.gen_opt:
+        config["generators"].setdefault(option.partition(".")[0], {})
+    apply_generator_options(config["generators"], args.gen_opt)
+    return config
 
 
 def register(tree: CommandTree) -> None:
@@ -94,19 +119,7 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--store", default="results.sqlite", help="SQLite results store (default results.sqlite)")
     p.add_argument("--dataset", default=None,
                    help="dataset with eval / hard splits (default: the 'dataset' of the first run's config.yaml)")
-    p.add_argument("--limit", type=positive_int("--limit"), default=None, help="first N scenarios of each split")
-    p.add_argument("--k", type=positive_int("--k"), default=None, help="perturbation passes = queue length (5)")
-    p.add_argument("--seed", type=int, default=None, help="episode / generator rng seed, same for every ego (0)")
-    p.add_argument("--config", default=None,
-                   help="YAML with generators kwargs (generators: {goose: {model: F}, cat: {prior: F}}), prior, "
-                   "candidates, k, limit, seed, env; a `seal run` preset's eval section also works. Default: the "
-                   "generator kwargs recorded in the runs' config.yaml")
-    add_set_option(p, "k=3 or generators.cat.stride=10")
-    p.add_argument("--prior", default=None, help="trajectory prior for candidate-based generators (cat, seal)")
-    p.add_argument("--candidates", default=None, help="built-in candidate source instead of a prior: lanes | "
-                   "constant_velocity")
-    p.add_argument("--gen-opt", action="append", default=[], metavar="NAME.KEY=VALUE",
-                   help="constructor option of one generator, repeatable, e.g. goose.model=goose.zip")
+    add_eval_config_options(p)
     p.add_argument("--no-replay-ego", action="store_true", help="do not evaluate the Replay ego")
     p.add_argument("--workers", type=positive_int("--workers"), default=None,
                    help="local worker processes over which egos x scenarios are spread, in chunks of a few "
