@@ -4,10 +4,12 @@ For each scenario of a setting the ego plays the evaluation protocol exactly as 
 (`seal.experiments.evaluation.protocol`: the normal episode, then the K generator passes; the last one scored). When
 the scored episode ends in a crash, the scored pass's adversary behaviour is played again from the same env seed
 against other ego plans: the reference ego itself (the crash must come back, else the row says "not reproducible"),
-the heuristic driver, and `AvoidabilityConfig.n_plans` plans that drive like the heuristic driver with a
-piecewise-constant offset added to its acceleration (and, on some segments, its steering): full braking or full
-throttle from each segment on, then random offsets. A crash is *avoidable* when one of them finishes the episode
-without a crash and on the road, and *avoidable reaching the goal* when one also completes the route.
+the heuristic driver, and `AvoidabilityConfig.n_plans` plans (`seal.experiments.evaluation.avoidance_plans`): in
+the ``actions`` space they drive like the heuristic driver with a piecewise-constant offset added to its
+acceleration (and, on some segments, its steering): full braking or full throttle from each segment on, then random
+offsets; in the ``skills`` space they are a ReSkill ego's own agent with its skill choices changed the same way. A
+crash is *avoidable* when one of them finishes the episode without a crash and on the road, and *avoidable reaching
+the goal* when one also completes the route.
 
 What this measures and what it does not: the plans know the adversary's future (it is replayed: open loop for
 CAT-style generators, reacting to the plan for SEAL's skills), so "avoidable" is a hindsight bound, what no
@@ -27,87 +29,23 @@ from typing import Any
 import numpy as np
 
 from seal.core.scenario import Scenario
-from seal.envs.heuristic import HeuristicDriver
 from seal.envs.rollout import Rollout
 from seal.envs.scenario_env import ScenarioEnv
+from seal.experiments.evaluation.avoidance_plans import (
+    PLAN_SPACES,
+    AvoidabilityConfig,
+    PlanEgo,
+    SkillPlanEgo,
+    ego_plans,
+    plan_label,
+    plan_offsets,
+    skill_plans,
+)
+
+__all__ = ["FAILED", "PLAN_SPACES", "AvoidabilityConfig", "PlanEgo", "ProbeRow", "SkillPlanEgo", "plan_label",
+           "plan_offsets", "probe_scenario", "run_avoidability", "skill_plans", "summarize"]
 
 FAILED = ("crash", "out_of_road")
-
-
-@dataclass(frozen=True)
-class AvoidabilityConfig:
-    """How other ego plans are searched for a crashed episode."""
-
-    n_plans: int = 64
-    """Plans tried per crash besides the reference ego and the heuristic driver (the first 2 x ``segments`` are full
-    braking / full throttle from each segment on, the rest random)."""
-    segments: int = 6
-    """Pieces of the episode horizon over which an offset stays constant."""
-    max_accel_offset: float = 2.0
-    """Largest acceleration offset of a random plan (normalised action units; the action is clipped to [-1, 1], so
-    2 can override any heuristic acceleration)."""
-    max_steer_offset: float = 0.3
-    """Largest steering offset of a random plan (normalised action units, x the largest steering angle)."""
-    steer_share: float = 0.5
-    """Share of a random plan's segments that get a steering offset (the others keep the heuristic steering)."""
-    seed: int = 0
-    """Seed of the random plans (with the scenario index)."""
-
-    def __post_init__(self) -> None:
-        if self.n_plans < 0 or self.segments < 1:
-            raise ValueError(f"n_plans must be >= 0 and segments >= 1, got {self.n_plans} and {self.segments}")
-        if not 0.0 <= self.steer_share <= 1.0:
-            raise ValueError(f"steer_share must be in [0, 1], got {self.steer_share}")
-
-
-class PlanEgo:
-    """The heuristic driver plus a piecewise-constant offset ``[segments, 2]`` (steering, acceleration) on its
-    normalised action, each segment ``segment_steps`` env steps long from the episode's first step."""
-
-    name = "plan"
-
-    def __init__(self, offsets: np.ndarray, segment_steps: int) -> None:
-        self.offsets = np.asarray(offsets, dtype=np.float64)
-        self.segment_steps = max(1, int(segment_steps))
-        self.driver = HeuristicDriver()
-        self._first_step: int | None = None
-
-    def reset(self, scenario: Scenario) -> None:
-        self._first_step = None
-
-    def act(self, observation: np.ndarray, step: int) -> np.ndarray:
-        if self._first_step is None:
-            self._first_step = step
-        segment = min((step - self._first_step) // self.segment_steps, len(self.offsets) - 1)
-        action = self.driver.act(np.asarray(observation, dtype=np.float64)) + self.offsets[segment]
-        return np.clip(action, -1.0, 1.0)
-
-
-def plan_offsets(config: AvoidabilityConfig, rng: np.random.Generator) -> list[np.ndarray]:
-    """The ``n_plans`` offset profiles ``[segments, 2]`` (see `AvoidabilityConfig.n_plans`)."""
-    n = config.segments
-    plans: list[np.ndarray] = []
-    for first in range(n):
-        for accel in (-2.0, 2.0):  # full braking / full throttle from segment `first` on, heuristic steering
-            offsets = np.zeros((n, 2))
-            offsets[first:, 1] = accel
-            plans.append(offsets)
-    plans = plans[: config.n_plans]
-    while len(plans) < config.n_plans:
-        offsets = np.zeros((n, 2))
-        offsets[:, 1] = rng.uniform(-config.max_accel_offset, config.max_accel_offset, n)
-        steer = rng.random(n) < config.steer_share
-        offsets[steer, 0] = rng.uniform(-config.max_steer_offset, config.max_steer_offset, int(steer.sum()))
-        plans.append(offsets)
-    return plans
-
-
-def plan_label(i: int, config: AvoidabilityConfig) -> str:
-    """What the ``i``-th plan of `plan_offsets` does: ``brake@J`` / ``throttle@J`` (from segment J on) or
-    ``random``."""
-    if i < min(2 * config.segments, config.n_plans):
-        return f"{'brake' if i % 2 == 0 else 'throttle'}@{i // 2}"
-    return "random"
 
 
 @dataclass
@@ -163,17 +101,17 @@ def probe_scenario(
     if row.reproducible:
         row.heuristic_outcome = _outcome(run_episode(env, scenario, PlanEgo(np.zeros((1, 2)), 1), behavior,
                                                      seed=episode_seed))
-        outcomes = [row.heuristic_outcome]
+        # The heuristic driver is the first plan of the actions space; the skills space searches the ego's own.
+        labels, outcomes = (["heuristic"], [row.heuristic_outcome]) if config.plan_space == "actions" else ([], [])
         segment_steps = int(np.ceil(int(env.config["horizon_steps"]) / config.segments))
-        for offsets in plan_offsets(config, np.random.default_rng([config.seed, index])):
+        for label, plan in ego_plans(config, ego, index, segment_steps):
             if "success" in outcomes:
                 break
-            plan = PlanEgo(offsets, segment_steps)
+            labels.append(label)
             outcomes.append(_outcome(run_episode(env, scenario, plan, behavior, seed=episode_seed)))
             row.plans_tried += 1
         row.avoidable = any(o not in FAILED for o in outcomes)
         row.avoidable_reaching_goal = "success" in outcomes
-        labels = ["heuristic", *(plan_label(i, config) for i in range(row.plans_tried))]
         row.first_avoiding_plan = next((lab for lab, o in zip(labels, outcomes, strict=True) if o not in FAILED), "")
         row.first_goal_plan = next((lab for lab, o in zip(labels, outcomes, strict=True) if o == "success"), "")
     row.seconds = round(time.perf_counter() - start, 2)
@@ -274,7 +212,9 @@ def row_dicts(rows: Sequence[ProbeRow]) -> list[dict[str, Any]]:
 
 def format_summary(summary: Mapping[str, Any], ego: str, setting: str) -> str:
     """The summary as a small table."""
-    lines = [f"ego {ego}, setting {setting}: {summary['crashes']} crashes in {summary['scenarios']} scenarios",
+    space = (summary.get("search") or {}).get("plan_space", "actions")
+    lines = [f"ego {ego}, setting {setting}: {summary['crashes']} crashes in {summary['scenarios']} scenarios "
+             f"(plans in the {space} space)",
              f"{'crashes with':<16}{'n':>6}{'replayed':>10}{'avoidable':>16}{'...reaching goal':>18}"
              f"{'heuristic avoids':>18}"]
     for group, label in (("adversary", "the adversary"), ("other", "other traffic")):

@@ -9,6 +9,10 @@ from seal.cli.args import CliError, add_plugin_option, non_negative_int, positiv
 from seal.cli.evaluate import add_eval_config_options, eval_config_from_args
 from seal.cli.tree import CommandTree
 
+PLAN_SPACES = ("actions", "skills")
+"""`seal.experiments.evaluation.avoidance_plans.PLAN_SPACES`, named here so that ``--help`` imports no simulator
+(a test keeps the two equal)."""
+
 
 def cmd_eval_avoidability(args: argparse.Namespace) -> int:
     import csv
@@ -25,7 +29,10 @@ def cmd_eval_avoidability(args: argparse.Namespace) -> int:
         ego = read_run(args.ego, args.algo)
         config = eval_config_from_args(args, [ego.config])
         (setting,) = parse_settings([args.setting], args.dataset or default_dataset([ego]))
-        search = av.AvoidabilityConfig(n_plans=args.plans, seed=args.plan_seed)
+        search = av.AvoidabilityConfig(n_plans=args.plans, seed=args.plan_seed, plan_space=args.plan_space)
+        if search.plan_space == "skills" and str(ego.algo or "").lower() != "reskill":
+            raise ValueError(f"--plan-space skills: {args.ego} is not a ReSkill ego (algo {ego.algo or 'none'}); the "
+                             "skills space searches a ReSkill ego's own skill choices")
     except (ValueError, RuntimeError, FileNotFoundError) as exc:
         raise CliError(str(exc)) from None
     out = Path(args.out) if args.out else None
@@ -60,7 +67,10 @@ def register(tree: CommandTree) -> None:
         "against the heuristic driver and --plans plans that add piecewise-constant offsets to its acceleration "
         "and steering (full braking / full throttle from each sixth of the horizon on, then random). A crash is "
         "avoidable when some plan ends without a crash and on the road; the plans know the adversary's future, so "
-        "this is a hindsight bound, and 'not avoidable' means none of the plans tried avoided it. Crashes are split "
+        "this is a hindsight bound, and 'not avoidable' means none of the plans tried avoided it. --plan-space skills "
+        "searches a ReSkill ego's own skill space instead (its agent with its skill choices changed: the hardest "
+        "braking / throttling skill from each sixth on, then random offsets on its high-level action), which says "
+        "whether its crashes are a limit of its skills or of what it learned. Crashes are split "
         "by whom the ego touched (the adversary, or other traffic replaying its log). Writes --out DIR/"
         "avoidability.csv (per scenario) and summary.json.",
     )
@@ -75,6 +85,9 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--plans", type=non_negative_int("--plans"), default=64,
                    help="ego plans tried per crash besides the heuristic driver (default 64)")
     p.add_argument("--plan-seed", type=int, default=0, help="seed of the random plans (default 0)")
+    p.add_argument("--plan-space", choices=PLAN_SPACES, default="actions",
+                   help="actions: plans around the heuristic driver in the env's action space (default); skills: "
+                   "plans in a ReSkill ego's skill space")
     p.add_argument("--workers", type=positive_int("--workers"), default=None,
                    help="worker processes over which the scenarios are spread (default: the CPU count; 1 = in this "
                    "process); the rows are the same for any count")
