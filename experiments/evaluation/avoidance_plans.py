@@ -23,6 +23,7 @@ import numpy as np
 
 from seal.core.scenario import Scenario
 from seal.envs.heuristic import HeuristicDriver
+from seal.models.skills.reach import box_candidates
 
 PLAN_SPACES = ("actions", "skills")
 
@@ -177,8 +178,8 @@ def plan_offsets(config: AvoidabilityConfig, rng: np.random.Generator) -> list[n
 def skill_plans(config: AvoidabilityConfig, latent_dim: int, rng: np.random.Generator
                 ) -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray]:
     """The ``n_plans`` plans ``(offsets [segments, L], extreme [segments])`` of the ``skills`` space (the extreme
-    ones first, in `plan_label`'s order) and the candidates ``[C, L]`` of the extreme segments: the box's corners
-    (all of them up to L = 5, else 32 drawn), the centre, then ``skill_candidates`` uniform draws."""
+    ones first, in `plan_label`'s order) and the candidates ``[C, L]`` of the extreme segments
+    (`seal.models.skills.reach.box_candidates` with ``skill_candidates`` uniform draws)."""
     n, dim = config.segments, int(latent_dim)
     plans: list[tuple[np.ndarray, np.ndarray]] = []
     for first in range(n):
@@ -190,12 +191,8 @@ def skill_plans(config: AvoidabilityConfig, latent_dim: int, rng: np.random.Gene
     while len(plans) < config.n_plans:
         offsets = rng.uniform(-config.max_skill_offset, config.max_skill_offset, (n, dim)).astype(np.float32)
         plans.append((offsets, np.zeros(n, dtype=np.int8)))
-    if dim <= 5:
-        corners = np.array(np.meshgrid(*[[-1.0, 1.0]] * dim, indexing="ij")).reshape(dim, -1).T
-    else:
-        corners = rng.choice([-1.0, 1.0], size=(32, dim))
-    candidates = np.vstack([corners, np.zeros((1, dim)), rng.uniform(-1.0, 1.0, (config.skill_candidates, dim))])
-    return plans, candidates.astype(np.float32)
+    candidates = box_candidates(dim, config.skill_candidates, rng)
+    return plans, candidates
 
 
 def plan_label(i: int, config: AvoidabilityConfig) -> str:

@@ -15,7 +15,9 @@
 5. Metrics on held-out windows (``metrics.json``): reconstruction error, prior NLL per class for both priors
    (the cross terms too, and the separation: how many nats each prior is better on its own class) against an
    unconditional Gaussian reference, the jerk of decoded skill roll-outs is measured separately
-   (`seal.experiments.bench.skills`), and the skill-space plot (``embedding.png``, thesis Fig. 6.2).
+   (`seal.experiments.bench.skills`), the skill-space plot (``embedding.png``, thesis Fig. 6.2), and each prior's
+   reach (`seal.models.skills.reach`: the hardest braking / strongest throttle its skills offer per state at noise
+   bounds 1, 2, 3, beside the logged drivers' acceleration tails).
 
 Outputs in ``--out``: ``vae.pt``, ``prior_benign.pt``, ``prior_adversarial.pt`` (`seal.models.skills.io`),
 ``demos_<source>.npz`` (unless ``--demos`` puts them elsewhere), ``config.yaml`` (resolved), ``metrics.json``,
@@ -211,6 +213,7 @@ def _held_out_metrics(vae: Any, priors: dict[str, Any], demos: Demonstrations, r
     """Reconstruction, prior NLL per class (cross terms too) against a Gaussian reference, and the embedding plot."""
     from seal.experiments.fitting.skill_embedding import plot_embedding, prior_samples
     from seal.models.skills.metrics import gaussian_nll, prior_nll, vae_metrics
+    from seal.models.skills.reach import skill_reach
 
     seed, obs, actions = config.seed, demos.obs, demos.actions
     val_all = np.concatenate([rows["val", "benign"], rows["val", "adversarial"]])
@@ -236,6 +239,8 @@ def _held_out_metrics(vae: Any, priors: dict[str, Any], demos: Demonstrations, r
                for k, (name, p) in enumerate(priors.items())}
     embedding = plot_embedding(samples, out / "embedding.png",
                                f"skill latents of both priors over {state_rows.size} held-out states (PCA)")
+    # What each prior's skills can do in those states (the hardest braking / throttle a ReSkill ego can pick).
+    reach = {name: skill_reach(vae, p, states, actions[state_rows, 1], seed=seed) for name, p in priors.items()}
     return {
         "reconstruction": {k: {m: round(v, 5) if isinstance(v, float) else v for m, v in r.items()}
                            for k, r in recon.items()},
@@ -250,6 +255,7 @@ def _held_out_metrics(vae: Any, priors: dict[str, Any], demos: Demonstrations, r
             for stat, suffix in (("mean", ""), ("median", "_median"))
         },
         "embedding": embedding,
+        "reach": reach,
     }
 
 
@@ -355,6 +361,10 @@ def format_summary(m: dict[str, Any]) -> str:
                  f"{sep['adversarial_windows']:+.3f}, {sep['adversarial_windows_median']:+.3f} nats better than the "
                  f"benign prior; on benign windows the benign prior is {sep['benign_windows']:+.3f}, "
                  f"{sep['benign_windows_median']:+.3f} nats better than the adversarial prior")
+    from seal.models.skills.reach import format_reach
+
+    for name, reach in (m.get("reach") or {}).items():  # absent in reports written before it existed
+        lines.append(format_reach(name, reach))
     e = m["embedding"]
     lines.append(f"embedding: PCA variance {e['explained_variance']}, prior mean distance "
                  f"{e.get('mean_distance_pooled_std')} pooled std; timings {m['timings']}")

@@ -66,6 +66,12 @@ def test_fit_skills_writes_loadable_models_and_metrics(
     assert json.loads((out / "metrics.json").read_text())["windows_used"] == used
     models = load_skill_models(out)
     assert models.vae is not None and set(models.priors) == {"benign", "adversarial"}
+    reach = result["reach"]["benign"]  # each prior's reach over the plot's 5 held-out states
+    assert set(result["reach"]) == {"benign", "adversarial"} and reach["states"] == 5
+    for bound in ("1", "2", "3"):
+        cell = reach[f"noise_bound_{bound}"]
+        assert -1 <= cell["hardest_braking"]["p10"] <= cell["hardest_braking"]["p90"] <= 1
+        assert cell["hardest_braking"]["p50"] <= cell["strongest_throttle"]["p50"]
 
 
 def test_fit_then_eval_objective_give_the_same_held_out_report(
