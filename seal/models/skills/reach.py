@@ -7,6 +7,10 @@ the skills that box maps to. For each state this module decodes the first action
 (the box's corners, its centre and uniform draws) and keeps the lowest and highest acceleration. A space whose
 median hardest braking is a fraction of what logged drivers do in their 5 % tail cannot express an emergency stop,
 and an ego choosing among its skills cannot learn one, whatever it is trained against.
+
+The first action is what a skill does before the state changes. For a decoder that also reads the previous action
+(SEAL's smooth skills) it stays near that action, so the reach understates what such a skill does over its horizon;
+the ReSkill ego's decoder does not read it (``experiments/configs/skills_ego.yaml``).
 """
 
 from __future__ import annotations
