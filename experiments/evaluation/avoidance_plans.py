@@ -23,6 +23,7 @@ import numpy as np
 
 from seal.core.scenario import Scenario
 from seal.envs.heuristic import HeuristicDriver
+from seal.experiments.training.skill_prior import EgoSkills, noise_of
 from seal.models.skills.reach import box_candidates
 
 PLAN_SPACES = ("actions", "skills")
@@ -93,6 +94,14 @@ class PlanEgo:
         return np.clip(action, -1.0, 1.0)
 
 
+def reskill_skills(ego: Any) -> EgoSkills:
+    """The skill model of a ReSkill ego (`seal.experiments.training.egos.ReSkillEgo`); ValueError for any other."""
+    skills = getattr(getattr(ego, "policy", None), "skills", None)
+    if skills is None:
+        raise ValueError(f"plan_space 'skills' needs a ReSkill ego, got {getattr(ego, 'name', ego)!r}")
+    return skills
+
+
 class SkillPlanEgo:
     """A ReSkill ego (`seal.experiments.training.egos.ReSkillEgo`) whose skill choices follow a plan.
 
@@ -113,14 +122,10 @@ class SkillPlanEgo:
 
     def __init__(self, ego: Any, offsets: np.ndarray, extreme: np.ndarray, segment_steps: int,
                  candidates: np.ndarray) -> None:
-        from seal.experiments.training.skill_prior import noise_of
-
-        if not hasattr(getattr(ego, "policy", None), "skills"):
-            raise ValueError(f"plan_space 'skills' needs a ReSkill ego, got {getattr(ego, 'name', ego)!r}")
-        self._noise_of = noise_of
+        skills = reskill_skills(ego)
         self.policy = copy.copy(ego.policy)  # its own step counter and current skill; weights shared
-        self.policy.skills = ego.policy.skills.clone()
-        self._probe = ego.policy.skills.clone()  # scores candidate skills without touching the driven one
+        self.policy.skills = skills.clone()
+        self._probe = skills.clone()  # scores candidate skills without touching the driven one
         self._high = ego.policy.high_action
         self.policy.high_action = self._choose
         self.deadline_obs = bool(getattr(ego, "deadline_obs", False))
@@ -151,7 +156,7 @@ class SkillPlanEgo:
         options = np.vstack([u[None], self.candidates])
         accel = np.empty(len(options))
         for i, option in enumerate(options):
-            self._probe.skill(self._noise_of(option, self.policy.noise_bound), obs)
+            self._probe.skill(noise_of(option, self.policy.noise_bound), obs)
             accel[i] = float(self._probe.action(obs)[1])
         return options[int(np.argmax(sign * accel))]
 
@@ -207,10 +212,7 @@ def ego_plans(config: AvoidabilityConfig, ego: Any, index: int, segment_steps: i
     first plan reaching the goal). ``ego`` is the reference ego (needed by the ``skills`` space)."""
     rng = np.random.default_rng([config.seed, index])
     if config.plan_space == "skills":
-        skills = getattr(getattr(ego, "policy", None), "skills", None)
-        if skills is None:
-            raise ValueError(f"plan_space 'skills' needs a ReSkill ego, got {getattr(ego, 'name', ego)!r}")
-        plans, candidates = skill_plans(config, int(skills.latent_dim), rng)
+        plans, candidates = skill_plans(config, int(reskill_skills(ego).latent_dim), rng)
         for i, (offsets, extreme) in enumerate(plans):
             yield plan_label(i, config), SkillPlanEgo(ego, offsets, extreme, segment_steps, candidates)
         return
