@@ -302,8 +302,10 @@ def _apply(cls: type, base: Mapping[str, Any], layer: Mapping[str, Any], where: 
     types_ = field_types(cls)
     unknown = sorted(set(layer) - set(types_))
     if unknown:
+        hints = [hint for k in unknown if (hint := _nested_hint(cls, k, prefix))]
         raise ConfigError(f"{where}: unknown key(s) {[prefix + k for k in unknown]}; known: {sorted(types_)}"
-                          + (f" (under {prefix.rstrip('.')})" if prefix else ""))
+                          + (f" (under {prefix.rstrip('.')})" if prefix else "")
+                          + (f"; did you mean {', '.join(hints)}?" if hints else ""))
     out = dict(base)
     partial = _overrides_of(cls)
     for name, value in layer.items():
@@ -319,6 +321,25 @@ def _apply(cls: type, base: Mapping[str, Any], layer: Mapping[str, Any], where: 
         else:
             out[name] = coerce(value, tp, key, where)
     return out
+
+
+def _nested_hint(cls: type, name: str, prefix: str, depth: int = 3) -> str:
+    """The dotted keys (comma-separated, '' if none) of the fields called ``name`` in the dataclasses nested below
+    ``cls`` (up to ``depth`` levels): a key given one level too high, e.g. ``hyperparams.noise_bound`` for
+    ``hyperparams.reskill.noise_bound``."""
+    found: list[str] = []
+
+    def walk(c: type, path: str, left: int) -> None:
+        nested = {**{n: sub for n, tp in field_types(c).items() if (sub := _dataclass_in(tp)) is not None},
+                  **_overrides_of(c)}
+        for child, sub in nested.items():
+            if name in field_types(sub):
+                found.append(f"{path}{child}.{name}")
+            elif left > 1:
+                walk(sub, f"{path}{child}.", left - 1)
+
+    walk(cls, prefix, depth)
+    return ", ".join(found)
 
 
 def _merge_mapping(base: Mapping[str, Any], layer: Mapping[str, Any], inner: Any, key: str,

@@ -108,6 +108,14 @@ def test_unknown_key_names_key_file_and_known_keys(tmp_path: Path) -> None:
         load_config(Cfg, overrides=["sub.c=1"])
 
 
+def test_unknown_key_one_level_too_high_suggests_the_nested_key() -> None:
+    with pytest.raises(ConfigError, match=r"unknown key\(s\) \['lr'\].*did you mean inner\.lr\?"):
+        load_config(Cfg, overrides=["lr=0.1"])
+    with pytest.raises(ConfigError) as err:  # nothing nested is called so: no guess
+        load_config(Cfg, overrides=["nothing=1"])
+    assert "did you mean" not in str(err.value)
+
+
 @pytest.mark.parametrize(
     ("override", "match"),
     [
