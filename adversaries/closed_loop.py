@@ -72,14 +72,26 @@ class ClosedLoopEnv(gym.Wrapper):
         generator: the generator, or None for the logged adversary only (queues are still kept).
         k: queue length.
         perturb_prob: share of episodes the generator perturbs (the curriculum sets it with `set_perturb_prob`).
+        revisit_prob: probability that an episode replays the scenario of the episode before it (drawn at each
+            reset without a ``scenario_id`` option, from the env's generator). Why: the generator targets the
+            newest roll-out in the scenario's queue, and with a training pool much larger than the run's episode
+            count most scenarios are played about once, so without revisits most perturbed episodes target the
+            logged ego or a roll-out of a much older policy; with ``revisit_prob`` r the scenario is played in runs
+            of 1 / (1 - r) episodes on average, each perturbed one against the ego's roll-out just before it, as
+            the evaluation's K passes do. 0 (the default) draws every scenario afresh.
     """
 
     def __init__(
-        self, env: ScenarioEnv, generator: AdversaryGenerator | None, k: int = K_ROLLOUTS, perturb_prob: float = 1.0
+        self, env: ScenarioEnv, generator: AdversaryGenerator | None, k: int = K_ROLLOUTS, perturb_prob: float = 1.0,
+        revisit_prob: float = 0.0,
     ) -> None:
         super().__init__(env)
+        if not 0.0 <= revisit_prob < 1.0:
+            raise ValueError(f"revisit_prob must be in [0, 1), got {revisit_prob}")
         self.history = RolloutHistory(k)
         self.adversary = ClosedLoopAdversary(generator, self.history, perturb_prob)
+        self.revisit_prob = float(revisit_prob)
+        self._last_scenario_id: str | None = None
         self._episode_adversary: dict[str, Any] = {}
         env.set_adversary(self.adversary)
 
@@ -105,9 +117,11 @@ class ClosedLoopEnv(gym.Wrapper):
 
     def get_state(self) -> dict[str, np.ndarray]:
         """This worker's roll-out queues (`RolloutHistory.get_state`) plus ``rng_state`` (0-d str: JSON of the
-        env's numpy bit-generator state, which picks scenarios, curriculum draws and generator randomness)."""
+        env's numpy bit-generator state, which picks scenarios, curriculum draws and generator randomness) and
+        ``last_scenario`` (0-d str: the scenario of the last episode, '' before the first; what a revisit replays)."""
         state = self.history.get_state()
         state["rng_state"] = np.array(json.dumps(self.env.unwrapped.np_random.bit_generator.state))
+        state["last_scenario"] = np.array(self._last_scenario_id or "")
         return state
 
     def set_state(self, state: Mapping[str, np.ndarray], source: str = "closed-loop state") -> None:
@@ -116,10 +130,18 @@ class ClosedLoopEnv(gym.Wrapper):
         if "rng_state" in state:
             rng = self.env.unwrapped.np_random  # property: seeds a fresh generator when none exists yet
             rng.bit_generator.state = json.loads(str(np.asarray(state["rng_state"])))
+        if "last_scenario" in state:
+            self._last_scenario_id = str(np.asarray(state["last_scenario"])) or None
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         self.adversary.last = {}
+        if (self.revisit_prob > 0.0 and self._last_scenario_id is not None and seed is None
+                and "scenario_id" not in (options or {})
+                and self._scenario_env.np_random.random() < self.revisit_prob):
+            options = {**(options or {}), "scenario_id": self._last_scenario_id}
         obs, info = self.env.reset(seed=seed, options=options)
+        scenario = self._scenario_env.scenario
+        self._last_scenario_id = None if scenario is None else scenario.scenario_id
         info["adversary"] = dict(self.adversary.last) or {"generator": "given", "perturbed": False}
         self._episode_adversary = info["adversary"]
         return obs, info
@@ -152,6 +174,7 @@ def closed_loop_env_fns(
     env_config: Mapping[str, Any] | None = None,
     k: int = K_ROLLOUTS,
     perturb_prob: float = 1.0,
+    revisit_prob: float = 0.0,
 ) -> list[Callable[[], ClosedLoopEnv]]:
     """One env constructor per worker (for SB3 ``SubprocVecEnv`` / ``DummyVecEnv``), worker ``w`` playing only
     its part of `partition_scenarios`; the generator is built by name inside the worker."""
@@ -163,7 +186,8 @@ def closed_loop_env_fns(
         def build() -> ClosedLoopEnv:
             reserve_road_cache(len({id(s.road) for s in part}))  # every reset would else miss the cache
             gen = make_generator(generator, **kwargs) if generator is not None else None
-            return ClosedLoopEnv(ScenarioEnv(part, config=config), gen, k=k, perturb_prob=perturb_prob)
+            return ClosedLoopEnv(ScenarioEnv(part, config=config), gen, k=k, perturb_prob=perturb_prob,
+                                 revisit_prob=revisit_prob)
 
         return build
 

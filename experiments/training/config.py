@@ -252,6 +252,11 @@ class EgoTrainConfig:
     """Roll-out queue length per scenario."""
     curriculum: Curriculum = field(default_factory=Curriculum)
     """Perturbation probability schedule."""
+    revisit_prob: float = 0.0
+    """Probability that a worker's next episode replays the scenario of its last one, in [0, 1)
+    (`seal.adversaries.closed_loop.ClosedLoopEnv`): the generator then targets the ego's roll-out just played, as
+    in the evaluation's K passes, instead of the logged ego of a scenario not played before. 0: every episode
+    draws its scenario afresh."""
     env: dict[str, Any] = field(default_factory=lambda: {"terminate_on_crash": False})
     """`ScenarioEnv` config overrides for training (CAT: episodes go on after a crash)."""
     eval_env: dict[str, Any] = field(default_factory=lambda: {"terminate_on_crash": True})
@@ -440,6 +445,8 @@ def resolve(config: EgoTrainConfig, preset: str) -> dict[str, Any]:
             raise ConfigError(f"train.{key} must be >= 0, got {getattr(config, key)}")
     if config.n_envs is not None and config.n_envs < 1:
         raise ConfigError(f"train.n_envs must be >= 1 or null (all cores), got {config.n_envs}")
+    if not 0.0 <= config.revisit_prob < 1.0:
+        raise ConfigError(f"train.revisit_prob must be in [0, 1), got {config.revisit_prob}")
     _check_env_keys(config)
     chosen = getattr(config.hyperparams, algo)
     if hasattr(chosen, "policy_kwargs"):

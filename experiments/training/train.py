@@ -106,7 +106,8 @@ def build_vec_env(config: Mapping[str, Any], scenarios: list[Any], n_envs: int) 
     gen = config["generator"]
     kwargs = _generator_kwargs(config) if gen["name"] else {}
     fns: list[Callable[[], Any]] = list(closed_loop_env_fns(
-        scenarios, n_envs, gen["name"], kwargs, env_config=config["env"], k=int(config["k"]), perturb_prob=0.0))
+        scenarios, n_envs, gen["name"], kwargs, env_config=config["env"], k=int(config["k"]), perturb_prob=0.0,
+        revisit_prob=float(config.get("revisit_prob") or 0.0)))
     if config["algo"] == "reskill":
         from seal.experiments.training.reskill import wrap_env_fns
 

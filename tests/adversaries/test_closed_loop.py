@@ -103,6 +103,49 @@ def test_worker_state_round_trip_restores_queues_and_the_env_rng() -> None:
     assert replayed == expected_next  # same scenarios, same coin flips, same queues seen
 
 
+def _reset_ids(env: ClosedLoopEnv, n: int) -> list[str]:
+    ids = []
+    for _ in range(n):  # ScenarioEnv allows a reset before an episode ends: only the scenario choice matters here
+        env.reset()
+        ids.append(env.env.unwrapped.scenario.scenario_id)
+    return ids
+
+
+def test_revisits_replay_the_last_scenario_at_their_rate() -> None:
+    """revisit_prob r: the next episode replays the last scenario with probability r (plus 1 / n when the fresh
+    draw hits it again); 0 draws every scenario afresh from the same rng stream as before the option existed."""
+    scenarios = [sf.highway_scenario(i) for i in range(8)]
+    plain = ClosedLoopEnv(ScenarioEnv(scenarios), None, k=2)
+    plain.reset(seed=1)
+    reference = ScenarioEnv(scenarios)
+    reference.reset(seed=1)
+    ids = _reset_ids(plain, 60)
+    assert ids == [reference.reset()[1]["scenario_id"] for _ in range(60)]  # r = 0: untouched stream
+
+    env = ClosedLoopEnv(ScenarioEnv(scenarios), None, k=2, revisit_prob=0.8)
+    env.reset(seed=1)
+    ids = _reset_ids(env, 400)
+    repeats = np.mean([a == b for a, b in zip(ids, ids[1:], strict=False)])
+    assert abs(repeats - (0.8 + 0.2 / 8)) < 0.06  # 0.825 expected; binomial sd over 399 pairs ~0.02
+    assert len(set(ids)) == 8
+    assert env.reset(options={"scenario_id": scenarios[3].scenario_id})[1]["scenario_id"] == scenarios[3].scenario_id
+    with pytest.raises(ValueError, match="revisit_prob"):
+        ClosedLoopEnv(ScenarioEnv(scenarios), None, revisit_prob=1.0)
+
+
+def test_worker_state_round_trip_keeps_the_scenario_a_revisit_replays() -> None:
+    scenarios = [sf.highway_scenario(i) for i in range(5)]
+    env = ClosedLoopEnv(ScenarioEnv(scenarios), None, k=2, revisit_prob=0.5)
+    env.reset(seed=4)
+    _reset_ids(env, 3)
+    state = env.get_state()
+    assert str(state["last_scenario"]) == env.env.unwrapped.scenario.scenario_id
+    expected = _reset_ids(env, 20)
+    other = ClosedLoopEnv(ScenarioEnv(scenarios), None, k=2, revisit_prob=0.5)
+    other.set_state(state)
+    assert _reset_ids(other, 20) == expected
+
+
 def test_partition_edges() -> None:
     scenarios = [sf.highway_scenario(i) for i in range(3)]
     assert partition_scenarios(scenarios, 1) == [scenarios]

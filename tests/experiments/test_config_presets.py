@@ -62,6 +62,8 @@ def test_preset_resolves_to_recorded_values(key: str) -> None:
         assert resolved.pop("overlap_updates") is True
         # Added after the recording (issue 26): the time-aware ego is opt-in.
         assert resolved.pop("deadline_obs") is False
+        # Added after the recording (issue 26): revisits of the last scenario are opt-in.
+        assert resolved.pop("revisit_prob") == 0.0
         # Added after the recording (issue 25): SB3 policy_kwargs besides net_arch, none by default.
         if "policy_kwargs" in resolved["hyperparams"]:
             assert resolved["hyperparams"].pop("policy_kwargs") == {}

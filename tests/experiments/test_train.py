@@ -65,6 +65,8 @@ def test_config_errors_name_the_key(tmp_path: Path) -> None:
         load_train_config(path, {"pipeline": "nope"})
     with pytest.raises(ValueError, match="hyperparams.td3"):
         load_train_config(path, {"hyperparams.td3.bogus": 1})
+    with pytest.raises(ValueError, match=r"train.revisit_prob must be in \[0, 1\), got 1.0"):
+        load_train_config(path, {"revisit_prob": 1.0})
     bad = tmp_path / "bad.yaml"
     bad.write_text("data: {}\n")
     with pytest.raises(ValueError, match="no 'train:' section"):
@@ -231,6 +233,20 @@ def test_episode_end_info_and_warm_up() -> None:
     # The last step repeats the episode's reset metadata (a vec env's reset info is the next episode's).
     assert info["episode_adversary"] == reset_info["adversary"]
     assert info["episode_adversary"]["generator"] == "rule" and info["episode_adversary"]["perturbed"]
+
+
+def test_the_training_envs_revisit_at_the_configured_rate(tmp_path: Path) -> None:
+    from seal.core.dataset import load_split
+    from seal.experiments.training.train import build_vec_env
+
+    config = tiny_train_config(tiny_dataset(tmp_path))
+    scenarios = load_split(config["dataset"], "train")
+    assert config["revisit_prob"] == 0.0  # the presets draw every episode's scenario afresh
+    venv = build_vec_env({**config, "n_envs": 1, "revisit_prob": 0.7}, scenarios, 1)
+    try:
+        assert venv.get_attr("revisit_prob") == [0.7]
+    finally:
+        venv.close()
 
 
 def test_replay_buffer_round_trip(tmp_path: Path) -> None:
