@@ -26,7 +26,7 @@ import gymnasium as gym
 import numpy as np
 
 from seal.adversaries.base import K_ROLLOUTS, AdversaryGenerator, make_generator
-from seal.adversaries.history import RolloutHistory, rollout_digest
+from seal.adversaries.history import LOGGED_ADVERSARY, RolloutHistory, rollout_digest
 from seal.core.scenario import Scenario
 from seal.envs.behaviors import AdversaryBehavior, ReplayBehavior
 from seal.envs.road_geometry import get_road_geometry, reserve_road_cache
@@ -60,6 +60,8 @@ class ClosedLoopAdversary:
             "predicted_step": generation.predicted_step,
             "generation_time_s": generation.generation_time_s,
             "history": digests,
+            # the generator aims at the newest roll-out: the logged ego until the scenario has been played
+            "targets_log": queue[-1].adversary == LOGGED_ADVERSARY,
         }
         return generation.behavior
 

@@ -30,6 +30,9 @@ from seal.core.outcome import Outcome
 from seal.core.scenario import CURRENT_STEP, VALID, Scenario
 from seal.envs.rollout import Rollout
 
+LOGGED_ADVERSARY = "log"
+"""``Rollout.adversary`` of `logged_rollout`: the queue entry that is the log, not a roll-out the ego played."""
+
 
 def logged_rollout(scenario: Scenario) -> Rollout:
     """The logged episode as a `Rollout`: what the queue holds before the scenario was ever played.
@@ -63,7 +66,7 @@ def logged_rollout(scenario: Scenario) -> Rollout:
         ego_crashes=crashes(ego_i, (ego_i,)),
         adv_crashes=crashes(adv_i, (adv_i, ego_i)),
         route_completion=1.0,
-        adversary="log",
+        adversary=LOGGED_ADVERSARY,
     )
 
 

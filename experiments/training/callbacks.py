@@ -36,8 +36,10 @@ class ResumableCSVOutputFormat(CSVOutputFormat):
 
 class EpisodeStatsCallback(BaseCallback):
     """Outcome rates of the last ``window`` training episodes, logged as ``episode/*`` (success, crash: the ego
-    touched another agent at any step, out-of-road, timeout, route completion, share perturbed by the generator)
-    and ``generator/time_ms`` (mean generation time of the perturbed ones). ``totals`` counts every episode of
+    touched another agent at any step, out-of-road, timeout, route completion, share perturbed by the generator,
+    and of the perturbed ones the share whose generator aimed at the logged ego because the scenario's queue held
+    no roll-out of the ego yet: ``log_target_share``, see ``train.revisit_prob``) and ``generator/time_ms`` (mean
+    generation time of the perturbed ones). ``totals`` counts every episode of
     this session: by final outcome (``crash`` only counts episodes a crash ended, never with
     ``terminate_on_crash: false``) and ``crashed``, the episodes in which the ego touched another agent at any
     step (what ``episode/crash_rate`` is a rate of)."""
@@ -58,6 +60,7 @@ class EpisodeStatsCallback(BaseCallback):
                 "outcome": rollout.outcome, "crashed": rollout.crashed, "completion": rollout.route_completion,
                 "perturbed": bool(adv.get("perturbed", False)),
                 "generation_s": float(adv.get("generation_time_s") or 0.0),
+                "targets_log": bool(adv.get("targets_log", False)),
             }
             self.recent.append(record)
             t = self.totals
@@ -74,6 +77,7 @@ class EpisodeStatsCallback(BaseCallback):
         if not r:
             return {}
         gen = [e["generation_s"] for e in r if e["perturbed"]]
+        aimed_at_log = [e["targets_log"] for e in r if e["perturbed"]]
         return {
             "success_rate": float(np.mean([e["outcome"] == Outcome.SUCCESS for e in r])),
             "crash_rate": float(np.mean([e["crashed"] for e in r])),
@@ -81,6 +85,7 @@ class EpisodeStatsCallback(BaseCallback):
             "timeout_rate": float(np.mean([e["outcome"] == Outcome.TIMEOUT for e in r])),
             "route_completion": float(np.mean([e["completion"] for e in r])),
             "perturbed_share": float(np.mean([e["perturbed"] for e in r])),
+            "log_target_share": float(np.mean(aimed_at_log)) if aimed_at_log else 0.0,
             "generation_ms": 1e3 * float(np.mean(gen)) if gen else 0.0,
         }
 

@@ -4,6 +4,7 @@ episode infos carry, the worker state round trip with the env rng, and the per-w
 
 from __future__ import annotations
 
+import dataclasses
 import types
 
 import numpy as np
@@ -54,7 +55,11 @@ def test_last_names_the_generation_facts() -> None:
     adversary(scenario, np.random.default_rng(0))
     digests = adversary.history.digests(scenario)
     assert adversary.last == {"generator": "fixed", "perturbed": True, "chosen_candidate": 7, "predicted_step": 33,
-                              "generation_time_s": 0.25, "history": digests}
+                              "generation_time_s": 0.25, "history": digests, "targets_log": True}
+    played = dataclasses.replace(adversary.history.queue(scenario)[-1], adversary="ReplayBehavior")
+    adversary.history.append(scenario, played)  # as if the ego had played the scenario once
+    adversary(scenario, np.random.default_rng(0))
+    assert adversary.last["targets_log"] is False
 
 
 def _play_episode(env: ClosedLoopEnv, seed: int) -> tuple[dict, dict]:

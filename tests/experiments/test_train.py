@@ -249,6 +249,22 @@ def test_the_training_envs_revisit_at_the_configured_rate(tmp_path: Path) -> Non
         venv.close()
 
 
+def test_episode_stats_give_the_share_of_perturbed_episodes_aimed_at_the_log() -> None:
+    from seal.experiments.training.callbacks import EpisodeStatsCallback
+
+    stats = EpisodeStatsCallback()
+    base = {"outcome": "success", "crashed": False, "completion": 1.0, "generation_s": 0.0}
+    stats.recent.extend([{**base, "perturbed": True, "targets_log": True},
+                         {**base, "perturbed": True, "targets_log": False},
+                         {**base, "perturbed": True, "targets_log": False},
+                         {**base, "perturbed": False, "targets_log": False}])
+    rates = stats.rates()
+    assert rates["perturbed_share"] == 0.75 and abs(rates["log_target_share"] - 1 / 3) < 1e-12
+    stats.recent.clear()
+    stats.recent.append({**base, "perturbed": False, "targets_log": False})
+    assert stats.rates()["log_target_share"] == 0.0  # nothing perturbed: nothing aimed
+
+
 def test_replay_buffer_round_trip(tmp_path: Path) -> None:
     from gymnasium import spaces
     from stable_baselines3.common.buffers import ReplayBuffer
