@@ -87,7 +87,9 @@ def write_report(
         "along the contact normal over colliding episodes; head-on rates of all episodes. `normal` = logged "
         "adversary (reference); `normal-reactive` = the same with reacting background traffic (the crashes the "
         "replayed background caused are the difference). yaw+acc WD: the mean of the yaw and acceleration "
-        "distances alone (thesis Table 7.6 leaves the out-of-road term out).\n",
+        "distances alone (thesis Table 7.6 leaves the out-of-road term out); per scenario: each episode's own yaw and "
+        "acceleration WDs to its scenario's logged adversary, averaged over the episodes (the thesis's \"profiles "
+        "derived from the original X_adv in s\" read per scenario; larger, as one episode's histograms are sparse).\n",
         generator_markdown(t62) if t62 else "(no generator settings evaluated)\n",
         where["markdown"],
         *training_md,

@@ -89,6 +89,16 @@ def test_table_6_2_per_generator():
     assert cat["head_on_rate"] == pytest.approx(sum(r["head_on"] for r in crashes) / 28)
     assert cat["generation_ms_mean"] == pytest.approx(np.mean([10.0 * (s + 1) for s in (0, 1, 2, 0, 1, 2, 0)]))
     assert "normal" in table and np.isnan(table["normal"]["collision_speed_mps"])
+    cat_rows = [r for r in rows if r["setting"] == "cat"]
+    for i, r in enumerate(cat_rows):  # per-episode WDs that differ, so the mean is over episodes, not a constant
+        r.update(yaw_wd=0.01 * i, acc_wd=0.5 - 0.01 * i * i)
+    again = {r["setting"]: r for r in generator_table(rows, settings)}["cat"]
+    assert again["realism_yaw_acc_per_scenario"] == pytest.approx(
+        np.mean([(0.01 * i + 0.5 - 0.01 * i * i) / 2 for i in range(len(cat_rows))]))
+    cat_rows[0]["yaw_wd"] = None  # an episode without an adversary track has no WDs: left out
+    again = {r["setting"]: r for r in generator_table(rows, settings)}["cat"]
+    assert again["realism_yaw_acc_per_scenario"] == pytest.approx(
+        np.mean([(r["yaw_wd"] + r["acc_wd"]) / 2 for r in cat_rows[1:]]))
 
 
 def test_counts_give_the_set_level_realism_of_pooled_samples():
