@@ -61,7 +61,7 @@ class ClosedLoopAdversary:
             "generation_time_s": generation.generation_time_s,
             "history": digests,
             # the generator aims at the newest roll-out: the logged ego until the scenario has been played
-            "targets_log": queue[-1].adversary == LOGGED_ADVERSARY,
+            "targets_log": not queue or queue[-1].adversary == LOGGED_ADVERSARY,
         }
         return generation.behavior
 
