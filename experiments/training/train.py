@@ -415,6 +415,7 @@ def _callbacks(config: Mapping[str, Any], out: Path, checkpoint: Path | None, re
         RestoreCallback,
     )
     from seal.experiments.training.curriculum import CurriculumCallback
+    from seal.experiments.training.saturation import ActorSaturationCallback
 
     total = int(config["total_timesteps"])
     # p is pushed to every env either way; it is logged only where a generator uses it (noadv never perturbs).
@@ -431,6 +432,7 @@ def _callbacks(config: Mapping[str, Any], out: Path, checkpoint: Path | None, re
         RestoreCallback(restored["workers"], restored["state"]["rng"], restored["rng"])
         if checkpoint is not None else None,
         stats,
+        ActorSaturationCallback(seed=int(config["seed"])),  # actor/edge_share: a policy stuck at the box edges
         residual,  # after the restore: its first weight copy reaches the restored workers
         CheckpointCallback(int(config["checkpoint_every"]), total, save),
         EvalCallback(int(config["eval_every"]), out / "eval",

@@ -204,6 +204,9 @@ def test_killed_run_resumes_to_the_same_step_count(tmp_path: Path, monkeypatch: 
     steps = [int(r["time/total_timesteps"]) for r in csv.DictReader((run / ts.PROGRESS).open())
              if r["time/total_timesteps"]]
     assert steps == sorted(steps) and steps[-1] <= 160
+    edge = [float(r["actor/edge_share"]) for r in csv.DictReader((run / ts.PROGRESS).open())
+            if r.get("actor/edge_share")]
+    assert edge and all(0.0 <= e <= 1.0 for e in edge)  # the actor's saturation, logged once there are states
     evals = [int(r["step"]) for r in csv.DictReader((run / "eval" / "evaluations.csv").open())]
     assert evals == [80, 160]
     assert (run / ts.FINAL_MODEL).is_file() and any((run / "tb").iterdir())
