@@ -3,7 +3,7 @@
 Why: a TD3 actor ends in tanh, and when its critic keeps asking for more in one direction the pre-activations grow
 until the action sits at the edge of the box, where the gradient through tanh vanishes and the policy stops
 changing. Measured on the decisive run (session 33): 3 of 28 ReSkill egos took one and the same high-level action in
-every state of 20 scenarios, and 5 more nearly so; they scored like the others, so what the pipeline taught them
+every state of 20 scenarios, and 6 more nearly so; they scored like the others, so what the pipeline taught them
 could not show. These two numbers make that visible while a run trains: on a fixed-size sample of replay-buffer
 states, the share of action components at the edge (``|a| > EDGE`` in the policy's [-1, 1] units) and the spread of
 the deterministic action over the states (mean over components of the standard deviation; 0 = one action for all).
@@ -45,7 +45,11 @@ class ActorSaturationCallback(BaseCallback):
         super().__init__()
         self.every, self.n_states = int(every), int(n_states)
         self.rng = np.random.default_rng(seed)
-        self.next_step = 0
+        self.next_step: float = 0
+
+    def _on_training_start(self) -> None:
+        if getattr(self.model, "replay_buffer", None) is None:  # on-policy (PPO): nothing to sample, never look again
+            self.next_step = float("inf")
 
     def _on_step(self) -> bool:
         if self.num_timesteps < self.next_step:
