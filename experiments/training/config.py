@@ -138,6 +138,19 @@ def _high_level_td3() -> TD3Hyperparams:
                           action_noise_std=0.2)
 
 
+def _high_level_sac() -> SACHyperparams:
+    # The same decision-level schedule as the high-level TD3 (gamma, buffer, one gradient step per decision). The
+    # entropy coefficient starts at 0.1, not SB3's 1: a decision earns ~10 reward (decisive preset: ~70 an episode of
+    # ~7 skills) against the 8-dimensional policy's ~7 nats of entropy, so at 1 the bonus would drown the reward for
+    # most of a 100k-step run (~10k gradient steps for the learned coefficient to come down).
+    return SACHyperparams(gamma=0.9, learning_starts=5_000, buffer_size=100_000, train_freq=1, gradient_steps=2,
+                          ent_coef="auto_0.1")
+
+
+HIGH_ALGOS = ("td3", "sac")
+"""Learners of the ReSkill ego's high-level agent (``hyperparams.reskill.high_algo``)."""
+
+
 def _residual_td3() -> TD3Hyperparams:
     # learning_starts counts residual transitions (collected once the gate opens); train_freq / gradient_steps:
     # one gradient step per 4 residual transitions, the low-level TD3 preset's ratio. Exploration noise is added
@@ -148,7 +161,7 @@ def _residual_td3() -> TD3Hyperparams:
 
 @dataclass(frozen=True)
 class ReSkillHyperparams:
-    """The ReSkill ego (``algo: reskill``; `seal.experiments.training.reskill`): a high-level TD3 agent whose action
+    """The ReSkill ego (``algo: reskill``; `seal.experiments.training.reskill`): a high-level agent whose action
     is the benign prior's noise, one decision per skill horizon, and a residual TD3 agent adding a bounded
     correction to each decoded action, both trained on the env reward."""
 
@@ -169,8 +182,15 @@ class ReSkillHyperparams:
     """Gaussian exploration noise on the residual action (in its [-1, 1] units), added in the env workers."""
     residual_sync_every: int = 200
     """Env steps between copies of the residual actor's weights to the env workers."""
+    high_algo: str = "td3"
+    """Learner of the high-level agent: ``td3`` (settings ``high``) or ``sac`` (settings ``high_sac``). TD3's
+    deterministic tanh actor saturates on this problem: of the 28 decisive ReSkill egos (session 33) 3 took one and
+    the same corner of the action box in every state and 6 more nearly so, and they scored like the others. SAC's
+    entropy term (with the tanh squashing's log-density correction) keeps its policy off the corners."""
     high: TD3Hyperparams = field(default_factory=_high_level_td3)
     """High-level TD3 (transitions are skills; ``learning_starts`` in env steps)."""
+    high_sac: SACHyperparams = field(default_factory=_high_level_sac)
+    """High-level SAC, when ``high_algo`` is ``sac`` (same units as ``high``)."""
     residual: TD3Hyperparams = field(default_factory=_residual_td3)
     """Residual TD3 (``train_freq``: residual transitions per ``gradient_steps`` gradient steps)."""
 
@@ -179,6 +199,8 @@ class ReSkillHyperparams:
             "noise_bound": _POSITIVE, "residual_bound": _NON_NEGATIVE, "residual_start": _NON_NEGATIVE,
             "residual_ramp": _NON_NEGATIVE, "residual_noise_std": _NON_NEGATIVE, "residual_sync_every": _AT_LEAST_1,
         })
+        if self.high_algo not in HIGH_ALGOS:
+            raise ConfigError(f"ReSkillHyperparams.high_algo must be one of {HIGH_ALGOS}, got {self.high_algo!r}")
 
 
 @dataclass(frozen=True)
@@ -231,7 +253,7 @@ class EgoTrainConfig:
     """The ``train:`` section of a preset: everything ``seal train`` needs besides the run folder."""
 
     algo: str = "td3"
-    """Ego algorithm: td3 | sac | ppo (SB3) | reskill (skill prior + residual, both TD3)."""
+    """Ego algorithm: td3 | sac | ppo (SB3) | reskill (skill prior + residual; high level TD3 or SAC)."""
     pipeline: str = "cat"
     """Adversary pipeline: one of ``pipelines`` (noadv | goose | cat | seal)."""
     seed: int = 0

@@ -244,6 +244,7 @@ def load_reskill(path: Path) -> Any:
     from seal.experiments.training.reskill import (
         FINAL_RESIDUAL,
         RESIDUAL,
+        high_level,
         load_reskill_policy,
         load_skills,
         residual_spaces,
@@ -264,7 +265,7 @@ def load_reskill(path: Path) -> Any:
     skills = load_skills(config["hyperparams"])
     from gymnasium import spaces
 
-    high = load_sb3_model(model_path, algo_name="TD3",
+    high = load_sb3_model(model_path, algo_name=high_level(config["hyperparams"])[0].upper(),
                           action_space=spaces.Box(-1.0, 1.0, (skills.latent_dim,), np.float32))
     res_obs, res_act = residual_spaces(skills)
     residual = load_sb3_model(residual_path, algo_name="TD3", observation_space=res_obs, action_space=res_act)

@@ -1,4 +1,4 @@
-"""SB3 TD3 actors in numpy, for one observation at a time.
+"""SB3 TD3 and SAC actors in numpy, for one observation at a time.
 
 SB3's ``model.predict`` spends ~0.3-0.8 ms a call on a 2-core machine (tensor conversion, checks, torch's
 per-operation overhead) where the actor's three small matrix products take ~30-50 us in numpy. An evaluation calls
@@ -8,7 +8,7 @@ ReSkill env workers run the residual actor every step; there numpy is 10-15x che
 `NumpyMLP` is a copy of an actor's ``mu`` network (every Linear, the activation between them, the output Tanh),
 read from the torch modules so that any hidden activation of `seal.experiments.training.zoo.ACTIVATIONS`
 (``policy_kwargs.activation_fn``) is computed as torch computes it. `deterministic_actor` is the numpy twin of
-``model.predict(obs, deterministic=True)`` for a TD3 / DDPG model (flattened Box observation, squashed Box
+``model.predict(obs, deterministic=True)`` for a TD3 / DDPG / SAC model (flattened Box observation, squashed Box
 action); results agree with SB3's to float32 rounding (~1e-6; the same products summed in another order). A
 copy does not follow later training: take a new one after the weights change.
 """
@@ -144,24 +144,47 @@ def actor_mlp(model: Any) -> NumpyMLP:
     return mlp_of(model.actor.mu)
 
 
-def deterministic_actor(model: Any) -> Callable[[np.ndarray], np.ndarray] | None:
-    """The numpy twin of ``model.predict(obs, deterministic=True)[0]`` for one observation, or None when
-    ``model`` is not an SB3 TD3 / DDPG model with a flattened Box observation and a squashed Box action (SAC,
-    PPO, image or dict observations, other feature extractors: use ``predict``)."""
-    from gymnasium import spaces
-    from stable_baselines3.common.torch_layers import FlattenExtractor
+def sac_actor_mlp(policy: Any) -> NumpyMLP:
+    """The numpy copy of an SB3 SAC policy's deterministic actor: ``tanh(mu(latent_pi(obs)))`` (the mode of its
+    squashed Gaussian, in [-1, 1])."""
+    body = mlp_of(policy.actor.latent_pi) if len(policy.actor.latent_pi) else None
+    head = mlp_of([policy.actor.mu])
+    layers = (body.layers if body else ()) + head.layers
+    acts = (body.activations if body else ()) + (("Tanh", ()),)
+    return NumpyMLP(layers, acts)
+
+
+def _numpy_policy(policy: Any) -> NumpyMLP | None:
+    """The numpy actor of a TD3 / DDPG policy with a squashed output or of a SAC policy without gSDE; else None."""
+    from stable_baselines3.sac.policies import SACPolicy
     from stable_baselines3.td3.policies import TD3Policy
 
+    try:
+        if isinstance(policy, TD3Policy) and policy.squash_output:
+            return actor_mlp(policy)
+        if isinstance(policy, SACPolicy) and not policy.actor.use_sde:
+            return sac_actor_mlp(policy)
+    except ValueError:
+        return None
+    return None
+
+
+def deterministic_actor(model: Any) -> Callable[[np.ndarray], np.ndarray] | None:
+    """The numpy twin of ``model.predict(obs, deterministic=True)[0]`` for one observation, or None when
+    ``model`` is not an SB3 TD3 / DDPG / SAC model with a flattened Box observation and a squashed Box action (PPO,
+    SAC with gSDE, image or dict observations, other feature extractors: use ``predict``)."""
+    from gymnasium import spaces
+    from stable_baselines3.common.torch_layers import FlattenExtractor
+
     policy = getattr(model, "policy", None)
-    if not isinstance(policy, TD3Policy) or not policy.squash_output:
+    if policy is None or getattr(policy, "actor", None) is None:  # PPO's policy has no separate actor
         return None
     if not isinstance(policy.observation_space, spaces.Box) or not isinstance(policy.action_space, spaces.Box):
         return None
     if not isinstance(policy.actor.features_extractor, FlattenExtractor) or len(policy.observation_space.shape) != 1:
         return None
-    try:
-        mlp = actor_mlp(policy)
-    except ValueError:
+    mlp = _numpy_policy(policy)
+    if mlp is None:
         return None
     low = np.asarray(policy.action_space.low, dtype=np.float32)
     high = np.asarray(policy.action_space.high, dtype=np.float32)

@@ -1,11 +1,12 @@
 """The ReSkill ego in ``seal train --algo reskill`` (thesis 6.4.1, after ReSkill): the trainer-side parts.
 
-Two TD3 agents learn from the env reward:
+Two agents learn from the env reward:
 
-- the **high-level agent** is an SB3 TD3 on `ReSkillEnv` (one transition per skill: the state where the skill was
-  picked, the prior-noise action, the summed reward of its H env steps, the state after it); SB3's loop drives it
-  like any other run (curriculum, checkpoints, evaluation), with ``num_timesteps`` counting env steps
-  (`EnvStepCounter`), so budgets, ``learning_starts``, checkpoints and curves are in env steps as for TD3;
+- the **high-level agent** is an SB3 TD3 or SAC (``hyperparams.high_algo``; `high_level`) on `ReSkillEnv` (one
+  transition per skill: the state where the skill was picked, the prior-noise action, the summed reward of its H
+  env steps, the state after it); SB3's loop drives it like any other run (curriculum, checkpoints, evaluation),
+  with ``num_timesteps`` counting env steps (`EnvStepCounter`), so budgets, ``learning_starts``, checkpoints and
+  curves are in env steps as for the other algorithms;
 - the **residual agent** is a second SB3 TD3 used as a learner only (`build_residual_model`: replay buffer, critics,
   actor): `ResidualTrainer` adds the residual transitions the env workers return, runs its gradient steps (one per
   ``train_freq`` transitions, overlapped with env stepping when the run overlaps updates), copies its actor to the
@@ -49,6 +50,13 @@ def load_skills(hyper: Mapping[str, Any]) -> BenignSkills:
     if not Path(folder).is_dir():
         raise FileNotFoundError(f"train.hyperparams.reskill.skills = {folder!r} is not a folder (seal fit skills)")
     return BenignSkills(folder)
+
+
+def high_level(hyper: Mapping[str, Any]) -> tuple[str, Mapping[str, Any]]:
+    """(algorithm, its settings) of the high-level agent: ``hyperparams.high_algo`` (td3 for runs recorded before
+    it existed) and ``high`` (TD3) or ``high_sac`` (SAC)."""
+    algo = str(hyper.get("high_algo", "td3"))
+    return algo, hyper["high_sac"] if algo == "sac" else hyper["high"]
 
 
 def wrap_env_fns(fns: list[Callable[[], gym.Env]], hyper: Mapping[str, Any], seed: int) -> list[Callable[[], Any]]:

@@ -133,14 +133,17 @@ def _deadline(fn: Callable[[], Any]) -> Callable[[], Any]:
 
 def build_model(config: Mapping[str, Any], env: Any) -> Any:
     """The SB3 model of ``config["algo"]`` with ``config["hyperparams"]`` (see `seal.experiments.training.config`);
-    for ``reskill`` the high-level TD3 (``hyperparams.high``). Off-policy classes defer ``train()`` to an
-    `OverlapVecEnv` in ``env`` when there is one."""
+    for ``reskill`` the high-level agent (TD3 ``hyperparams.high`` or SAC ``hyperparams.high_sac``). Off-policy
+    classes defer ``train()`` to an `OverlapVecEnv` in ``env`` when there is one."""
     import stable_baselines3 as sb3
 
     from seal.experiments.training.overlap import overlapped
 
     if config["algo"] == "reskill":
-        return build_model({**config, "algo": "td3", "hyperparams": config["hyperparams"]["high"]}, env)
+        from seal.experiments.training.reskill import high_level
+
+        algo, hyper = high_level(config["hyperparams"])
+        return build_model({**config, "algo": algo, "hyperparams": hyper}, env)
     import torch
 
     from seal.experiments.training.zoo import parse_policy_kwargs, parse_schedule

@@ -1,4 +1,4 @@
-"""Numpy copies of SB3 TD3 actors (`seal.experiments.training.numpy_actor`) against SB3's own predict."""
+"""Numpy copies of SB3 TD3 and SAC actors (`seal.experiments.training.numpy_actor`) against SB3's own predict."""
 
 from __future__ import annotations
 
@@ -100,13 +100,33 @@ def test_the_copy_pickles_for_the_env_workers() -> None:
     np.testing.assert_array_equal(again(x), mlp(x))
 
 
+@pytest.mark.parametrize("activation", ["ReLU", "Tanh"])
+def test_a_sac_actor_gives_sb3_predict_actions(activation: str) -> None:
+    """SAC's deterministic action is the mode of its squashed Gaussian, tanh(mu(latent_pi(obs))), unscaled."""
+    from stable_baselines3 import SAC
+
+    low, high = (-2.0, 0.0, -1.0), (1.0, 3.0, 1.0)
+    model = SAC("MlpPolicy", _Spaces(100, list(low), list(high)), seed=3, device="cpu",
+                policy_kwargs={"net_arch": [64, 32], "activation_fn": getattr(nn, activation)})
+    with torch.no_grad():
+        model.actor.mu.weight.mul_(40.0)  # trained-looking output layer, as for TD3 above
+    act = deterministic_actor(model)
+    assert act is not None
+    obs = np.random.default_rng(2).normal(0.0, 2.0, (300, 100)).astype(np.float32)
+    want = np.stack([model.predict(o, deterministic=True)[0] for o in obs])
+    got = np.stack([act(o) for o in obs])
+    assert got.shape == want.shape == (300, 3) and got.dtype == np.float32
+    np.testing.assert_allclose(got, want, atol=1e-5)
+    assert np.all(got.std(axis=0) > 0.05 * (np.array(high) - np.array(low)))
+
+
 def test_policies_without_a_numpy_twin_fall_back_to_predict() -> None:
     from stable_baselines3 import PPO, SAC
 
     from seal.envs.heuristic import HeuristicDriver
 
     env = _Spaces(8, [-1.0, -1.0], [1.0, 1.0])
-    assert deterministic_actor(SAC("MlpPolicy", env, device="cpu")) is None
+    assert deterministic_actor(SAC("MlpPolicy", env, device="cpu", use_sde=True)) is None
     assert deterministic_actor(PPO("MlpPolicy", env, device="cpu", n_steps=8, batch_size=8)) is None
     assert deterministic_actor(HeuristicDriver()) is None
     assert PolicyEgo(HeuristicDriver(), "heuristic", numpy_actor=True)._fast is None

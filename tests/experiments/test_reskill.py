@@ -181,14 +181,15 @@ def _dataset(tmp_path: Path) -> Path:
     return root
 
 
-def _tiny_config(data: Path, skills: Path) -> dict:
+def _tiny_config(data: Path, skills: Path, high_algo: str = "td3") -> dict:
     small = {"batch_size": 16, "net_arch": [16, 16], "buffer_size": 400}
+    high = {**small, "learning_starts": 60, "train_freq": 1, "gradient_steps": 1}
     over = {
         "algo": "reskill", "pipeline": "noadv", "seed": 2, "dataset": str(data), "total_timesteps": 400,
         "n_envs": 2, "checkpoint_every": 200, "eval_every": 200, "eval_episodes": 1,
         "hyperparams.reskill": {"skills": str(skills), "residual_start": 100, "residual_ramp": 100,
-                                "residual_sync_every": 40,
-                                "high": {**small, "learning_starts": 60, "train_freq": 1, "gradient_steps": 1},
+                                "residual_sync_every": 40, "high_algo": high_algo,
+                                "high" if high_algo == "td3" else "high_sac": high,
                                 "residual": {**small, "learning_starts": 20, "train_freq": 4, "gradient_steps": 1}},
     }
     return load_train_config(CONFIG_DIR / "quick.yaml", over)
@@ -198,15 +199,24 @@ def _params(model: object) -> dict[str, np.ndarray]:
     return {k: v.detach().numpy().copy() for k, v in model.policy.state_dict().items()}  # type: ignore[attr-defined]
 
 
+def _ent_coef(model: object) -> float | None:
+    """SAC's learned log entropy coefficient (None for TD3)."""
+    log_ent = getattr(model, "log_ent_coef", None)
+    return None if log_ent is None else float(log_ent.detach().item())
+
+
+@pytest.mark.parametrize("high_algo", ["td3", "sac"])
 def test_killed_reskill_run_resumes_both_agents_exactly(tmp_path: Path, skills_dir: Path,
-                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+                                                        monkeypatch: pytest.MonkeyPatch, high_algo: str) -> None:
+    from stable_baselines3 import SAC, TD3
+
     from seal.experiments.training import callbacks as train_callbacks
     from seal.experiments.training import reskill as rk
     from seal.experiments.training.egos import EgoError, ReSkillEgo, make_ego
     from seal.experiments.training.train import train_run
 
     run = tmp_path / "run"
-    config = _tiny_config(_dataset(tmp_path), skills_dir)
+    config = _tiny_config(_dataset(tmp_path), skills_dir, high_algo)
     saved: dict[str, dict[str, np.ndarray]] = {}
     original_write = ts.write_checkpoint
 
@@ -214,7 +224,8 @@ def test_killed_reskill_run_resumes_both_agents_exactly(tmp_path: Path, skills_d
         folder = original_write(out, model, states, extra, extra_models)
         saved[folder.name] = {"high": _params(model), "residual": _params(extra_models[rk.RESIDUAL]),
                               "n_res": extra_models[rk.RESIDUAL]._n_updates,
-                              "res_size": extra_models[rk.RESIDUAL].replay_buffer.size()}
+                              "res_size": extra_models[rk.RESIDUAL].replay_buffer.size(),
+                              "ent": _ent_coef(model), "high_sac": isinstance(model, SAC)}
         return folder
 
     monkeypatch.setattr(ts, "write_checkpoint", recording_write)
@@ -240,7 +251,8 @@ def test_killed_reskill_run_resumes_both_agents_exactly(tmp_path: Path, skills_d
 
     def capturing(self: rk.ResidualTrainer) -> None:
         seen.update(high=_params(self.model), residual=_params(self.residual), n_res=self.residual._n_updates,
-                    res_size=self.residual.replay_buffer.size(), step=self.model.num_timesteps)
+                    res_size=self.residual.replay_buffer.size(), step=self.model.num_timesteps,
+                    ent=_ent_coef(self.model))
         original_restore(self)
 
     monkeypatch.setattr(rk.ResidualTrainer, "_on_training_start", capturing)
@@ -250,6 +262,11 @@ def test_killed_reskill_run_resumes_both_agents_exactly(tmp_path: Path, skills_d
         for key, value in rec[agent].items():
             np.testing.assert_array_equal(seen[agent][key], value)  # type: ignore[index]
     assert (seen["n_res"], seen["res_size"]) == (rec["n_res"], rec["res_size"])
+    # the high-level learner is the one asked for; SAC's entropy coefficient had moved and resumes as saved
+    assert rec["high_sac"] == (high_algo == "sac")
+    assert (rec["ent"] is None) == (high_algo == "td3") and seen["ent"] == rec["ent"]
+    if high_algo == "sac":
+        assert rec["ent"] != 0.0  # log(1) at the start: the coefficient was learning
 
     done = ts.read_done(run)
     assert 400 <= done["steps"] < 400 + 2 * 10  # whole skills: at most one skill per worker past the budget
@@ -259,6 +276,12 @@ def test_killed_reskill_run_resumes_both_agents_exactly(tmp_path: Path, skills_d
     ego.reset(sf.highway_scenario(4))
     action = ego.act(_obs(3), 0)
     assert action.shape == (2,) and np.all(np.abs(action) <= 1.0)
+    # the trained ego loads its high level as the algorithm it was trained with, and decides through the numpy copy
+    # of its actor exactly as SB3's predict would
+    assert isinstance(ego.policy.high, {"td3": TD3, "sac": SAC}[high_algo])
+    for seed in range(5):
+        np.testing.assert_allclose(ego.policy.high_action(_obs(seed)),
+                                   ego.policy.high.predict(_obs(seed), deterministic=True)[0], atol=1e-5)
     # a checkpoint is an ego too (seal eval runs RUN/checkpoints/step_N/model.zip): its own two agents, the gate
     # at its step, whether or not the caller names the algorithm
     for algo in (None, "reskill"):
@@ -284,6 +307,8 @@ def test_reskill_config_resolves_and_refuses_bad_values() -> None:
         assert h["high"]["gamma"] == pytest.approx(0.9) and h["residual"]["action_noise_std"] == 0.0
     with pytest.raises(ValueError, match="noise_bound"):
         load_train_config(CONFIG_DIR / "quick.yaml", {"algo": "reskill", "hyperparams.reskill.noise_bound": 0})
+    with pytest.raises(ValueError, match="high_algo must be one of"):
+        load_train_config(CONFIG_DIR / "quick.yaml", {"algo": "reskill", "hyperparams.reskill.high_algo": "ppo"})
     with pytest.raises(ValueError, match="train.algo"):
         load_train_config(CONFIG_DIR / "quick.yaml", {"algo": "nope"})
 
