@@ -307,6 +307,15 @@ def test_reskill_config_resolves_and_refuses_bad_values() -> None:
         assert h["high"]["gamma"] == pytest.approx(0.9) and h["residual"]["action_noise_std"] == 0.0
     with pytest.raises(ValueError, match="noise_bound"):
         load_train_config(CONFIG_DIR / "quick.yaml", {"algo": "reskill", "hyperparams.reskill.noise_bound": 0})
+    # the high-level learner: TD3 unless asked; a run recorded before high_algo existed is a TD3 run
+    from seal.experiments.training.reskill import high_level
+
+    h = load_train_config(CONFIG_DIR / "decisive.yaml", {"algo": "reskill", "pipeline": "noadv"})["hyperparams"]
+    assert high_level(h) == ("td3", h["high"])
+    assert high_level({k: v for k, v in h.items() if k != "high_algo"}) == ("td3", h["high"])
+    sac = load_train_config(CONFIG_DIR / "decisive.yaml", {"algo": "reskill", "pipeline": "noadv",
+                                                           "hyperparams.reskill.high_algo": "sac"})["hyperparams"]
+    assert high_level(sac) == ("sac", sac["high_sac"]) and sac["high_sac"]["ent_coef"] == "auto_0.1"
     with pytest.raises(ValueError, match="high_algo must be one of"):
         load_train_config(CONFIG_DIR / "quick.yaml", {"algo": "reskill", "hyperparams.reskill.high_algo": "ppo"})
     with pytest.raises(ValueError, match="train.algo"):
