@@ -16,7 +16,13 @@ from seal.experiments.report.ci_plots import plot_success_intervals
 from seal.experiments.report.compare import to_csv
 from seal.experiments.report.first_page import first_page_markdown, leader_pairs
 from seal.experiments.report.generator_stats import generator_ci_markdown, generator_ci_table
-from seal.experiments.report.paired import paired_counts, paired_markdown, scenario_rates
+from seal.experiments.report.paired import (
+    discrimination_counts,
+    discrimination_markdown,
+    paired_counts,
+    paired_markdown,
+    scenario_rates,
+)
 from seal.experiments.report.stats import (
     N_BOOT,
     N_BOOT_POI,
@@ -27,7 +33,7 @@ from seal.experiments.report.stats import (
 )
 
 FILES = ("ego_ci.csv", "improvement.csv", "improvement_per_setting.csv", "paired.csv", "per_scenario.csv",
-         "generator_ci.csv")
+         "generator_ci.csv", "discrimination.csv")
 
 
 @dataclass
@@ -55,8 +61,10 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
     # Per setting only what the first page reads (leader vs runner-up): each pair costs ~1 s per setting.
     poi_setting = improvement_table(ego_rows, n_boot_poi, seed, per_setting=True, only=leader_pairs(cis))
     paired = paired_counts(ego_rows)
+    discrimination = discrimination_counts(ego_rows)
     gen_ci = generator_ci_table(ego_rows, [r["setting"] for r in t62], seed=seed)
-    for name, table in zip(FILES, (cis, poi, poi_setting, paired, scenario_rates(ego_rows), gen_ci), strict=True):
+    for name, table in zip(FILES, (cis, poi, poi_setting, paired, scenario_rates(ego_rows), gen_ci, discrimination),
+                           strict=True):
         atomic_write_bytes(out / name, to_csv(table))
     figures = []
     if plots:
@@ -78,6 +86,10 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
         "A pipeline solves a scenario when its egos succeed on it in more than half of the seeds. Every "
         "scenario's success share per pipeline: `per_scenario.csv`; all counts: `paired.csv`.\n",
         paired_markdown(paired) if paired else "(fewer than two comparable pipelines)\n",
+        "How much of each setting can tell the egos apart: the scenarios on which every trained ego (every pipeline "
+        "and seed) succeeds, every one fails, and the rest. Only the rest can move a difference between "
+        "pipelines.\n",
+        discrimination_markdown(discrimination) if discrimination else "(no trained egos)\n",
         "## Generators with intervals (Table 6.2)\n",
         "Realism Wasserstein distances and collision speed as in Table 6.2 [95 % bootstrap interval; the "
         "setting's scenarios resampled, each with all its episodes].\n",

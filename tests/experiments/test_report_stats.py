@@ -18,7 +18,12 @@ from seal.experiments.report.first_page import (
     setting_verdicts,
 )
 from seal.experiments.report.grouping import algo_of, base_pipeline, comparable, label_by_algo
-from seal.experiments.report.paired import paired_counts, scenario_rates
+from seal.experiments.report.paired import (
+    discrimination_counts,
+    discrimination_markdown,
+    paired_counts,
+    scenario_rates,
+)
 from seal.experiments.report.stats import (
     ego_ci_table,
     improvement_markdown,
@@ -141,6 +146,20 @@ def test_paired_view_counts_what_one_solves_and_the_other_does_not() -> None:
     assert shares[("noadv", "s003")] == 0.5 and shares[("cat", "s005")] == 1.0
 
 
+def test_discrimination_counts_scenarios_every_trained_ego_solves_or_fails() -> None:
+    # s0-s2 every seed of both pipelines solves; s3-s5 only some egos; s6-s9 none. The built-in heuristic ego is
+    # not a trained ego (it solves everything here and changes nothing); TD3 egos are counted apart.
+    rows = _rows("cat", [0.6, 0.3]) + _rows("noadv", [0.4, 0.5]) + _rows("heuristic", [1.0])
+    rows += _rows("cat (td3)", [0.0, 0.0]) + _rows("cat", [1.0, 1.0], setting="hard")
+    counts = {(r["setting"], r["algo"]): r for r in discrimination_counts(rows)}
+    assert set(counts) == {("normal", ""), ("normal", "td3"), ("hard", "")}
+    c = counts[("normal", "")]
+    assert (c["egos"], c["scenarios"], c["all_succeed"], c["all_fail"], c["differ"]) == (4, 10, 3, 4, 3)
+    assert (counts[("normal", "td3")]["all_fail"], counts[("hard", "")]["all_succeed"]) == (10, 10)
+    md = discrimination_markdown(discrimination_counts(rows))
+    assert "| normal | 4 | 10 | 3 | 4 | 3 (30 %) |" in md and "| normal (td3) | 2 | 10 | 0 | 10 | 0 (0 %) |" in md
+
+
 def test_first_page_names_the_leader_from_the_numbers() -> None:
     rows = _rows("cat", [0.9, 0.95, 0.85, 0.9], n=40) + _rows("noadv", [0.4, 0.5, 0.45, 0.5], n=40)
     rows += _rows("cat", [0.5, 0.4, 0.45, 0.5], setting="hard", n=40)
@@ -196,7 +215,8 @@ def test_report_folder_has_the_statistics_first_page_and_json(tmp_path, capsys) 
                  "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert {p.name for p in out.iterdir()} >= {"ego_ci.csv", "improvement.csv", "improvement_per_setting.csv",
-                                               "paired.csv", "per_scenario.csv", "ci_success_mean.png",
+                                               "paired.csv", "per_scenario.csv", "discrimination.csv",
+                                               "ci_success_mean.png",
                                                "ci_success_iqm.png"}
     cell = next(r for r in result["ego_ci"] if (r["pipeline"], r["setting"], r["metric"]) == ("cat", "hard", "success"))
     assert cell["mean"] == pytest.approx((6 + 7 + 8) / 24) and cell["seeds"] == 3 and cell["scenarios"] == 8
