@@ -35,8 +35,9 @@ class ResumableCSVOutputFormat(CSVOutputFormat):
 
 
 class EpisodeStatsCallback(BaseCallback):
-    """Outcome rates of the last ``window`` training episodes, logged as ``episode/*`` (success, crash: the ego
-    touched another agent at any step, out-of-road, timeout, route completion, share perturbed by the generator,
+    """Outcome rates of the last ``window`` training episodes, logged as ``episode/*`` (success; clean success:
+    success without touching anyone, the evaluation's success; crash: the ego touched another agent at any step,
+    out-of-road, timeout, route completion, share perturbed by the generator,
     and of the perturbed ones the share whose generator aimed at the logged ego because the scenario's queue held
     no roll-out of the ego yet: ``log_target_share``, see ``train.revisit_prob``) and ``generator/time_ms`` (mean
     generation time of the perturbed ones). ``totals`` counts every episode of
@@ -80,6 +81,9 @@ class EpisodeStatsCallback(BaseCallback):
         aimed_at_log = [e["targets_log"] for e in r if e["perturbed"]]
         return {
             "success_rate": float(np.mean([e["outcome"] == Outcome.SUCCESS for e in r])),
+            # What the evaluation (crash ends the episode) would call a success: with ``terminate_on_crash: false``
+            # an ego that touched someone and drove on to the goal still ends in SUCCESS above.
+            "clean_success_rate": float(np.mean([e["outcome"] == Outcome.SUCCESS and not e["crashed"] for e in r])),
             "crash_rate": float(np.mean([e["crashed"] for e in r])),
             "out_of_road_rate": float(np.mean([e["outcome"] == Outcome.OUT_OF_ROAD for e in r])),
             "timeout_rate": float(np.mean([e["outcome"] == Outcome.TIMEOUT for e in r])),

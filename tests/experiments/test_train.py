@@ -252,7 +252,7 @@ def test_the_training_envs_revisit_at_the_configured_rate(tmp_path: Path) -> Non
         venv.close()
 
 
-def test_episode_stats_give_the_share_of_perturbed_episodes_aimed_at_the_log() -> None:
+def test_episode_stats_give_clean_success_and_the_share_of_perturbed_episodes_aimed_at_the_log() -> None:
     from seal.experiments.training.callbacks import EpisodeStatsCallback
 
     stats = EpisodeStatsCallback()
@@ -263,9 +263,16 @@ def test_episode_stats_give_the_share_of_perturbed_episodes_aimed_at_the_log() -
                          {**base, "perturbed": False, "targets_log": False}])
     rates = stats.rates()
     assert rates["perturbed_share"] == 0.75 and abs(rates["log_target_share"] - 1 / 3) < 1e-12
+    assert rates["success_rate"] == rates["clean_success_rate"] == 1.0
     stats.recent.clear()
     stats.recent.append({**base, "perturbed": False, "targets_log": False})
     assert stats.rates()["log_target_share"] == 0.0  # nothing perturbed: nothing aimed
+    # with terminate_on_crash false an ego that touched someone and drove on to the goal ends in success; the
+    # clean success rate (the evaluation's success) does not count it
+    stats.recent.extend([{**base, "crashed": True, "perturbed": True, "targets_log": False},
+                         {**base, "outcome": "crash", "crashed": True, "perturbed": True, "targets_log": False}])
+    rates = stats.rates()
+    assert rates["success_rate"] == 2 / 3 and rates["clean_success_rate"] == 1 / 3 and rates["crash_rate"] == 2 / 3
 
 
 def test_replay_buffer_round_trip(tmp_path: Path) -> None:
