@@ -129,8 +129,8 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--resume", default=None, metavar="RUN", help="continue the unfinished run in RUN")
     p.add_argument("--algo", choices=ALGOS, default=None,
                    help="ego algorithm: td3 / sac / ppo (SB3) or reskill (a high-level agent choosing benign skills "
-                   "every skill horizon plus a residual agent correcting each decoded action; needs --ego-skills) "
-                   "(default td3)")
+                   "every skill horizon plus a residual agent correcting each decoded action; needs --ego-skills; "
+                   "the high-level learner: --set hyperparams.reskill.high_algo=td3|sac) (default td3)")
     p.add_argument("--dataset", default=None, help="dataset directory with train / eval splits (default: config)")
     p.add_argument("--steps", type=positive_int("--steps"), default=None, help="total env steps (default: config)")
     p.add_argument("--n-envs", type=positive_int("--n-envs"), default=None,
