@@ -101,7 +101,9 @@ def discrimination_counts(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, A
             common = sorted(set.intersection(*(set(m.scenario_ids) for m in group)))
             if not common:
                 continue
-            wins = np.concatenate([m.values[[m.scenario_ids.index(s) for s in common], :, 0] for m in group], axis=1)
+            row_of = [{sid: i for i, sid in enumerate(m.scenario_ids)} for m in group]
+            wins = np.concatenate([m.values[[at[s] for s in common], :, 0]
+                                   for m, at in zip(group, row_of, strict=True)], axis=1)
             every, none = wins.all(axis=1), ~wins.any(axis=1)
             out.append({"setting": setting_label(setting), "algo": algo, "egos": int(wins.shape[1]),
                         "scenarios": len(common), "all_succeed": int(every.sum()), "all_fail": int(none.sum()),

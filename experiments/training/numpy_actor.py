@@ -176,15 +176,13 @@ def deterministic_actor(model: Any) -> Callable[[np.ndarray], np.ndarray] | None
     from gymnasium import spaces
     from stable_baselines3.common.torch_layers import FlattenExtractor
 
-    policy = getattr(model, "policy", None)
-    if policy is None or getattr(policy, "actor", None) is None:  # PPO's policy has no separate actor
+    policy: Any = getattr(model, "policy", None)
+    mlp = _numpy_policy(policy)  # None for anything but a TD3 / DDPG / SAC policy
+    if mlp is None:
         return None
     if not isinstance(policy.observation_space, spaces.Box) or not isinstance(policy.action_space, spaces.Box):
         return None
     if not isinstance(policy.actor.features_extractor, FlattenExtractor) or len(policy.observation_space.shape) != 1:
-        return None
-    mlp = _numpy_policy(policy)
-    if mlp is None:
         return None
     low = np.asarray(policy.action_space.low, dtype=np.float32)
     high = np.asarray(policy.action_space.high, dtype=np.float32)
