@@ -336,3 +336,15 @@ def test_generator_intervals_equal_resampling_the_episodes_themselves() -> None:
     got = generator_intervals(rows, n_boot=120, seed=3)
     for i, name in enumerate(("realism", "realism_yaw_acc")):
         assert got[name] == pytest.approx((points["x"][i], intervals["x"][0, i], intervals["x"][1, i]), abs=1e-12)
+
+
+def test_probability_of_improvement_resamples_whole_egos_across_settings() -> None:
+    # One ego plays every setting: No-Adv's seed 0 is weak everywhere, the rest tie with CAT. Ten identical settings
+    # carry no more evidence than one, so the interval over ten must be the one-setting interval; redrawing the seeds
+    # per setting (10 "independent" seeds) would narrow it above 0.5. P = (4 wins + 12 half ties) / 16.
+    cat, noadv = np.array([0.6, 0.6, 0.6, 0.6]), np.array([0.5, 0.6, 0.6, 0.6])
+    one = poi_interval([cat], [noadv], n_boot=500, seed=3)
+    ten = poi_interval([cat] * 10, [noadv] * 10, n_boot=500, seed=3)
+    assert one[0] == pytest.approx(0.625) and ten == pytest.approx(one)
+    # a resample without the weak seed ((3/4)^4 = 32 % of them) gives exactly 0.5
+    assert ten[1] == pytest.approx(0.5)
