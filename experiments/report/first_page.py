@@ -8,7 +8,8 @@ the two success intervals do not overlap: with few seeds that probability can be
 every runner-up seed) while the margin is within the scenario-to-scenario noise that only the success intervals
 see. Then which pipelines beat which over all settings (the averaged probability of improvement, interval above
 0.5; a seed-level statement), the precision (the largest interval half-width against `TARGET_HALF_WIDTH`)
-and, from Table 6.2's intervals, the most realistic generator and the lowest collision speed; last, the thesis's
+and, from Table 6.2's intervals and the paired generator differences, the most realistic generator and the lowest
+collision speed; last, the thesis's
 findings checked one by one (`seal.experiments.report.thesis_claims`).
 """
 
@@ -134,11 +135,13 @@ GENERATOR_CLAIMS = (("realism", "most realistic generator (lowest mean WD to the
                     ("collision_speed_mps", "lowest collision speed", " m/s"))
 
 
-def generator_lines(gen_ci: Sequence[Mapping[str, Any]]) -> list[str]:
+def generator_lines(gen_ci: Sequence[Mapping[str, Any]], gen_diff: Sequence[Mapping[str, Any]] = ()) -> list[str]:
     """The most realistic generator (lowest mean Wasserstein distance) and the lowest collision speed, with their
-    intervals (`seal.experiments.report.generator_stats`); the leader is *lowest* when its interval lies below the
-    next one's, else not separated."""
+    intervals (`seal.experiments.report.generator_stats`); the leader is *lowest* when its paired difference to the
+    runner-up (``gen_diff``, scenario by scenario) lies below 0, or without it when its interval lies below the
+    runner-up's; else not separated."""
     gens = generator_rows(gen_ci)
+    diffs = {(r["setting"], r["reference"]): r for r in gen_diff}
     lines = []
     for key, what, unit in GENERATOR_CLAIMS:
         ranked = sorted((r for r in gens if math.isfinite(r.get(key, math.nan))), key=lambda r: r[key])
@@ -147,18 +150,30 @@ def generator_lines(gen_ci: Sequence[Mapping[str, Any]]) -> list[str]:
         cells = [f"{r['setting']} {r[key]:.3g}{unit} " + (f"[{r[f'{key}_low']:.3g}-{r[f'{key}_high']:.3g}]" if
                                                           math.isfinite(r[f"{key}_low"]) else "[too few scenarios]")
                  for r in ranked]
-        bounds = [ranked[0][f"{key}_high"], *(r[f"{key}_low"] for r in ranked[1:2])]
-        verdict = ("" if len(ranked) == 1 else "; too few scenarios for intervals: not sure"
-                   if not all(map(math.isfinite, bounds)) else "; its interval lies below the next one's"
-                   if bounds[0] < bounds[1] else "; its interval overlaps the next one's: not sure")
         lines.append(f"- The {what}: **{cells[0]}**" + (f" (then {', '.join(cells[1:])})" if cells[1:] else "")
-                     + verdict + ".")
+                     + (_leader_verdict(ranked[0], ranked[1], key, unit, diffs) if len(ranked) > 1 else "") + ".")
     return lines
+
+
+def _leader_verdict(first: Mapping[str, Any], second: Mapping[str, Any], key: str, unit: str,
+                    diffs: Mapping[tuple[str, str], Mapping[str, Any]]) -> str:
+    d = diffs.get((first["setting"], second["setting"]))
+    if d is not None:
+        low, high = d[f"{key}_low"], d[f"{key}_high"]
+        if not (math.isfinite(low) and math.isfinite(high)):
+            return "; too few scenarios for intervals: not sure"
+        cell = f"{d[key]:+.3g}{unit} [{low:+.3g} to {high:+.3g}] over {d['scenarios']} scenarios"
+        return (f"; paired with {second['setting']} scenario by scenario: {cell}, "
+                + ("below 0" if high < 0 else "includes 0: not sure"))
+    bounds = (first[f"{key}_high"], second[f"{key}_low"])
+    return ("; too few scenarios for intervals: not sure" if not all(map(math.isfinite, bounds)) else
+            "; its interval lies below the next one's" if bounds[0] < bounds[1] else
+            "; its interval overlaps the next one's: not sure")
 
 
 def first_page_markdown(cis: Sequence[Mapping[str, Any]], poi: Sequence[Mapping[str, Any]],
                         poi_by_setting: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[str, Any]],
-                        training_lines: Sequence[str] = ()) -> str:
+                        training_lines: Sequence[str] = (), gen_diff: Sequence[Mapping[str, Any]] = ()) -> str:
     """The report's first page (module docstring) as Markdown; ``training_lines`` (e.g.
     `seal.experiments.report.convergence.convergence_line`) follow the precision line."""
     md = ["## Summary: who wins where\n",
@@ -179,7 +194,7 @@ def first_page_markdown(cis: Sequence[Mapping[str, Any]], poi: Sequence[Mapping[
         md.append("")
     md.append(precision_line(cis))
     md += list(training_lines)
-    md += generator_lines(gen_ci)
+    md += generator_lines(gen_ci, gen_diff)
     md.append("")
-    md.append(claims_markdown(poi, gen_ci))
+    md.append(claims_markdown(poi, gen_ci, gen_diff))
     return "\n".join(md)

@@ -123,3 +123,79 @@ def generator_ci_markdown(table: Sequence[Mapping[str, Any]]) -> str:
                  for n in STATISTICS]
         out.append(f"| {r['setting']} | {r['scenarios']} | {r['episodes']} | " + " | ".join(cells) + " |")
     return "\n".join(out) + "\n"
+
+
+def _per_scenario_summaries(episodes: Sequence[Mapping[str, Any]]) -> dict[str, np.ndarray]:
+    """Scenario id -> its additive summary: the `realism_counts` of its episodes, then ``[collision speed sum,
+    contacts]``."""
+    by_scenario: dict[str, list[Mapping[str, Any]]] = {}
+    for e in episodes:
+        by_scenario.setdefault(str(e["scenario_id"]), []).append(e)
+    out = {}
+    for sid, group in by_scenario.items():
+        speeds = [v for e in group if (v := _speed(e)) is not None]
+        out[sid] = np.concatenate([realism_counts([dict(e) for e in group]), [sum(speeds), len(speeds)]])
+    return out
+
+
+def _statistics(summed: np.ndarray) -> np.ndarray:
+    """`STATISTICS` from one summed `_per_scenario_summaries` vector."""
+    return np.concatenate([_realism(summed[:-2]), _mean_speed(summed[-2:])])
+
+
+def generator_difference_table(rows: Sequence[Mapping[str, Any]], generator_settings: Sequence[str],
+                               n_boot: int = N_BOOT_GENERATORS, seed: int = 0) -> list[dict[str, Any]]:
+    """Every pair of generated-adversary settings (``generator_settings`` without the replayed ones), *paired*
+    over the scenarios both played: per statistic, ``setting``'s value minus ``reference``'s, with a 95 % interval
+    from one bootstrap that draws the shared scenarios with replacement and keeps all their episodes in *both*
+    settings. The generators perturb the same scenarios, so a scenario that is hard to imitate in one tends to be
+    hard in the other; comparing two unpaired intervals (do they overlap?) ignores that and misses differences this
+    finds. Both orders of a pair (the reverse negated, same resamples); ``scenarios`` = shared scenarios."""
+    by_setting: dict[str, list[Mapping[str, Any]]] = {}
+    for r in rows:
+        label = setting_label(r["setting"])
+        if label in generator_settings and r["setting"] not in REPLAY_SETTINGS:
+            by_setting.setdefault(r["setting"], []).append(r)
+    settings = ordered_settings(by_setting)
+    summaries = {s: _per_scenario_summaries(by_setting[s]) for s in settings}
+    width = realism_counts([]).size + 2  # one setting's summary
+    table = []
+    for i, a in enumerate(settings):
+        for b in settings[i + 1:]:
+            shared = sorted(set(summaries[a]) & set(summaries[b]))
+            per_group = np.array([np.concatenate([summaries[a][s], summaries[b][s]]) for s in shared]
+                                 ).reshape(len(shared), 2 * width)
+            estimates = _by_scenario_interval(
+                per_group, lambda x, w=width: _statistics(x[:w]) - _statistics(x[w:]), n_boot, seed)
+            for first, second, sign in ((a, b, 1.0), (b, a, -1.0)):
+                row: dict[str, Any] = {"setting": setting_label(first), "reference": setting_label(second),
+                                       "scenarios": len(shared)}
+                for name, (p, lo, hi) in zip(STATISTICS, estimates, strict=True):
+                    low, high = (lo, hi) if sign > 0 else (-hi, -lo)
+                    row.update({name: sign * p, f"{name}_low": low, f"{name}_high": high})
+                table.append(row)
+    return table
+
+
+def generator_difference_markdown(table: Sequence[Mapping[str, Any]]) -> str:
+    """Two matrices (realism mean WD, collision speed): row minus column, ``estimate [low to high]``, the cells
+    whose interval excludes 0 in bold."""
+    settings = list(dict.fromkeys(r["setting"] for r in table))
+    cells = {(r["setting"], r["reference"]): r for r in table}
+    out = []
+    for name, title, digits in (("realism", "realism (mean WD)", 3), ("collision_speed_mps", "coll. speed (m/s)", 2)):
+        out += [f"| {title}: row - column | " + " | ".join(settings) + " |", "|---|" + "---:|" * len(settings)]
+        for a in settings:
+            row = []
+            for b in settings:
+                r = cells.get((a, b))
+                if r is None:
+                    row.append("-")
+                    continue
+                p, lo, hi = r[name], r[f"{name}_low"], r[f"{name}_high"]
+                text = (f"{p:+.{digits}f} [{lo:+.{digits}f} to {hi:+.{digits}f}]" if math.isfinite(lo)
+                        and math.isfinite(hi) else f"{p:+.{digits}f} [no interval]")
+                row.append(f"**{text}**" if lo > 0 or hi < 0 else text)
+            out.append(f"| {a} | " + " | ".join(row) + " |")
+        out.append("")
+    return "\n".join(out)

@@ -4,10 +4,12 @@ Ego claims (thesis Table 6.1 / 7.2) are read from the averaged probability of im
 (`seal.experiments.report.stats.improvement_table`): a claim "X > Y" *holds* when P(X > Y)'s 95 % interval lies
 above 0.5, is *reversed* when it lies below, and is *not shown* otherwise (with fewer than
 `seal.experiments.report.stats.MIN_SEEDS_FOR_POI` seeds a side: *too few seeds*). Generator claims (Table 6.2)
-are read from the generator intervals (`seal.experiments.report.generator_stats`): "SEAL is the most realistic" /
-"SEAL has the lowest collision speed" hold when SEAL's interval lies below every other generator's, are reversed
-when another generator's interval lies below SEAL's, and are not shown otherwise. A claim whose pipelines or
-generators were not evaluated is *not tested*.
+are read from the paired generator differences (`seal.experiments.report.generator_stats.generator_difference_table`:
+SEAL minus each other generator, scenario by scenario): "SEAL is the most realistic" / "SEAL has the lowest collision
+speed" hold when every difference's 95 % interval lies below 0, are reversed when one lies above 0, and are not
+shown otherwise. Without differences (a caller that has only the per-generator intervals) the same reading is made
+from those intervals: SEAL's below every other's, another's below SEAL's (a weaker test: two overlapping intervals
+can still differ when paired). A claim whose pipelines or generators were not evaluated is *not tested*.
 """
 
 from __future__ import annotations
@@ -43,9 +45,12 @@ def ego_claims(poi: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
-def generator_claims(gen_ci: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """One row per generator claim: ``claim``, ``verdict`` and the ``seal`` / best-other rows it rests on."""
+def generator_claims(gen_ci: Sequence[Mapping[str, Any]], gen_diff: Sequence[Mapping[str, Any]] = ()
+                     ) -> list[dict[str, Any]]:
+    """One row per generator claim: ``claim``, ``verdict``, the ``seal`` / best-other rows it rests on and, when
+    ``gen_diff`` has the pair, ``diff``: SEAL minus the best other, paired (module docstring)."""
     gens = {r["setting"]: r for r in generator_rows(gen_ci)}
+    diffs = {r["reference"]: r for r in gen_diff if r["setting"] == "seal"}
     out = []
     for key, claim in GENERATOR_CLAIMS:
         seal = gens.get("seal")
@@ -54,21 +59,28 @@ def generator_claims(gen_ci: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]
             out.append({"claim": claim, "verdict": "not tested", "seal": seal, "other": None})
             continue
         best = min(others, key=lambda r: r[key])
-        bounded = all(math.isfinite(r[f"{key}_{b}"]) for r in (seal, *others) for b in ("low", "high"))
-        verdict = ("too few scenarios" if not bounded else
-                   "holds" if all(seal[f"{key}_high"] < r[f"{key}_low"] for r in others) else
-                   "reversed" if any(r[f"{key}_high"] < seal[f"{key}_low"] for r in others) else "not shown")
-        out.append({"claim": claim, "verdict": verdict, "seal": seal, "other": best, "key": key})
+        paired = [diffs[r["setting"]] for r in others if r["setting"] in diffs]
+        if len(paired) == len(others):
+            bounds = [(d[f"{key}_low"], d[f"{key}_high"]) for d in paired]
+        else:  # SEAL's interval against each other's, unpaired
+            bounds = [(seal[f"{key}_low"] - r[f"{key}_high"], seal[f"{key}_high"] - r[f"{key}_low"]) for r in others]
+        verdict = ("too few scenarios" if not all(map(math.isfinite, (b for pair in bounds for b in pair))) else
+                   "holds" if all(high < 0 for _, high in bounds) else
+                   "reversed" if any(low > 0 for low, _ in bounds) else "not shown")
+        out.append({"claim": claim, "verdict": verdict, "seal": seal, "other": best, "key": key,
+                    "diff": diffs.get(best["setting"]) if len(paired) == len(others) else None})
     return out
 
 
-def claims_markdown(poi: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[str, Any]]) -> str:
+def claims_markdown(poi: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[str, Any]],
+                    gen_diff: Sequence[Mapping[str, Any]] = ()) -> str:
     """The claims as a Markdown table with the numbers each verdict rests on."""
     seeds = min((min(r["seeds"], r["reference_seeds"]) for r in poi), default=0)
     md = ["### The thesis's findings, checked\n",
-          "holds / reversed: the 95 % interval lies on one side (P above or below 0.5; SEAL's interval below or "
-          "above another generator's); not shown: it does not. P compares the pipelines' seeds (each seed's "
-          f"success rate per setting; here as few as {seeds} seeds a pipeline), so it says how consistently one "
+          "holds / reversed: the 95 % interval lies on one side (P above or below 0.5; SEAL minus another "
+          "generator, scenario by scenario, below or above 0); not shown: it does not. P compares the pipelines' "
+          f"seeds (each seed's success rate per setting; here as few as {seeds} seeds a pipeline), so it says how "
+          "consistently one "
           "training pipeline beats another, not by how much: read it with the success intervals above.\n",
           "| claim | ego | verdict | evidence |", "|---|---|---|---|"]
     for c in ego_claims(poi):
@@ -76,12 +88,16 @@ def claims_markdown(poi: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[s
         evidence = (f"P = {r['p_improvement']:.2f} [{r['ci_low']:.2f}-{r['ci_high']:.2f}] over {r['settings']} "
                     "settings" if r else "-")
         md.append(f"| {c['claim']} | {c['algo'] or '-'} | {c['verdict']} | {evidence} |")
-    for c in generator_claims(gen_ci):
+    for c in generator_claims(gen_ci, gen_diff):
         if c["other"] is None:
             md.append(f"| {c['claim']} | all | {c['verdict']} | - |")
             continue
         key, s, o = c["key"], c["seal"], c["other"]
         seal_cell = ci_cell(s[key], s[f"{key}_low"], s[f"{key}_high"], 1.0, 3)
         other_cell = ci_cell(o[key], o[f"{key}_low"], o[f"{key}_high"], 1.0, 3)
-        md.append(f"| {c['claim']} | all | {c['verdict']} | seal {seal_cell}, best other {o['setting']} {other_cell} |")
+        d = c.get("diff")
+        paired = (f"; paired difference {ci_cell(d[key], d[f'{key}_low'], d[f'{key}_high'], 1.0, 3)} over "
+                  f"{d['scenarios']} scenarios" if d else "")
+        md.append(f"| {c['claim']} | all | {c['verdict']} | seal {seal_cell}, best other {o['setting']} {other_cell}"
+                  f"{paired} |")
     return "\n".join(md) + "\n"

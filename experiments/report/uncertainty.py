@@ -15,7 +15,12 @@ from seal.core.atomic import atomic_write_bytes
 from seal.experiments.report.ci_plots import plot_success_intervals
 from seal.experiments.report.compare import to_csv
 from seal.experiments.report.first_page import first_page_markdown, leader_pairs
-from seal.experiments.report.generator_stats import generator_ci_markdown, generator_ci_table
+from seal.experiments.report.generator_stats import (
+    generator_ci_markdown,
+    generator_ci_table,
+    generator_difference_markdown,
+    generator_difference_table,
+)
 from seal.experiments.report.paired import (
     discrimination_counts,
     discrimination_markdown,
@@ -33,7 +38,7 @@ from seal.experiments.report.stats import (
 )
 
 FILES = ("ego_ci.csv", "improvement.csv", "improvement_per_setting.csv", "paired.csv", "per_scenario.csv",
-         "generator_ci.csv", "discrimination.csv")
+         "generator_ci.csv", "discrimination.csv", "generator_differences.csv")
 
 
 @dataclass
@@ -45,6 +50,7 @@ class Uncertainty:
     improvement_per_setting: list[dict[str, Any]]
     paired: list[dict[str, Any]]
     generator_ci: list[dict[str, Any]]
+    generator_differences: list[dict[str, Any]]
     first_page: str
     sections: list[str]
     figures: list[str] = field(default_factory=list)
@@ -63,8 +69,9 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
     paired = paired_counts(ego_rows)
     discrimination = discrimination_counts(ego_rows)
     gen_ci = generator_ci_table(ego_rows, [r["setting"] for r in t62], seed=seed)
-    for name, table in zip(FILES, (cis, poi, poi_setting, paired, scenario_rates(ego_rows), gen_ci, discrimination),
-                           strict=True):
+    gen_diff = generator_difference_table(ego_rows, [r["setting"] for r in t62], seed=seed)
+    for name, table in zip(FILES, (cis, poi, poi_setting, paired, scenario_rates(ego_rows), gen_ci, discrimination,
+                                   gen_diff), strict=True):
         atomic_write_bytes(out / name, to_csv(table))
     figures = []
     if plots:
@@ -94,6 +101,10 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
         "Realism Wasserstein distances and collision speed as in Table 6.2 [95 % bootstrap interval; the "
         "setting's scenarios resampled, each with all its episodes].\n",
         generator_ci_markdown(gen_ci) if gen_ci else "(no generator settings evaluated)\n",
+        "Row minus column, paired: the scenarios both generators perturbed drawn with replacement, each with all its "
+        "episodes in both [95 % interval]; an interval below 0 = the row is lower (more realistic, slower "
+        "collisions) on the same scenarios. All statistics: `generator_differences.csv`.\n",
+        generator_difference_markdown(gen_diff) if gen_diff else "(fewer than two generator settings)\n",
     ]
-    first_page = first_page_markdown(cis, poi, poi_setting, gen_ci, training_lines)
-    return Uncertainty(cis, poi, poi_setting, paired, gen_ci, first_page, sections, figures)
+    first_page = first_page_markdown(cis, poi, poi_setting, gen_ci, training_lines, gen_diff)
+    return Uncertainty(cis, poi, poi_setting, paired, gen_ci, gen_diff, first_page, sections, figures)

@@ -263,6 +263,53 @@ def test_generator_intervals_resample_scenarios_and_match_table_6_2() -> None:
     assert "[no interval]" in generator_ci_markdown([few])
 
 
+def test_generator_differences_pair_the_scenarios() -> None:
+    from results_builders import episode, hist
+
+    from seal.experiments.evaluation.metrics import pooled_realism
+    from seal.experiments.report.generator_stats import (
+        generator_ci_table,
+        generator_difference_markdown,
+        generator_difference_table,
+    )
+    from seal.experiments.report.thesis_claims import generator_claims
+    from seal.scoring.realism import YAW_RATE_BINS
+
+    rng = np.random.default_rng(2)
+    rows = []
+    for i in range(12):  # scenario i: every contact at 1 + i m/s (cat) or 0.3 m/s slower (seal), 3 egos each
+        for k in range(3):
+            for setting, dv, spread in (("cat", 0.0, 0.3), ("seal", -0.3, 0.1)):
+                rows.append(episode(run=f"r{k}", setting=setting, scenario_id=f"s{i}", collision_speed_mps=1.0 + i + dv,
+                                    adv_yaw_hist=hist(rng.normal(0, spread, 40), YAW_RATE_BINS)))
+    rows += [episode(run="r0", setting="normal", scenario_id="s0", collision_speed_mps=9.0)]  # replayed: no rival
+    table = generator_difference_table(rows, ["normal", "cat", "seal"], n_boot=200)
+    diff = {(r["setting"], r["reference"]): r for r in table}
+    assert set(diff) == {("cat", "seal"), ("seal", "cat")} and diff[("seal", "cat")]["scenarios"] == 12
+    seal, cat = (pooled_realism([r for r in rows if r["setting"] == s]) for s in ("seal", "cat"))
+    d = diff[("seal", "cat")]
+    assert d["realism"] == pytest.approx(seal["realism"] - cat["realism"])
+    assert d["realism_yaw_acc"] == pytest.approx((seal["yaw_wd"] + seal["acc_wd"] - cat["yaw_wd"] - cat["acc_wd"]) / 2)
+    # the same scenarios in every resample: the speed difference is -0.3 in all of them
+    assert (d["collision_speed_mps"], d["collision_speed_mps_low"], d["collision_speed_mps_high"]) == pytest.approx(
+        (-0.3, -0.3, -0.3))
+    back = diff[("cat", "seal")]
+    assert (back["realism"], back["realism_low"], back["realism_high"]) == pytest.approx(
+        (-d["realism"], -d["realism_high"], -d["realism_low"]))
+    # Unpaired, the two speed intervals overlap (the scenarios' own speeds spread over 1-12 m/s): the claim is not
+    # shown from them, and holds from the paired differences.
+    gen_ci = generator_ci_table(rows, ["cat", "seal"], n_boot=200)
+    by = {r["setting"]: r for r in gen_ci}
+    assert by["seal"]["collision_speed_mps_high"] > by["cat"]["collision_speed_mps_low"]
+    verdicts = {c["key"]: c["verdict"] for c in generator_claims(gen_ci)}
+    paired = {c["key"]: c for c in generator_claims(gen_ci, table)}
+    assert verdicts["collision_speed_mps"] == "not shown" and paired["collision_speed_mps"]["verdict"] == "holds"
+    assert paired["collision_speed_mps"]["diff"] is d
+    md = generator_difference_markdown(table)
+    assert "| seal | **" in md and "| coll. speed (m/s): row - column | cat | seal |" in md
+    assert first_page_markdown([], [], [], gen_ci, (), table).count("paired") >= 2
+
+
 def test_thesis_claims_read_the_intervals() -> None:
     from seal.experiments.report.thesis_claims import claims_markdown, ego_claims, generator_claims
 
