@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -143,6 +144,11 @@ def _statistics(summed: np.ndarray) -> np.ndarray:
     return np.concatenate([_realism(summed[:-2]), _mean_speed(summed[-2:])])
 
 
+def _difference(summed: np.ndarray, width: int) -> np.ndarray:
+    """`STATISTICS` of the first ``width`` columns (one setting's summary) minus those of the rest (the other's)."""
+    return _statistics(summed[:width]) - _statistics(summed[width:])
+
+
 def generator_difference_table(rows: Sequence[Mapping[str, Any]], generator_settings: Sequence[str],
                                n_boot: int = N_BOOT_GENERATORS, seed: int = 0) -> list[dict[str, Any]]:
     """Every pair of generated-adversary settings (``generator_settings`` without the replayed ones), *paired*
@@ -165,8 +171,7 @@ def generator_difference_table(rows: Sequence[Mapping[str, Any]], generator_sett
             shared = sorted(set(summaries[a]) & set(summaries[b]))
             per_group = np.array([np.concatenate([summaries[a][s], summaries[b][s]]) for s in shared]
                                  ).reshape(len(shared), 2 * width)
-            estimates = _by_scenario_interval(
-                per_group, lambda x, w=width: _statistics(x[:w]) - _statistics(x[w:]), n_boot, seed)
+            estimates = _by_scenario_interval(per_group, partial(_difference, width=width), n_boot, seed)
             for first, second, sign in ((a, b, 1.0), (b, a, -1.0)):
                 row: dict[str, Any] = {"setting": setting_label(first), "reference": setting_label(second),
                                        "scenarios": len(shared)}
