@@ -96,7 +96,7 @@ def claims_markdown(poi: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[s
         seal_cell = ci_cell(s[key], s[f"{key}_low"], s[f"{key}_high"], 1.0, 3)
         other_cell = ci_cell(o[key], o[f"{key}_low"], o[f"{key}_high"], 1.0, 3)
         d = c.get("diff")
-        paired = (f"; paired difference {ci_cell(d[key], d[f'{key}_low'], d[f'{key}_high'], 1.0, 3)} over "
+        paired = (f"; paired difference {d[key]:+.3f} [{d[f'{key}_low']:+.3f} to {d[f'{key}_high']:+.3f}] over "
                   f"{d['scenarios']} scenarios" if d else "")
         md.append(f"| {c['claim']} | all | {c['verdict']} | seal {seal_cell}, best other {o['setting']} {other_cell}"
                   f"{paired} |")
