@@ -86,8 +86,9 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
         "Crash rate in %: mean [95 % interval].\n",
         ci_markdown(cis, metric="crash") if cis else "(none)\n",
         "Probability that the row's egos beat the column's in success rate (per-seed rates, averaged over the "
-        "settings both were evaluated on; 95 % stratified-bootstrap interval; 0.5 = no difference). Per setting, "
-        "for each setting's leader and runner-up: `improvement_per_setting.csv`.\n",
+        "settings both were evaluated on; 95 % bootstrap interval drawing whole egos, each seed with its rates in "
+        "every setting; 0.5 = no difference). Per setting, for each setting's leader and runner-up: "
+        "`improvement_per_setting.csv`.\n",
         improvement_markdown(poi) if poi else "(fewer than two comparable pipelines)\n",
         "## Per scenario: what one pipeline solves and another does not\n",
         "A pipeline solves a scenario when its egos succeed on it in more than half of the seeds. Every "
