@@ -80,6 +80,7 @@ from seal.experiments.pipeline.references import (
     with_algo,
     with_models,
 )
+from seal.experiments.pipeline.reuse import apply_reuse, describe, reuse_plan
 from seal.experiments.pipeline.steps import FIT_OUTPUTS, Steps, data_steps, fit_steps, run_steps
 from seal.experiments.pipeline.tasks import run_task
 
@@ -119,6 +120,9 @@ class RunPreset:
     """Ego algorithm -> ``train`` settings for that algorithm's runs only, on top of ``train`` (nested keys)."""
     preset: str = ""
     """The preset's name (default: the file name)."""
+    reuse: str = ""
+    """Another run folder whose data and fitted models this run takes where they were made with exactly this
+    preset's options (`seal.experiments.pipeline.reuse`); the rest is made here."""
 
 
 SECTIONS = tuple(f.name for f in fields(RunPreset))
@@ -157,6 +161,8 @@ def load_run_config(path: str | Path, sets: Sequence[str] = ()) -> dict[str, Any
     for name in config.get("variants") or {}:
         variant_of(config, name)  # a malformed variant fails here, before any step runs
     config.setdefault("preset", path.stem)
+    if config.get("reuse"):
+        config = apply_reuse(config, reuse_plan(config, Path(str(config["reuse"])).expanduser().resolve()))
     return config
 
 
@@ -265,6 +271,8 @@ def run_pipeline(
     config_path, out = Path(config_path).resolve(), Path(out).resolve()
     config = load_run_config(config_path, sets)
     check_plan(config, config_path, out, train_config_fn, FIT_OUTPUTS)  # every step's config, before any file
+    if config.get("reuse"):
+        logger.info(describe(config, fits_needed(config)))
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(out / "config.yaml", yaml.safe_dump(config, sort_keys=False).encode())
     if backend is None:

@@ -26,7 +26,8 @@ from typing import Any
 import yaml
 
 from seal.core.dataset import MANIFEST
-from seal.experiments.pipeline.references import planned_runs
+from seal.experiments.pipeline.references import fits_needed, planned_runs
+from seal.experiments.pipeline.reuse import describe
 from seal.experiments.pipeline.run import load_run_config
 from seal.experiments.pipeline.steps import StepJob, Steps, data_steps, fit_steps
 from seal.experiments.training.state import CHECKPOINTS, CONFIG, DONE, LATEST, read_done
@@ -42,6 +43,7 @@ def run_status(config_path: str | Path, out: str | Path, sets: Sequence[str] = (
     runs = _training(out, config)
     return {
         "preset": config["preset"], "out": str(out), "exists": out.is_dir(),
+        "reuse": describe(config, fits_needed(config)).removeprefix("[seal run] ") if config.get("reuse") else None,
         "steps": [_step(markers, step) for step in [*data, *fits]],
         "training": runs,
         "evaluation": _evaluation(out, config, dataset, runs["runs"]),
@@ -144,6 +146,8 @@ def format_status(status: Mapping[str, Any]) -> str:
     """The status as a few lines of text."""
     lines = [f"seal run status: {status['preset']} in {status['out']}" + ("" if status["exists"] else
                                                                           " (no such folder yet)")]
+    if status.get("reuse"):
+        lines.append(f"  {status['reuse']}")
     for step in status["steps"]:
         took = f" ({step['seconds'] / 60:.1f} min)" if step.get("seconds") is not None else ""
         lines.append(f"  {step['name']:<18} {step['state']}{took}")

@@ -63,7 +63,10 @@ def register(tree: CommandTree) -> None:
         "OUT/results.sqlite; write OUT/report. Finished steps are skipped on re-run (markers in OUT/steps, run "
         "folders with done.json, evaluations already in the store). Train and eval jobs run on the local "
         "machine in processes (--backend local) or as Ray tasks on a running cluster (--backend ray; start one "
-        "with `ray start --head`; address from --address, the preset's backend.address, RAY_ADDRESS or auto).",
+        "with `ray start --head`; address from --address, the preset's backend.address, RAY_ADDRESS or auto). "
+        "--set reuse=OTHER_OUT takes the data and the fitted models of another run folder wherever they were made "
+        "with this preset's options (e.g. a second comparison with other ego settings on the same models); the "
+        "rest is made here.",
     )
     p.add_argument("config", help="preset YAML, e.g. experiments/configs/quick.yaml")
     p.add_argument("--out", default=None, help="output folder (default runs/<preset name>)")
