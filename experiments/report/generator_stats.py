@@ -28,7 +28,9 @@ N_BOOT_GENERATORS = 300
 MIN_SCENARIOS = 5
 """Scenarios (with a contact, for the collision speed) below which an interval is not given (NaN bounds): from one
 scenario the bootstrap returns a zero-width interval whatever the data."""
-STATISTICS = ("realism", "realism_yaw_acc", "collision_speed_mps")
+STATISTICS = ("realism", "realism_yaw_acc", "collision_speed_mps", "realism_yaw_acc_per_scenario")
+"""The pooled realism distances (mean WD; yaw + acceleration alone), the mean collision speed, and the per-scenario
+reading of realism: each episode's own yaw + acceleration WDs to its scenario's logged adversary, averaged."""
 
 
 def generator_rows(gen_ci: Sequence[Mapping[str, Any]]) -> list[Mapping[str, Any]]:
@@ -51,8 +53,21 @@ def _realism(summed_counts: np.ndarray) -> np.ndarray:
     return np.array([realism["realism"], float(np.nanmean([realism["yaw_wd"], realism["acc_wd"]]))])
 
 
-def _mean_speed(summed: np.ndarray) -> np.ndarray:
-    """``[mean collision speed]`` from the summed ``[speed sum, contact count]`` of a set of episodes."""
+def _episode_yaw_acc(e: Mapping[str, Any]) -> float | None:
+    """The mean of the episode's own yaw and acceleration WDs (Table 6.2's ``yaw+acc WD per scenario`` averages
+    these), None where either is missing."""
+    y, a = e.get("yaw_wd"), e.get("acc_wd")
+    v = (float(y) + float(a)) / 2 if y is not None and a is not None else math.nan
+    return v if math.isfinite(v) else None
+
+
+def _sum_count(values: Sequence[float]) -> list[float]:
+    return [float(sum(values)), float(len(values))]
+
+
+def _mean_of_sum(summed: np.ndarray) -> np.ndarray:
+    """``[mean]`` from a summed ``[sum, count]`` (the collision speed over the contacts; the per-episode realism
+    over the episodes)."""
     return np.array([summed[0] / summed[1] if summed[1] > 0 else math.nan])
 
 
@@ -90,10 +105,13 @@ def generator_intervals(episodes: Sequence[Mapping[str, Any]], n_boot: int = N_B
     counts = np.array([realism_counts([dict(e) for e in g]) for g in groups]).reshape(len(groups),
                                                                                       realism_counts([]).size)
     speeds = [[v for e in g if (v := _speed(e)) is not None] for g in groups]
-    contact = np.array([[sum(v), len(v)] for v in speeds if v], dtype=np.float64).reshape(-1, 2)
+    contact = np.array([_sum_count(v) for v in speeds if v], dtype=np.float64).reshape(-1, 2)
+    own = np.array([_sum_count([v for e in g if (v := _episode_yaw_acc(e)) is not None]) for g in groups],
+                   dtype=np.float64).reshape(-1, 2)
     realism = _by_scenario_interval(counts, _realism, n_boot, seed)
-    speed = _by_scenario_interval(contact, _mean_speed, n_boot, seed)
-    return dict(zip(STATISTICS, [*realism, *speed], strict=True))
+    speed = _by_scenario_interval(contact, _mean_of_sum, n_boot, seed)
+    per_scenario = _by_scenario_interval(own, _mean_of_sum, n_boot, seed)
+    return dict(zip(STATISTICS, [*realism, *speed, *per_scenario], strict=True))
 
 
 def generator_ci_table(rows: Sequence[Mapping[str, Any]], generator_settings: Sequence[str],
@@ -116,9 +134,10 @@ def generator_ci_table(rows: Sequence[Mapping[str, Any]], generator_settings: Se
 
 
 def generator_ci_markdown(table: Sequence[Mapping[str, Any]]) -> str:
-    """Settings as rows: realism (mean WD), yaw + acceleration WD and collision speed, each ``estimate [low-high]``."""
-    out = ["| generator | scenarios | episodes | realism (mean WD) | yaw+acc WD | coll. speed (m/s) |",
-           "|---|---:|---:|---:|---:|---:|"]
+    """Settings as rows: realism (mean WD), yaw + acceleration WD, collision speed and the per-scenario yaw +
+    acceleration WD, each ``estimate [low-high]``."""
+    out = ["| generator | scenarios | episodes | realism (mean WD) | yaw+acc WD | coll. speed (m/s) | yaw+acc WD per "
+           "scenario |", "|---|---:|---:|---:|---:|---:|---:|"]
     for r in table:
         cells = [ci_cell(r[n], r[f"{n}_low"], r[f"{n}_high"], 1.0, 3 if n != "collision_speed_mps" else 2)
                  for n in STATISTICS]
@@ -128,20 +147,21 @@ def generator_ci_markdown(table: Sequence[Mapping[str, Any]]) -> str:
 
 def _per_scenario_summaries(episodes: Sequence[Mapping[str, Any]]) -> dict[str, np.ndarray]:
     """Scenario id -> its additive summary: the `realism_counts` of its episodes, then ``[collision speed sum,
-    contacts]``."""
+    contacts]``, then ``[sum, count]`` of the episodes' own yaw + acceleration WDs."""
     by_scenario: dict[str, list[Mapping[str, Any]]] = {}
     for e in episodes:
         by_scenario.setdefault(str(e["scenario_id"]), []).append(e)
     out = {}
     for sid, group in by_scenario.items():
         speeds = [v for e in group if (v := _speed(e)) is not None]
-        out[sid] = np.concatenate([realism_counts([dict(e) for e in group]), [sum(speeds), len(speeds)]])
+        own = [v for e in group if (v := _episode_yaw_acc(e)) is not None]
+        out[sid] = np.concatenate([realism_counts([dict(e) for e in group]), _sum_count(speeds), _sum_count(own)])
     return out
 
 
 def _statistics(summed: np.ndarray) -> np.ndarray:
     """`STATISTICS` from one summed `_per_scenario_summaries` vector."""
-    return np.concatenate([_realism(summed[:-2]), _mean_speed(summed[-2:])])
+    return np.concatenate([_realism(summed[:-4]), _mean_of_sum(summed[-4:-2]), _mean_of_sum(summed[-2:])])
 
 
 def _difference(summed: np.ndarray, width: int) -> np.ndarray:
@@ -164,7 +184,7 @@ def generator_difference_table(rows: Sequence[Mapping[str, Any]], generator_sett
             by_setting.setdefault(r["setting"], []).append(r)
     settings = ordered_settings(by_setting)
     summaries = {s: _per_scenario_summaries(by_setting[s]) for s in settings}
-    width = realism_counts([]).size + 2  # one setting's summary
+    width = realism_counts([]).size + 4  # one setting's summary
     table = []
     for i, a in enumerate(settings):
         for b in settings[i + 1:]:
@@ -183,12 +203,13 @@ def generator_difference_table(rows: Sequence[Mapping[str, Any]], generator_sett
 
 
 def generator_difference_markdown(table: Sequence[Mapping[str, Any]]) -> str:
-    """Two matrices (realism mean WD, collision speed): row minus column, ``estimate [low to high]``, the cells
-    whose interval excludes 0 in bold."""
+    """Three matrices (realism mean WD, collision speed, per-scenario yaw + acceleration WD): row minus column,
+    ``estimate [low to high]``, the cells whose interval excludes 0 in bold."""
     settings = list(dict.fromkeys(r["setting"] for r in table))
     cells = {(r["setting"], r["reference"]): r for r in table}
     out = []
-    for name, title, digits in (("realism", "realism (mean WD)", 3), ("collision_speed_mps", "coll. speed (m/s)", 2)):
+    for name, title, digits in (("realism", "realism (mean WD)", 3), ("collision_speed_mps", "coll. speed (m/s)", 2),
+                                ("realism_yaw_acc_per_scenario", "yaw+acc WD per scenario", 3)):
         out += [f"| {title}: row - column | " + " | ".join(settings) + " |", "|---|" + "---:|" * len(settings)]
         for a in settings:
             row = []

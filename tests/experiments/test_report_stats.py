@@ -255,6 +255,7 @@ def test_generator_intervals_resample_scenarios_and_match_table_6_2() -> None:
     assert row["realism_yaw_acc"] == pytest.approx((expected["yaw_wd"] + expected["acc_wd"]) / 2)
     speeds = [r["collision_speed_mps"] for r in rows if r["setting"] == "cat" and r["collision_speed_mps"] is not None]
     assert row["collision_speed_mps"] == pytest.approx(np.mean(speeds))
+    assert row["realism_yaw_acc_per_scenario"] == pytest.approx(0.15)  # the builder's yaw_wd 0.1, acc_wd 0.2
     for name in ("realism", "collision_speed_mps"):
         assert row[f"{name}_low"] <= row[name] <= row[f"{name}_high"] and row[f"{name}_low"] < row[f"{name}_high"]
     assert "| cat | 12 | 36 | " in generator_ci_markdown([row])
@@ -281,7 +282,8 @@ def test_generator_differences_pair_the_scenarios() -> None:
         for k in range(3):
             for setting, dv, spread in (("cat", 0.0, 0.3), ("seal", -0.3, 0.1)):
                 rows.append(episode(run=f"r{k}", setting=setting, scenario_id=f"s{i}", collision_speed_mps=1.0 + i + dv,
-                                    adv_yaw_hist=hist(rng.normal(0, spread, 40), YAW_RATE_BINS)))
+                                    adv_yaw_hist=hist(rng.normal(0, spread, 40), YAW_RATE_BINS),
+                                    yaw_wd=0.1 * i + (0.1 if setting == "cat" else 0.0), acc_wd=0.3))
     rows += [episode(run="r0", setting="normal", scenario_id="s0", collision_speed_mps=9.0)]  # replayed: no rival
     table = generator_difference_table(rows, ["normal", "cat", "seal"], n_boot=200)
     diff = {(r["setting"], r["reference"]): r for r in table}
@@ -293,6 +295,9 @@ def test_generator_differences_pair_the_scenarios() -> None:
     # the same scenarios in every resample: the speed difference is -0.3 in all of them
     assert (d["collision_speed_mps"], d["collision_speed_mps_low"], d["collision_speed_mps_high"]) == pytest.approx(
         (-0.3, -0.3, -0.3))
+    # per scenario: each episode's own (yaw + acc) / 2, seal 0.05 below cat in every scenario
+    assert (d["realism_yaw_acc_per_scenario"], d["realism_yaw_acc_per_scenario_low"],
+            d["realism_yaw_acc_per_scenario_high"]) == pytest.approx((-0.05, -0.05, -0.05))
     back = diff[("cat", "seal")]
     assert (back["realism"], back["realism_low"], back["realism_high"]) == pytest.approx(
         (-d["realism"], -d["realism_high"], -d["realism_low"]))
