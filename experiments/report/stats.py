@@ -258,3 +258,42 @@ def improvement_markdown(table: Sequence[Mapping[str, Any]]) -> str:
                 for b in names) + " |")
         out.append("")
     return "\n".join(out)
+
+
+def seed_profile_table(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Per trained pipeline and seed: the seed's success rate averaged over the ``settings`` (count) that every seed
+    of the pipeline played. The probability of improvement over all settings compares these egos whole, so a seed
+    far from its siblings (e.g. a degenerate learner) moves every comparison of its pipeline; this shows it."""
+    matrices = score_matrices(rows)
+    table = []
+    for pipeline in ordered_pipelines(p for p, _ in matrices):
+        settings = [s for p, s in matrices if p == pipeline and matrices[(p, s)].scenario_ids]
+        if not is_trained(pipeline) or not settings:
+            continue
+        runs = sorted(set.intersection(*(set(matrices[(pipeline, s)].runs) for s in settings)))
+        for run in runs:
+            rates = [matrices[(pipeline, s)].rates()[matrices[(pipeline, s)].runs.index(run)] for s in settings]
+            table.append({"pipeline": pipeline, "run": run, "settings": len(settings),
+                          "success": float(np.mean(rates))})
+    return table
+
+
+def _seed_label(run: str) -> str:
+    """``s3`` for a run folder named ``...-s3``, else the folder name."""
+    name = run.rstrip("/").rsplit("/", 1)[-1]
+    tail = name.rsplit("-", 1)[-1]
+    return tail if tail[:1] == "s" and tail[1:].isdigit() else name
+
+
+def seed_profile_markdown(table: Sequence[Mapping[str, Any]]) -> str:
+    """One row per pipeline: each seed's success over the settings (%, in seed order) and the spread (points)."""
+    by_pipeline: dict[str, list[Mapping[str, Any]]] = {}
+    for r in table:
+        by_pipeline.setdefault(r["pipeline"], []).append(r)
+    out = ["| pipeline | settings | each seed's success over the settings (%) | spread (points) |",
+           "|---|---:|---|---:|"]
+    for pipeline, seeds in by_pipeline.items():
+        values = [100 * s["success"] for s in seeds]
+        cells = ", ".join(f"{_seed_label(s['run'])} {v:.1f}" for s, v in zip(seeds, values, strict=True))
+        out.append(f"| {pipeline} | {seeds[0]['settings']} | {cells} | {max(values) - min(values):.1f} |")
+    return "\n".join(out) + "\n"

@@ -35,10 +35,12 @@ from seal.experiments.report.stats import (
     ego_ci_table,
     improvement_markdown,
     improvement_table,
+    seed_profile_markdown,
+    seed_profile_table,
 )
 
 FILES = ("ego_ci.csv", "improvement.csv", "improvement_per_setting.csv", "paired.csv", "per_scenario.csv",
-         "generator_ci.csv", "discrimination.csv", "generator_differences.csv")
+         "generator_ci.csv", "discrimination.csv", "generator_differences.csv", "seed_profile.csv")
 
 
 @dataclass
@@ -70,8 +72,9 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
     discrimination = discrimination_counts(ego_rows)
     gen_ci = generator_ci_table(ego_rows, [r["setting"] for r in t62], seed=seed)
     gen_diff = generator_difference_table(ego_rows, [r["setting"] for r in t62], seed=seed)
+    seeds = seed_profile_table(ego_rows)
     for name, table in zip(FILES, (cis, poi, poi_setting, paired, scenario_rates(ego_rows), gen_ci, discrimination,
-                                   gen_diff), strict=True):
+                                   gen_diff, seeds), strict=True):
         atomic_write_bytes(out / name, to_csv(table))
     figures = []
     if plots:
@@ -90,6 +93,10 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
         "every setting; 0.5 = no difference). Per setting, for each setting's leader and runner-up: "
         "`improvement_per_setting.csv`.\n",
         improvement_markdown(poi) if poi else "(fewer than two comparable pipelines)\n",
+        "Each seed's success rate averaged over its pipeline's settings: the probability of improvement above compares "
+        "these egos whole, so one seed far from its siblings moves every comparison of its pipeline "
+        "(`seed_profile.csv`).\n",
+        seed_profile_markdown(seeds) if seeds else "(no trained egos)\n",
         "## Per scenario: what one pipeline solves and another does not\n",
         "A pipeline solves a scenario when its egos succeed on it in more than half of the seeds. Every "
         "scenario's success share per pipeline: `per_scenario.csv`; all counts: `paired.csv`.\n",

@@ -32,6 +32,8 @@ from seal.experiments.report.stats import (
     mean_iqm_intervals,
     poi_interval,
     score_matrices,
+    seed_profile_markdown,
+    seed_profile_table,
 )
 
 
@@ -45,6 +47,19 @@ def _rows(pipeline: str, run_rates: list[float], setting: str = "normal", n: int
                   "scenario_id": f"s{i:03d}", "success": i < wins, "crash": i >= wins, "out_of_road": False}
                  for i in range(n)]
     return rows
+
+
+def test_seed_profile_shows_the_seed_that_moves_every_comparison() -> None:
+    # No-Adv's seed 0 is weak in both settings; the replayed ego is no pipeline's seed
+    rows = (_rows("noadv", [0.5, 0.8, 0.8], "normal") + _rows("noadv", [0.1, 0.4, 0.5], "cat")
+            + _rows("cat", [0.8, 0.8, 0.7], "normal") + _rows("cat", [0.4, 0.4, 0.4], "cat") + _rows("replay", [0.9]))
+    table = seed_profile_table(rows)
+    assert [(r["pipeline"], r["run"], r["settings"]) for r in table] == [
+        ("noadv", f"noadv-s{k}", 2) for k in range(3)] + [("cat", f"cat-s{k}", 2) for k in range(3)]
+    assert [r["success"] for r in table] == pytest.approx([0.3, 0.6, 0.65, 0.6, 0.6, 0.55])
+    md = seed_profile_markdown(table)
+    assert "| noadv | 2 | s0 30.0, s1 60.0, s2 65.0 | 35.0 |" in md
+    assert "| cat | 2 | s0 60.0, s1 60.0, s2 55.0 | 5.0 |" in md
 
 
 def test_score_matrix_keeps_the_scenarios_every_seed_played() -> None:
