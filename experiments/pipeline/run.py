@@ -252,6 +252,7 @@ def check_run(config_path: str | Path, out: str | Path, sets: Sequence[str] = ()
     ev = config.get("eval") or {}
     return {"preset": config["preset"], "out": str(out), "runs": list(planned_runs(config)),
             "fits": fits_needed(config), "generators": generators_in_use(config),
+            "reuse": describe(config, fits_needed(config)).removeprefix("[seal run] ") if config.get("reuse") else None,
             "eval_settings": list(ev.get("settings") or ["normal", "hard"]), "eval_k": ev.get("k", DEFAULTS["k"])}
 
 

@@ -35,7 +35,8 @@ def cmd_run(args: argparse.Namespace) -> int:
             raise CliError(f"{args.config}: {exc}") from None
         print(json.dumps(plan, indent=2) if args.json else
               f"{args.config}: plan ok: {len(plan['runs'])} training runs, fits {', '.join(plan['fits']) or 'none'}, "
-              f"evaluation on {', '.join(plan['eval_settings'])} (K = {plan['eval_k']})")
+              f"evaluation on {', '.join(plan['eval_settings'])} (K = {plan['eval_k']})"
+              + (f"; {plan['reuse']}" if plan.get("reuse") else ""))
         return 0
     bcfg = config.get("backend") or {}
     name = args.backend or bcfg.get("name", "local")

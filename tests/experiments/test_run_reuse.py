@@ -7,10 +7,10 @@ from pathlib import Path
 
 import pytest
 import yaml
-from run_builders import FakeTasks, run, write_preset
+from run_builders import FakeTasks, fake_train_config, run, write_preset
 
 from seal.experiments.pipeline.reuse import reuse_plan
-from seal.experiments.pipeline.run import load_run_config
+from seal.experiments.pipeline.run import check_run, load_run_config
 
 FIT = {"prior": {"epochs": 1}, "objective": {"prior": "${fit.prior}"}}
 SEAL = {"seal": {"objective": "${fit.objective}/objective.pt"}}
@@ -43,7 +43,10 @@ def test_a_fit_with_other_options_is_made_again_with_what_depends_on_it(tmp_path
     commands = FakeTasks()
     fit = {"prior": {"epochs": 2}, "objective": {"prior": "${fit.prior}"}}
     second = tmp_path / "second"
-    run(write_preset(tmp_path, fit=fit, pipelines=["seal"], generators=SEAL, reuse=str(first)), second, commands)
+    preset = write_preset(tmp_path, fit=fit, pipelines=["seal"], generators=SEAL, reuse=str(first))
+    plan = check_run(preset, second, train_config_fn=fake_train_config)
+    assert plan["reuse"] == f"reusing from {first.resolve()}: data; fitted here: prior, objective"
+    run(preset, second, commands)
     # the data is the first run's; the prior has other options, and the objective was fitted on the first's prior
     assert [(c[0], c[1], c[2]) for c in commands.calls] == [
         ("prior", str(first / "data"), str(second / "models" / "prior.pt")),
