@@ -76,5 +76,5 @@ def describe(config: Mapping[str, Any], needed: list[str]) -> str:
     taken = [name for name in needed if inside((fit.get(name) or {}).get("path"))]
     data = ["data"] if inside((config.get("data") or {}).get("path")) else []
     refit = [name for name in needed if name not in taken]
-    return (f"[seal run] reusing from {source}: {', '.join(data + taken) or 'nothing'}"
+    return (f"reusing from {source}: {', '.join(data + taken) or 'nothing'}"
             + (f"; fitted here: {', '.join(refit)}" if refit else ""))

@@ -252,7 +252,7 @@ def check_run(config_path: str | Path, out: str | Path, sets: Sequence[str] = ()
     ev = config.get("eval") or {}
     return {"preset": config["preset"], "out": str(out), "runs": list(planned_runs(config)),
             "fits": fits_needed(config), "generators": generators_in_use(config),
-            "reuse": describe(config, fits_needed(config)).removeprefix("[seal run] ") if config.get("reuse") else None,
+            "reuse": describe(config, fits_needed(config)) if config.get("reuse") else None,
             "eval_settings": list(ev.get("settings") or ["normal", "hard"]), "eval_k": ev.get("k", DEFAULTS["k"])}
 
 
@@ -273,7 +273,7 @@ def run_pipeline(
     config = load_run_config(config_path, sets)
     check_plan(config, config_path, out, train_config_fn, FIT_OUTPUTS)  # every step's config, before any file
     if config.get("reuse"):
-        logger.info(describe(config, fits_needed(config)))
+        logger.info(f"[seal run] {describe(config, fits_needed(config))}")
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(out / "config.yaml", yaml.safe_dump(config, sort_keys=False).encode())
     if backend is None:

@@ -43,7 +43,7 @@ def run_status(config_path: str | Path, out: str | Path, sets: Sequence[str] = (
     runs = _training(out, config)
     return {
         "preset": config["preset"], "out": str(out), "exists": out.is_dir(),
-        "reuse": describe(config, fits_needed(config)).removeprefix("[seal run] ") if config.get("reuse") else None,
+        "reuse": describe(config, fits_needed(config)) if config.get("reuse") else None,
         "steps": [_step(markers, step) for step in [*data, *fits]],
         "training": runs,
         "evaluation": _evaluation(out, config, dataset, runs["runs"]),

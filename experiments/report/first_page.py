@@ -9,8 +9,7 @@ every runner-up seed) while the margin is within the scenario-to-scenario noise 
 see. Then which pipelines beat which over all settings (the averaged probability of improvement, interval above
 0.5; a seed-level statement), the precision (the largest interval half-width against `TARGET_HALF_WIDTH`)
 and, from Table 6.2's intervals and the paired generator differences, the most realistic generator and the lowest
-collision speed; last, the thesis's
-findings checked one by one (`seal.experiments.report.thesis_claims`).
+collision speed; last, the thesis's findings checked one by one (`seal.experiments.report.thesis_claims`).
 """
 
 from __future__ import annotations

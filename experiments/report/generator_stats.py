@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from functools import partial
 from typing import Any
 
 import numpy as np
@@ -93,21 +92,32 @@ def _by_scenario_interval(per_group: np.ndarray, statistic: Callable[[np.ndarray
     return [(float(p), float(intervals["x"][0, i]), float(intervals["x"][1, i])) for i, p in enumerate(points["x"])]
 
 
+_SUMMARY_WIDTH = realism_counts([]).size + 4
+"""Length of one scenario's `_per_scenario_summaries` vector."""
+
+
+def _per_scenario_summaries(episodes: Sequence[Mapping[str, Any]]) -> dict[str, np.ndarray]:
+    """Scenario id -> its additive summary: the `realism_counts` of its episodes, then ``[collision speed sum,
+    contacts]``, then ``[sum, count]`` of the episodes' own yaw + acceleration WDs."""
+    by_scenario: dict[str, list[Mapping[str, Any]]] = {}
+    for e in episodes:
+        by_scenario.setdefault(str(e["scenario_id"]), []).append(e)
+    out = {}
+    for sid, group in by_scenario.items():
+        speeds = [v for e in group if (v := _speed(e)) is not None]
+        own = [v for e in group if (v := _episode_yaw_acc(e)) is not None]
+        out[sid] = np.concatenate([realism_counts([dict(e) for e in group]), _sum_count(speeds), _sum_count(own)])
+    return out
+
+
 def generator_intervals(episodes: Sequence[Mapping[str, Any]], n_boot: int = N_BOOT_GENERATORS, seed: int = 0
                         ) -> dict[str, tuple[float, float, float]]:
     """``{statistic: (estimate, low, high)}`` over ``episodes`` (one setting, histogram columns decoded), the
     scenarios resampled: all of them for the realism distances, those with a contact for the collision speed
     (so that every resample has one)."""
-    by_scenario: dict[str, list[Mapping[str, Any]]] = {}
-    for e in episodes:
-        by_scenario.setdefault(str(e["scenario_id"]), []).append(e)
-    groups = list(by_scenario.values())
-    counts = np.array([realism_counts([dict(e) for e in g]) for g in groups]).reshape(len(groups),
-                                                                                      realism_counts([]).size)
-    speeds = [[v for e in g if (v := _speed(e)) is not None] for g in groups]
-    contact = np.array([_sum_count(v) for v in speeds if v], dtype=np.float64).reshape(-1, 2)
-    own = np.array([_sum_count([v for e in g if (v := _episode_yaw_acc(e)) is not None]) for g in groups],
-                   dtype=np.float64).reshape(-1, 2)
+    summary = np.array(list(_per_scenario_summaries(episodes).values())).reshape(-1, _SUMMARY_WIDTH)
+    counts, contact, own = summary[:, :-4], summary[:, -4:-2], summary[:, -2:]
+    contact = contact[contact[:, 1] > 0]
     realism = _by_scenario_interval(counts, _realism, n_boot, seed)
     speed = _by_scenario_interval(contact, _mean_of_sum, n_boot, seed)
     per_scenario = _by_scenario_interval(own, _mean_of_sum, n_boot, seed)
@@ -145,28 +155,14 @@ def generator_ci_markdown(table: Sequence[Mapping[str, Any]]) -> str:
     return "\n".join(out) + "\n"
 
 
-def _per_scenario_summaries(episodes: Sequence[Mapping[str, Any]]) -> dict[str, np.ndarray]:
-    """Scenario id -> its additive summary: the `realism_counts` of its episodes, then ``[collision speed sum,
-    contacts]``, then ``[sum, count]`` of the episodes' own yaw + acceleration WDs."""
-    by_scenario: dict[str, list[Mapping[str, Any]]] = {}
-    for e in episodes:
-        by_scenario.setdefault(str(e["scenario_id"]), []).append(e)
-    out = {}
-    for sid, group in by_scenario.items():
-        speeds = [v for e in group if (v := _speed(e)) is not None]
-        own = [v for e in group if (v := _episode_yaw_acc(e)) is not None]
-        out[sid] = np.concatenate([realism_counts([dict(e) for e in group]), _sum_count(speeds), _sum_count(own)])
-    return out
-
-
 def _statistics(summed: np.ndarray) -> np.ndarray:
     """`STATISTICS` from one summed `_per_scenario_summaries` vector."""
     return np.concatenate([_realism(summed[:-4]), _mean_of_sum(summed[-4:-2]), _mean_of_sum(summed[-2:])])
 
 
-def _difference(summed: np.ndarray, width: int) -> np.ndarray:
-    """`STATISTICS` of the first ``width`` columns (one setting's summary) minus those of the rest (the other's)."""
-    return _statistics(summed[:width]) - _statistics(summed[width:])
+def _difference(summed: np.ndarray) -> np.ndarray:
+    """`STATISTICS` of the first setting's summary (the first `_SUMMARY_WIDTH` columns) minus the other's."""
+    return _statistics(summed[:_SUMMARY_WIDTH]) - _statistics(summed[_SUMMARY_WIDTH:])
 
 
 def generator_difference_table(rows: Sequence[Mapping[str, Any]], generator_settings: Sequence[str],
@@ -184,14 +180,13 @@ def generator_difference_table(rows: Sequence[Mapping[str, Any]], generator_sett
             by_setting.setdefault(r["setting"], []).append(r)
     settings = ordered_settings(by_setting)
     summaries = {s: _per_scenario_summaries(by_setting[s]) for s in settings}
-    width = realism_counts([]).size + 4  # one setting's summary
     table = []
     for i, a in enumerate(settings):
         for b in settings[i + 1:]:
             shared = sorted(set(summaries[a]) & set(summaries[b]))
             per_group = np.array([np.concatenate([summaries[a][s], summaries[b][s]]) for s in shared]
-                                 ).reshape(len(shared), 2 * width)
-            estimates = _by_scenario_interval(per_group, partial(_difference, width=width), n_boot, seed)
+                                 ).reshape(len(shared), 2 * _SUMMARY_WIDTH)
+            estimates = _by_scenario_interval(per_group, _difference, n_boot, seed)
             for first, second, sign in ((a, b, 1.0), (b, a, -1.0)):
                 row: dict[str, Any] = {"setting": setting_label(first), "reference": setting_label(second),
                                        "scenarios": len(shared)}

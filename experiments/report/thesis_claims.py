@@ -59,16 +59,16 @@ def generator_claims(gen_ci: Sequence[Mapping[str, Any]], gen_diff: Sequence[Map
             out.append({"claim": claim, "verdict": "not tested", "seal": seal, "other": None})
             continue
         best = min(others, key=lambda r: r[key])
-        paired = [diffs[r["setting"]] for r in others if r["setting"] in diffs]
-        if len(paired) == len(others):
-            bounds = [(d[f"{key}_low"], d[f"{key}_high"]) for d in paired]
+        all_paired = all(r["setting"] in diffs for r in others)
+        if all_paired:
+            bounds = [(diffs[r["setting"]][f"{key}_low"], diffs[r["setting"]][f"{key}_high"]) for r in others]
         else:  # SEAL's interval against each other's, unpaired
             bounds = [(seal[f"{key}_low"] - r[f"{key}_high"], seal[f"{key}_high"] - r[f"{key}_low"]) for r in others]
         verdict = ("too few scenarios" if not all(map(math.isfinite, (b for pair in bounds for b in pair))) else
                    "holds" if all(high < 0 for _, high in bounds) else
                    "reversed" if any(low > 0 for low, _ in bounds) else "not shown")
         out.append({"claim": claim, "verdict": verdict, "seal": seal, "other": best, "key": key,
-                    "diff": diffs.get(best["setting"]) if len(paired) == len(others) else None})
+                    "diff": diffs[best["setting"]] if all_paired else None})
     return out
 
 
@@ -80,8 +80,8 @@ def claims_markdown(poi: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[s
           "holds / reversed: the 95 % interval lies on one side (P above or below 0.5; SEAL minus another "
           "generator, scenario by scenario, below or above 0); not shown: it does not. P compares the pipelines' "
           f"seeds (each seed's success rate per setting; here as few as {seeds} seeds a pipeline), so it says how "
-          "consistently one "
-          "training pipeline beats another, not by how much: read it with the success intervals above.\n",
+          "consistently one training pipeline beats another, not by how much: read it with the success intervals "
+          "above.\n",
           "| claim | ego | verdict | evidence |", "|---|---|---|---|"]
     for c in ego_claims(poi):
         r = c["poi"]
