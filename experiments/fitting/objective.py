@@ -171,7 +171,10 @@ def labels_for_split(
 
 
 def label_stats(labels: LabelSet) -> dict[str, Any]:
-    """How the simulated labels look (share of crashes, of candidates that change the ego's behaviour)."""
+    """How the simulated labels look (share of crashes, of candidates that change the ego's behaviour, of candidate
+    pairs whose targets differ by < 0.01)."""
+    from seal.models.objective.metrics import near_tie_share
+
     logged = labels.f_diff[:, LOGGED_ROW]
     return {
         "scenarios": labels.n_scenarios,
@@ -185,6 +188,8 @@ def label_stats(labels: LabelSet) -> dict[str, Any]:
         "f_diff_mean_all_prev": round(float(labels.f_diff.mean()), 4),
         "f_diff_mean_logged_prev": round(float(logged.mean()), 4),
         "share_f_diff_gt_0.5_logged_prev": round(float((logged > 0.5).mean()), 4),
+        # How much of the per-scenario Spearman rides on differences too small to matter (`near_tie_share`).
+        "near_tie_share_logged_prev": round(near_tie_share(labels.f_coll + logged), 4),
     }
 
 
@@ -303,7 +308,8 @@ def evaluate(model: Any, labels: LabelSet, seed: int = 0, retest: LabelSet | Non
     }
     report = {
         "mse": {"all_prev": mse(np.ones(len(all_pairs), dtype=bool)), "logged_prev": mse(logged)},
-        "ranking_logged_prev": {k: ranking_report(v, sim_logged) for k, v in scores_logged.items()},
+        "ranking_logged_prev": {k: ranking_report(v, sim_logged, crashed=labels.crashed)
+                                for k, v in scores_logged.items()},
         "ranking_per_head": per_head_ranking(pred_grid[:, LOGGED_ROW], close_logged, labels),
         "ranking_k5_prev": {k: ranking_report(v, sim_k) for k, v in scores_k.items()},
         "labels": label_stats(labels),

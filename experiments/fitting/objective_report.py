@@ -28,6 +28,9 @@ def format_report(r: dict[str, Any]) -> str:
         f"{lab['scenarios']} held-out scenarios x {lab['candidates']} candidates; ego crashes into the adversary in "
         f"{lab['crash_share']:.1%} of candidate episodes; mean f_coll {lab['f_coll_mean']:.3f}, mean f_diff "
         f"{lab['f_diff_mean_logged_prev']:.3f} (logged previous roll-out) / {lab['f_diff_mean_all_prev']:.3f} (any).",
+        *([f"In a scenario, {lab['near_tie_share_logged_prev']:.0%} of the candidate pairs have simulated f_coll + "
+           "f_diff (logged previous roll-out) within 0.01 of each other: the Spearman means below rank those too."]
+          if "near_tie_share_logged_prev" in lab else []),
         "",
         "## MSE per head",
         "",
@@ -43,11 +46,12 @@ def format_report(r: dict[str, Any]) -> str:
                        ("ranking_k5_prev", f"K = {K_PREV} previous roll-outs (mean score)")):
         lines += ["", f"## Ranking the candidates, {title}", "",
                   "| score | Spearman mean | median | share >= 0.6 | top-1 in sim. top-3 | sim. value of top-1 "
-                  "| best possible |", "|---|---|---|---|---|---|---|"]
+                  "| best possible | top-1 a crash (of scenarios with one) |", "|---|---|---|---|---|---|---|---|"]
         for name, m in r[key].items():
+            crash = m.get("crash_chosen_when_any")
             lines.append(f"| {name} | {m['spearman_mean']:.3f} | {m['spearman_median']:.3f} | "
                          f"{m['share_spearman_ge_0.6']:.2f} | {m['top1_in_top3']:.2f} | {m['chosen_target_mean']:.3f} "
-                         f"| {m['best_target_mean']:.3f} |")
+                         f"| {m['best_target_mean']:.3f} | {'-' if crash is None else f'{crash:.3f}'} |")
     if "ranking_per_head" in r:
         lines += ["", "## Each head against its own label (previous roll-out = logged episode; Spearman mean)", "",
                   "| label | pi_score head | closeness |", "|---|---|---|"]

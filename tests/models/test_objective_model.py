@@ -22,7 +22,14 @@ from seal.models.objective import (
     train_objective,
 )
 from seal.models.objective.features import to_frame
-from seal.models.objective.metrics import average_ranks, ranking_report, spearman, top1_in_topk
+from seal.models.objective.metrics import (
+    average_ranks,
+    crash_chosen_when_any,
+    near_tie_share,
+    ranking_report,
+    spearman,
+    top1_in_topk,
+)
 from seal.scoring.criticality import f_coll
 
 F = {name: i for i, name in enumerate(FEATURE_NAMES)}
@@ -164,6 +171,20 @@ def test_ranking_metrics_on_known_cases() -> None:
     np.testing.assert_array_equal(top1_in_topk(score, target, k=3), [True, False])
     rep = ranking_report(score, target)
     assert rep["spearman_mean"] == 0.0 and rep["top1_in_top3"] == 0.5 and rep["chosen_target_mean"] == 0.5
+    assert "crash_chosen_when_any" not in rep
+
+
+def test_crash_selection_and_near_ties_by_hand() -> None:
+    # Row 0 picks its crash, row 1 misses the one it has, row 2 has none (left out): 1 of 2.
+    score = np.array([[1.0, 2.0, 3.0], [3.0, 2.0, 1.0], [1.0, 1.0, 0.0]])
+    crashed = np.array([[0, 0, 1], [0, 1, 0], [0, 0, 0]], dtype=bool)
+    assert crash_chosen_when_any(score, crashed) == 0.5
+    assert np.isnan(crash_chosen_when_any(score, np.zeros_like(crashed)))
+    assert ranking_report(score, score, crashed=crashed)["crash_chosen_when_any"] == 0.5
+    # 4 candidates = 6 pairs; only (0, 0.005) is within 0.01; a second scenario of equal targets: 6 of 6.
+    assert near_tie_share(np.array([[0.0, 0.005, 0.5, 1.0]])) == pytest.approx(1 / 6)
+    assert near_tie_share(np.array([[0.0, 0.005, 0.5, 1.0], [0.3, 0.3, 0.3, 0.3]])) == pytest.approx(7 / 12)
+    assert near_tie_share(np.array([[0.0, 0.005, 0.5, 1.0]]), tolerance=0.001) == 0.0
 
 
 def _synthetic_labels(rng: np.random.Generator, n_scenarios: int, n_cand: int = 12) -> LabelSet:

@@ -51,13 +51,27 @@ def top1_in_topk(score: np.ndarray, target: np.ndarray, k: int = 3) -> np.ndarra
     return np.take_along_axis(target, best[..., None], axis=-1)[..., 0] >= kth - 1e-12
 
 
-def ranking_report(score: np.ndarray, target: np.ndarray, k: int = 3) -> dict[str, Any]:
+def crash_chosen_when_any(score: np.ndarray, crashed: np.ndarray) -> float:
+    """Among the scenarios (rows of ``[S, N]``) where some candidate made the ego hit the adversary (``crashed``),
+    the share where the score's top candidate is one of them (NaN when no scenario has a crash): how often a
+    selector that plays its best candidate finds a crash that exists."""
+    crashed = np.asarray(crashed, dtype=bool)
+    has = crashed.any(axis=-1)
+    if not has.any():
+        return float("nan")
+    best = np.argmax(np.asarray(score, np.float64), axis=-1)
+    return float(np.take_along_axis(crashed, best[..., None], axis=-1)[..., 0][has].mean())
+
+
+def ranking_report(score: np.ndarray, target: np.ndarray, k: int = 3, crashed: np.ndarray | None = None
+                   ) -> dict[str, Any]:
     """Mean / median Spearman, share of scenarios with Spearman >= 0.6, top-1-in-top-k rate and the mean simulated
-    target of the chosen candidate against the best possible (regret), over scenarios (rows of ``[S, N]``)."""
+    target of the chosen candidate against the best possible (regret), over scenarios (rows of ``[S, N]``); with
+    ``crashed [S, N]`` also `crash_chosen_when_any`."""
     rho = spearman(score, target)
     best = np.argmax(score, axis=-1)
     chosen = np.take_along_axis(np.asarray(target, np.float64), best[:, None], axis=-1)[:, 0]
-    return {
+    report: dict[str, Any] = {
         "spearman_mean": round(float(rho.mean()), 4),
         "spearman_median": round(float(np.median(rho)), 4),
         "share_spearman_ge_0.6": round(float((rho >= 0.6).mean()), 4),
@@ -66,3 +80,17 @@ def ranking_report(score: np.ndarray, target: np.ndarray, k: int = 3) -> dict[st
         "best_target_mean": round(float(np.max(target, axis=-1).mean()), 4),
         "scenarios": int(rho.size),
     }
+    if crashed is not None:
+        report["crash_chosen_when_any"] = round(crash_chosen_when_any(score, crashed), 4)
+    return report
+
+
+def near_tie_share(target: np.ndarray, tolerance: float = 0.01) -> float:
+    """Share of the candidate pairs of a scenario (rows of ``[S, N]``, every unordered pair) whose targets differ by
+    less than ``tolerance``, averaged over scenarios: how much of a per-scenario Spearman is decided by differences
+    that small."""
+    t = np.asarray(target, np.float64)
+    n = t.shape[-1]
+    iu = np.triu_indices(n, 1)
+    close = np.abs(t[..., :, None] - t[..., None, :])[..., iu[0], iu[1]] < tolerance
+    return float(close.mean()) if close.size else float("nan")
