@@ -311,7 +311,7 @@ def evaluate(model: Any, labels: LabelSet, seed: int = 0, retest: LabelSet | Non
         "ranking_logged_prev": {k: ranking_report(v, sim_logged, crashed=labels.crashed)
                                 for k, v in scores_logged.items()},
         "ranking_per_head": per_head_ranking(pred_grid[:, LOGGED_ROW], close_logged, labels),
-        "ranking_k5_prev": {k: ranking_report(v, sim_k) for k, v in scores_k.items()},
+        "ranking_k5_prev": {k: ranking_report(v, sim_k, crashed=labels.crashed) for k, v in scores_k.items()},
         "labels": label_stats(labels),
     }
     if retest is not None:
