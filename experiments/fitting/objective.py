@@ -232,6 +232,24 @@ def per_head_ranking(pred: np.ndarray, close: np.ndarray, labels: LabelSet) -> d
     return out
 
 
+def oracle_bounds(close: np.ndarray, labels: LabelSet) -> dict[str, float]:
+    """Mean Spearman (over scenarios, previous roll-out = the logged episode) against the simulated f_coll + f_diff
+    of closeness with one part of that target known exactly: the crash flags (crashing candidates first, closeness
+    within each group: the most any crash predictor can add to closeness) and f_diff (closeness + the true f_diff:
+    what predicting the ego's change of path would give). How far above closeness a learned score can get, and where.
+
+    Args:
+        close: ``[S, N]`` closeness to the logged-adversary roll-out.
+        labels: the labels (crash flags, f_coll and f_diff of the logged row).
+    """
+    from seal.models.objective.metrics import spearman
+
+    logged = labels.f_diff[:, LOGGED_ROW]
+    target = labels.f_coll + logged
+    return {"closeness_plus_true_crash": round(float(spearman(close + labels.crashed, target).mean()), 4),
+            "closeness_plus_true_f_diff": round(float(spearman(close + logged, target).mean()), 4)}
+
+
 def label_retest(labels: LabelSet, second: LabelSet, scores: dict[str, np.ndarray]) -> dict[str, Any]:
     """How reproducible the held-out labels are: ``second`` is another draw of the same labels (same scenarios,
     candidates and ego; another skill-noise seed of the ``seal`` label behaviour). With the logged-adversary episode
@@ -311,6 +329,7 @@ def evaluate(model: Any, labels: LabelSet, seed: int = 0, retest: LabelSet | Non
         "ranking_logged_prev": {k: ranking_report(v, sim_logged, crashed=labels.crashed)
                                 for k, v in scores_logged.items()},
         "ranking_per_head": per_head_ranking(pred_grid[:, LOGGED_ROW], close_logged, labels),
+        "oracle_bounds_logged_prev": oracle_bounds(close_logged, labels),
         "ranking_k5_prev": {k: ranking_report(v, sim_k, crashed=labels.crashed) for k, v in scores_k.items()},
         "labels": label_stats(labels),
     }

@@ -57,6 +57,13 @@ def format_report(r: dict[str, Any]) -> str:
                   "| label | pi_score head | closeness |", "|---|---|---|"]
         lines += [f"| {k} | {v['pi_score_head']:.3f} | {v['closeness']:.3f} |"
                   for k, v in r["ranking_per_head"].items()]
+    if "oracle_bounds_logged_prev" in r:
+        ob = r["oracle_bounds_logged_prev"]
+        lines += ["", "## How far above closeness a score can get (previous roll-out = logged episode)", "",
+                  "Closeness with the true crash flags (crashes first): Spearman "
+                  f"**{ob['closeness_plus_true_crash']:.3f}**, the most a crash predictor can add; closeness + the "
+                  "true f_diff: "
+                  f"**{ob['closeness_plus_true_f_diff']:.3f}** (where the rest of the headroom is)."]
     if "label_retest" in r:
         rt = r["label_retest"]
         lines += ["", "## Label reproducibility (a second draw of the held-out labels, another skill-noise seed)", "",

@@ -4,6 +4,9 @@ the held-out evaluation on those labels."""
 
 from __future__ import annotations
 
+import math
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import scenario_factory as sf
@@ -201,3 +204,27 @@ def test_seal_behaviour_labels_roll_out_follow_then_switch_per_ego(scenarios, ti
     assert not any(isinstance(b, SkillSwitchBehavior) for b in replay)
     with pytest.raises(ValueError, match="needs a skills folder"):
         ol.LabelBehavior(kind="seal")
+
+
+def test_oracle_bounds_by_hand() -> None:
+    from seal.experiments.fitting.objective import oracle_bounds
+
+    # One scenario, 3 candidates: closeness 0.1 / 0.5 / 0.9; the third makes the ego crash (f_coll 1); the first
+    # changes its path (f_diff 0.9): targets 1.0 / 0.5 / 1.0.
+    t = 2
+    labels = LabelSet(
+        scenario_ids=np.array(["s"]), cand_xy=np.zeros((1, 3, t, 2), np.float32),
+        cand_heading=np.zeros((1, 3, t), np.float32), probs=np.full((1, 3), 1 / 3, np.float32),
+        ego_xy=np.zeros((1, 4, t, 2), np.float32), ego_heading=np.zeros((1, 4, t), np.float32),
+        ego_valid=np.ones((1, 4, t), dtype=bool), f_coll=np.array([[0.1, 0.5, 1.0]], np.float32),
+        f_diff=np.array([[[0.9, 0.0, 0.0]] * 4], np.float32), crashed=np.array([[False, False, True]]),
+        cat_score=np.zeros((1, 3), np.float32),
+    )
+    out = oracle_bounds(np.array([[0.1, 0.5, 0.9]]), labels)
+    # Crashes first keeps closeness's order 0 < 1 < 2, uncorrelated with the target's ranks (1.5, 0, 1.5): 0.
+    # Closeness + f_diff = 1.0 / 0.5 / 0.9 ranks (2, 0, 1): centred products sum to 1.5, norms sqrt(2 * 1.5).
+    assert out["closeness_plus_true_crash"] == 0.0
+    assert out["closeness_plus_true_f_diff"] == pytest.approx(1.5 / math.sqrt(3.0), abs=1e-4)
+    # With the crash flag on the first candidate instead, crashes-first ranks (2, 0, 1) too.
+    flagged = oracle_bounds(np.array([[0.1, 0.5, 0.9]]), replace(labels, crashed=np.array([[True, False, False]])))
+    assert flagged["closeness_plus_true_crash"] == pytest.approx(1.5 / math.sqrt(3.0), abs=1e-4)
