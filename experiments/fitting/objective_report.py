@@ -1,6 +1,6 @@
 """The held-out report of ``seal fit objective`` / ``seal eval objective`` as files and text: ``report.json``,
 ``report.md`` (`format_report`) and the terminal summary (`format_summary`). The metrics themselves are computed by
-`seal.experiments.fitting.objective.evaluate`."""
+`seal.experiments.fitting.objective_eval.evaluate`."""
 
 from __future__ import annotations
 

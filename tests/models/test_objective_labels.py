@@ -115,7 +115,7 @@ def test_source_spec_needs_exactly_one_source(tmp_path) -> None:
 def test_evaluate_reports_metrics_and_baselines(built) -> None:
     import torch
 
-    from seal.experiments.fitting.objective import closeness, evaluate
+    from seal.experiments.fitting.objective_eval import closeness, evaluate
     from seal.experiments.fitting.objective_report import K_PREV, format_report
     from seal.models.objective import ObjectiveConfig, ObjectiveModel
 
@@ -141,7 +141,7 @@ def test_evaluate_reports_metrics_and_baselines(built) -> None:
 
 
 def test_per_head_ranking_scores_each_head_against_its_own_label(built) -> None:
-    from seal.experiments.fitting.objective import per_head_ranking
+    from seal.experiments.fitting.objective_eval import per_head_ranking
 
     labels, _ = built
     s, n = labels.f_coll.shape
@@ -207,7 +207,7 @@ def test_seal_behaviour_labels_roll_out_follow_then_switch_per_ego(scenarios, ti
 
 
 def test_oracle_bounds_by_hand() -> None:
-    from seal.experiments.fitting.objective import oracle_bounds
+    from seal.experiments.fitting.objective_eval import oracle_bounds
 
     # One scenario, 3 candidates: closeness 0.1 / 0.5 / 0.9; the third makes the ego crash (f_coll 1); the first
     # changes its path (f_diff 0.9): targets 1.0 / 0.5 / 1.0.

@@ -185,7 +185,7 @@ def _draw(f_coll: list[list[float]], f_diff_logged: list[list[float]], ids: tupl
 
 
 def test_label_retest_compares_two_draws_of_the_labels_and_ranks_the_scores_against_the_second() -> None:
-    from seal.experiments.fitting.objective import label_retest
+    from seal.experiments.fitting.objective_eval import label_retest
 
     first = _draw([[0.1, 0.2, 0.3, 0.4], [0.4, 0.3, 0.2, 0.1]], [[0, 0, 1, 1], [1, 0, 0, 0]])
     # Second draw: scenario a keeps its order (sums 0.1, 0.2, 1.3, 1.4 -> 0.1, 0.25, 1.2, 1.45), scenario b's sums
