@@ -12,15 +12,16 @@ import numpy as np
 
 from seal.experiments.fitting.objective_report import K_PREV
 from seal.models.objective.labels import LOGGED_ROW, LabelSet
+from seal.models.objective.metrics import near_tie_share, ranking_report, spearman
+from seal.scoring.criticality import f_coll
 
 LATENCY_CALLS = 200
 """``rank()`` calls timed by `rank_latency_ms`."""
 
+
 def label_stats(labels: LabelSet) -> dict[str, Any]:
     """How the simulated labels look (share of crashes, of candidates that change the ego's behaviour, of candidate
     pairs whose targets differ by < 0.01)."""
-    from seal.models.objective.metrics import near_tie_share
-
     logged = labels.f_diff[:, LOGGED_ROW]
     return {
         "scenarios": labels.n_scenarios,
@@ -42,8 +43,6 @@ def label_stats(labels: LabelSet) -> dict[str, Any]:
 def closeness(labels: LabelSet, prev: np.ndarray) -> np.ndarray:
     """``[S, len(prev), N]`` f_coll of each candidate against previous roll-out rows ``prev [S, P]``, as if the
     ego did not react (the no-simulation heuristic)."""
-    from seal.scoring.criticality import f_coll
-
     s = np.arange(labels.n_scenarios)[:, None]
     ego = labels.ego_xy[s, prev][:, :, None]  # [S, P, 1, T, 2]
     valid = labels.ego_valid[s, prev][:, :, None]
@@ -69,8 +68,6 @@ def per_head_ranking(pred: np.ndarray, close: np.ndarray, labels: LabelSet) -> d
         close: ``[S, N]`` closeness to the logged-adversary roll-out.
         labels: the labels (f_coll ``[S, N]``, f_diff of the logged row ``[S, N]``).
     """
-    from seal.models.objective.metrics import spearman
-
     out = {}
     for h, (name, target) in enumerate((("f_coll", labels.f_coll), ("f_diff", labels.f_diff[:, LOGGED_ROW]))):
         out[name] = {"pi_score_head": round(float(spearman(pred[..., h], target).mean()), 4),
@@ -88,8 +85,6 @@ def oracle_bounds(close: np.ndarray, labels: LabelSet) -> dict[str, float]:
         close: ``[S, N]`` closeness to the logged-adversary roll-out.
         labels: the labels (crash flags, f_coll and f_diff of the logged row).
     """
-    from seal.models.objective.metrics import spearman
-
     logged = labels.f_diff[:, LOGGED_ROW]
     target = labels.f_coll + logged
     return {"closeness_plus_true_crash": round(float(spearman(close + labels.crashed, target).mean()), 4),
@@ -106,8 +101,6 @@ def label_retest(labels: LabelSet, second: LabelSet, scores: dict[str, np.ndarra
     N]`` each, e.g. pi_score and closeness) are ranked against the second draw too.
 
     Raises ValueError when the two label sets are not of the same scenarios and candidates."""
-    from seal.models.objective.metrics import spearman
-
     same = (list(labels.scenario_ids) == list(second.scenario_ids) and labels.cand_xy.shape == second.cand_xy.shape
             and np.allclose(labels.cand_xy, second.cand_xy, atol=1e-4)
             and np.allclose(labels.ego_xy[:, LOGGED_ROW], second.ego_xy[:, LOGGED_ROW], atol=1e-4))
@@ -134,7 +127,6 @@ def label_retest(labels: LabelSet, second: LabelSet, scores: dict[str, np.ndarra
 def evaluate(model: Any, labels: LabelSet, seed: int = 0, retest: LabelSet | None = None) -> dict[str, Any]:
     """Held-out metrics of the module docstring for ``model`` (an `ObjectiveModel`) on ``labels``; with ``retest``
     (a second draw of the same labels) also `label_retest`."""
-    from seal.models.objective.metrics import ranking_report
     from seal.models.objective.train import PairTensors, predict_pairs
 
     tensors = PairTensors(labels)
