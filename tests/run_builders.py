@@ -54,8 +54,9 @@ def fake_train(job) -> dict:
 
 def fake_eval(job) -> dict:
     """One episode row per (setting, first scenario) for the job's ego, into the job's store."""
-    cfg = yaml.safe_load((Path(job["run"]) / "config.yaml").read_text()) if job["run"] != "replay" else {}
-    pipeline, seed = cfg.get("pipeline", "replay"), cfg.get("seed", 0)
+    builtin = job["run"] in ("replay", "heuristic")
+    cfg = yaml.safe_load((Path(job["run"]) / "config.yaml").read_text()) if not builtin else {}
+    pipeline, seed = cfg.get("pipeline", job["run"]), cfg.get("seed", 0)
     with ResultsStore(job["store"]) as store:
         store.upsert_episodes([
             episode(run=job["run"], setting=s["name"], pipeline=pipeline, seed=seed) for s in job["settings"]
@@ -84,6 +85,6 @@ def write_preset(tmp_path: Path, seeds=(0, 1), **changes) -> Path:
     return path
 
 
-def run(preset: Path, out: Path, commands: FakeTasks, train=fake_train) -> dict:
-    return run_pipeline(preset, out, backend=InlineBackend(), task_fn=commands, train_fn=train, eval_fn=fake_eval,
+def run(preset: Path, out: Path, commands: FakeTasks, train=fake_train, evaluate=fake_eval) -> dict:
+    return run_pipeline(preset, out, backend=InlineBackend(), task_fn=commands, train_fn=train, eval_fn=evaluate,
                         train_config_fn=fake_train_config, progress=False)

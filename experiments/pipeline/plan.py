@@ -26,7 +26,7 @@ from seal.experiments.pipeline.references import (
 from seal.experiments.pipeline.tasks import FIT_CONFIGS, FIT_DEFAULTS, OPTIONS
 from seal.experiments.training.config import ALGOS
 
-RUN_EVAL_KEYS = ("settings", "replay_ego")
+RUN_EVAL_KEYS = ("settings", "replay_ego", "egos")
 """Keys of a preset's ``eval`` section besides `seal.experiments.evaluation.evaluate.EvalRunsConfig`'s."""
 REPORT_KEYS = {"plots": bool, "videos": int, "video_format": str, "reps": int, "poi_reps": int}
 BACKEND_KEYS = {"name": str, "workers": int, "address": str, "train_workers": int, "fit_workers": int}
@@ -185,6 +185,7 @@ def _check_eval(ev: Mapping[str, Any], dataset: str) -> None:
         raise ValueError(f"eval: unknown key(s) {unknown}; known: {sorted({*DEFAULTS, *RUN_EVAL_KEYS})}")
     if not isinstance(ev.get("replay_ego", True), bool):
         raise ValueError(f"eval.replay_ego must be true or false, got {ev['replay_ego']!r}")
+    _check_reference_egos(ev.get("egos"))
     try:
         resolve_eval_config(k=ev.get("k"), limit=ev.get("limit"), seed=ev.get("seed"), prior=ev.get("prior"),
                             candidates=ev.get("candidates"), env=ev.get("env"))
@@ -194,6 +195,21 @@ def _check_eval(ev: Mapping[str, Any], dataset: str) -> None:
         parse_settings(settings, dataset)
     except (ValueError, DatasetError) as exc:
         raise ValueError(f"eval: {exc}") from None
+
+
+def _check_reference_egos(egos: Any) -> None:
+    """``eval.egos``: a list of egos `seal eval runs` accepts (built-in, registered, entry point, model path)."""
+    from seal.experiments.evaluation.evaluate import read_run
+
+    if egos is None:
+        return
+    if not isinstance(egos, list) or not all(isinstance(e, str) and e for e in egos):
+        raise ValueError(f"eval.egos must be a list of ego names or model paths, got {egos!r}")
+    for ego in egos:
+        try:
+            read_run(ego)
+        except (FileNotFoundError, ValueError) as exc:
+            raise ValueError(f"eval.egos: {exc}") from None
 
 
 def _check_types(section: str, values: Mapping[str, Any], types: Mapping[str, type]) -> None:

@@ -7,7 +7,7 @@ preset through these helpers.
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from seal.adversaries.base import NO_ADVERSARY
@@ -146,3 +146,12 @@ def with_models(config: Mapping[str, Any], models: Mapping[str, str]) -> dict[st
     """``config`` with the ``"${fit.NAME}"`` references of its train section replaced by the fitted models' paths
     (``train: {hyperparams: {reskill: {skills: "${fit.skills}"}}}``: the ReSkill ego's skills)."""
     return {**config, "train": substitute(dict(config.get("train") or {}), models)}
+
+
+def eval_egos(config: Mapping[str, Any], trained: Sequence[str]) -> list[str]:
+    """The egos the eval step evaluates, in the store's order: the ``trained`` run folders, the preset's
+    ``eval.egos`` (reference egos such as ``heuristic``, or models of other experiments) and, unless
+    ``eval.replay_ego`` is false, the Replay ego; each once."""
+    ev = config.get("eval") or {}
+    egos = [*trained, *(str(e) for e in ev.get("egos") or []), *(["replay"] if ev.get("replay_ego", True) else [])]
+    return list(dict.fromkeys(egos))

@@ -45,7 +45,8 @@ The preset's sections (all but ``train`` belong to this module; ``train`` is pas
   Fig. 6.5 (``experiments/configs/quick_ablations.yaml``); ``generator: noadv`` is a variant without adversary
   (``{noadv-dl: {generator: noadv, train: {deadline_obs: true}}}``: the time-aware No-Adv ego).
 * ``eval``: ``settings`` (list, as ``seal eval runs --settings``), ``k``, ``limit``, ``seed``, ``prior``,
-  ``candidates``, ``env``, ``replay_ego`` (default true).
+  ``candidates``, ``env``, ``replay_ego`` (default true), ``egos`` (reference egos evaluated beside the
+  trained ones: ``[heuristic]``, or run folders / SB3 models / ``seal.egos`` entry points of other experiments).
 * ``report``: ``plots`` (default true), ``videos`` (per generator, default 0), ``video_format``, ``reps`` /
   ``poi_reps`` (bootstrap resamples of the intervals / probabilities of improvement, as ``seal compare``).
 * ``backend``: ``name`` (local | ray), ``workers``, ``address`` (Ray), ``train_workers`` (local: concurrent train
@@ -71,6 +72,7 @@ from seal.experiments.backends import Backend, InlineBackend, Job, JobResult, Lo
 from seal.experiments.pipeline.plan import check_plan
 from seal.experiments.pipeline.references import (
     dotted,
+    eval_egos,
     fits_needed,
     generator_of,
     generators_in_use,
@@ -346,7 +348,8 @@ def _train_step(run: _Run, dataset: str, generators: Mapping[str, Any]) -> tuple
 
 
 def _eval_step(run: _Run, dataset: str, generators: Mapping[str, Any], trained: Sequence[str]) -> str:
-    """4. evaluate every trained ego plus the Replay ego into OUT/results.sqlite; returns the store path."""
+    """4. evaluate every trained ego, the preset's reference egos (``eval.egos``) and the Replay ego into
+    OUT/results.sqlite; returns the store path."""
     from seal.experiments.evaluation.evaluate import parse_settings, resolve_eval_config
 
     ev = dict(run.config.get("eval") or {})
@@ -355,7 +358,7 @@ def _eval_step(run: _Run, dataset: str, generators: Mapping[str, Any], trained: 
                                       candidates=ev.get("candidates"), env=ev.get("env"))
     eval_config["generators"] = generators
     settings = parse_settings(ev.get("settings") or ["normal", "hard"], dataset)
-    egos = [*trained, *(["replay"] if ev.get("replay_ego", True) else [])]
+    egos = eval_egos(run.config, trained)
     jobs = [{"name": Path(e).name, "store": store, "run": e, "settings": [vars(s) for s in settings],
              "config": eval_config, "progress": False} for e in egos]
 

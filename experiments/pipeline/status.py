@@ -26,7 +26,7 @@ from typing import Any
 import yaml
 
 from seal.core.dataset import MANIFEST
-from seal.experiments.pipeline.references import fits_needed, planned_runs
+from seal.experiments.pipeline.references import eval_egos, fits_needed, planned_runs
 from seal.experiments.pipeline.reuse import describe
 from seal.experiments.pipeline.run import load_run_config
 from seal.experiments.pipeline.steps import StepJob, Steps, data_steps, fit_steps
@@ -122,7 +122,7 @@ def _evaluation(out: Path, config: Mapping[str, Any], dataset: str, runs: Sequen
     from seal.experiments.evaluation.store_progress import expected_rows
 
     ev = config.get("eval") or {}
-    egos = [str(out / "runs" / r["name"]) for r in runs] + (["replay"] if ev.get("replay_ego", True) else [])
+    egos = eval_egos(config, [str(out / "runs" / r["name"]) for r in runs])
     store = out / "results.sqlite"
     stored = 0
     complete_egos = None

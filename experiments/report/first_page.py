@@ -9,7 +9,8 @@ every runner-up seed) while the margin is within the scenario-to-scenario noise 
 see. Then which pipelines beat which over all settings (the averaged probability of improvement, interval above
 0.5; a seed-level statement), the precision (the largest interval half-width against `TARGET_HALF_WIDTH`)
 and, from Table 6.2's intervals and the paired generator differences, the most realistic generator and the lowest
-collision speed; last, the thesis's findings checked one by one (`seal.experiments.report.thesis_claims`).
+collision speed; the reference egos (Replay, the heuristic driver) against each setting's leader; last, the
+thesis's findings checked one by one (`seal.experiments.report.thesis_claims`).
 """
 
 from __future__ import annotations
@@ -89,6 +90,24 @@ def _verdict_row(v: Mapping[str, Any]) -> str:
     verdict = _verdict(v)
     return (f"| {v['setting']} | {best['pipeline']} | {_pct(best)} | {second['pipeline']} | {_pct(second)} | "
             f"{100 * v['margin']:+.1f} | {p_text} | {verdict} |")
+
+
+def reference_lines(cis: Sequence[Mapping[str, Any]], verdicts: Sequence[Mapping[str, Any]]) -> list[str]:
+    """One sentence per reference ego (``replay``, ``heuristic``: trained by no pipeline) in the settings of
+    ``verdicts`` (one algorithm's): its success rate per setting, and in how many of them the leading pipeline's
+    interval lies above / below the reference's (the question "does training beat the heuristic driver?")."""
+    leaders = {v["setting"]: v["best"] for v in verdicts}
+    refs = [r for r in cis if r["metric"] == "success" and not is_trained(r["pipeline"])
+            and r["setting"] in leaders and math.isfinite(r["mean"])]
+    lines = []
+    for name in dict.fromkeys(r["pipeline"] for r in refs):
+        rows = [r for r in refs if r["pipeline"] == name]
+        above = sum(leaders[r["setting"]]["ci_low"] > r["ci_high"] for r in rows)
+        below = sum(leaders[r["setting"]]["ci_high"] < r["ci_low"] for r in rows)
+        cells = ", ".join(f"{r['setting']} {100 * r['mean']:.1f} %" for r in rows)
+        lines.append(f"- Reference ego **{name}** (no training): {cells}; the leading pipeline's interval lies above "
+                     f"its interval in {above}, below it in {below} of {len(rows)} settings.")
+    return lines
 
 
 def overall_lines(poi: Sequence[Mapping[str, Any]]) -> list[str]:
@@ -190,6 +209,7 @@ def first_page_markdown(cis: Sequence[Mapping[str, Any]], poi: Sequence[Mapping[
         md += [_verdict_row(v) for v in verdicts if v["algo"] == algo]
         md.append("")
         md += overall_lines([r for r in poi if algo_of(r["pipeline"]) == algo]) or ["- (one pipeline only)"]
+        md += reference_lines(cis, [v for v in verdicts if v["algo"] == algo])
         md.append("")
     md.append(precision_line(cis))
     md += list(training_lines)

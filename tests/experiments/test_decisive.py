@@ -117,14 +117,15 @@ def test_each_run_gets_its_algorithm_and_the_reskill_runs_the_fitted_skills(real
 
 def _eval(job) -> dict:
     """Four scenarios per setting: SEAL's ReSkill egos solve all four, every other ego the first two."""
-    cfg = yaml.safe_load((Path(job["run"]) / "config.yaml").read_text()) if job["run"] != "replay" else {}
-    pipeline, seed = cfg.get("pipeline", "replay"), cfg.get("seed", 0)
+    builtin = job["run"] in ("replay", "heuristic")  # the preset's reference egos
+    cfg = yaml.safe_load((Path(job["run"]) / "config.yaml").read_text()) if not builtin else {}
+    pipeline, seed = cfg.get("pipeline", job["run"]), cfg.get("seed", 0)
     wins = 4 if (pipeline, cfg.get("algo")) == ("seal", "reskill") else 2
     with ResultsStore(job["store"]) as store:
         store.upsert_episodes([episode(run=job["run"], setting=s["name"], pipeline=pipeline, seed=seed,
                                        scenario_id=f"s{i}", outcome="success" if i < wins else "crash")
                                for s in job["settings"] for i in range(4)])
-        store.upsert_run(job["run"], pipeline, seed, job["run"], None if job["run"] == "replay" else job["run"], cfg)
+        store.upsert_run(job["run"], pipeline, seed, job["run"], None if builtin else job["run"], cfg)
     return {"run": job["run"]}
 
 
@@ -155,6 +156,7 @@ def test_toy_decisive_runs_end_to_end_and_reports_the_algorithms_apart(tmp_path:
     md = (report / "report.md").read_text()
     assert "### Ego algorithm: reskill" in md and "### Ego algorithm: td3" in md
     assert "| normal | seal (reskill) | 100.0 % [" in md and "| cat | seal (reskill) |" in md
+    assert "| heuristic | 1 | 50.0 [50.0-50.0] (4) |" in md  # eval.egos: the heuristic driver as a reference row
     assert md.count("| P(row > column) |") == 2 and "**normal** (td3 egos) (4 scenarios)" in md  # a matrix per algo
     with open(report / "improvement.csv") as f:
         poi = list(csv.DictReader(f))

@@ -181,6 +181,8 @@ def test_first_page_names_the_leader_from_the_numbers() -> None:
     rows += _rows("noadv", [0.45, 0.5, 0.4, 0.55], setting="hard", n=40)
     # Every seed of seal beats every seed of noadv, by 10 points on 10 scenarios: P = 1, but within the noise.
     rows += _rows("seal", [0.6, 0.6, 0.7, 0.6], setting="seal") + _rows("noadv", [0.5, 0.5, 0.5, 0.4], setting="seal")
+    # the heuristic driver as a reference ego: below cat on normal (intervals apart), level with it on hard
+    rows += _rows("heuristic", [0.5], n=40) + _rows("heuristic", [0.45], setting="hard", n=40)
     cis = ego_ci_table(rows, n_boot=300)
     pairs = leader_pairs(cis)
     assert sorted(pairs) == [("cat", "noadv", "normal"), ("noadv", "cat", "hard"), ("seal", "noadv", "seal")]
@@ -200,6 +202,8 @@ def test_first_page_names_the_leader_from_the_numbers() -> None:
     md = first_page_markdown(cis, poi, per_setting, gen_ci)
     assert "| normal | cat | 90.0 % [" in md and "| cat ahead |" in md and "| no clear winner |" in md
     assert "seal ahead on the seeds, but the success intervals overlap: not sure" in md
+    assert ("- Reference ego **heuristic** (no training): normal 50.0 %, hard 45.0 %; the leading pipeline's interval "
+            "lies above its interval in 1, below it in 0 of 2 settings.") in md
     assert ("most realistic generator (lowest mean WD to the logged adversaries): **seal 0.2 [0.15-0.24]** (then "
             "cat 0.3 [0.25-0.35]); its interval lies below the next one's.") in md
     assert "lowest collision speed: **cat 4 m/s [3-5]** (then seal 5 m/s [4.5-5.5]); its interval overlaps" in md

@@ -69,6 +69,25 @@ def test_changed_parameters_rerun_only_what_changed(tmp_path: Path) -> None:
         assert store.count() == 7 * 3
 
 
+def test_reference_egos_are_evaluated_beside_the_trained_ones(tmp_path: Path) -> None:
+    out, commands = tmp_path / "out", FakeTasks()
+    run(write_preset(tmp_path), out, commands)
+    evaluated = []
+
+    def evaluate(job):
+        evaluated.append(job["run"])
+        return fake_eval(job)
+
+    # eval.egos added after a finished run: nothing is trained again, the eval step runs for the new ego list
+    preset = write_preset(tmp_path, eval={"settings": ["normal", "hard", "cat"], "k": 2, "limit": 2,
+                                          "egos": ["heuristic"]})
+    summary = run(preset, out, commands, train=lambda job: pytest.fail(f"trained {job['out']}"), evaluate=evaluate)
+    assert summary["steps_ran"] == ["eval", "report"]
+    assert evaluated[-2:] == ["heuristic", "replay"] and len(evaluated) == 6
+    with ResultsStore(out / "results.sqlite") as store:
+        assert store.count() == 6 * 3 and store.count(run="heuristic") == 3
+
+
 def test_failed_job_is_reported_and_retried(tmp_path: Path) -> None:
     out, commands = tmp_path / "out", FakeTasks()
     with pytest.raises(RuntimeError, match=r"(?s)1 job\(s\) failed.*cat-s13: RuntimeError: diverged"):

@@ -37,6 +37,8 @@ def _nested(base: dict, dotted: str, value: object) -> dict:
     ("eval.settings", ["normal", "sideways"], r"eval: .*unknown setting 'sideways'"),
     ("eval.settings", ["normal", "real:/no/such/dir"], r"eval: .*/no/such/dir"),
     ("eval.replay_ego", "yes", r"eval.replay_ego must be true or false"),
+    ("eval.egos", "heuristic", r"eval.egos must be a list of ego names or model paths"),
+    ("eval.egos", ["heuristic", "/no/such/run"], r"eval.egos: /no/such/run: not 'replay', 'heuristic'"),
     ("pipelines", ["noadv", "brake"], r"pipelines: unknown pipeline 'brake'"),
     ("seeds", [0, -1], r"seeds: every seed must be a non-negative integer"),
     ("data.path", "/no/such/dataset", r"data.path: .*/no/such/dataset"),

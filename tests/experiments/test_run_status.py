@@ -29,6 +29,9 @@ def test_status_of_a_run_before_during_and_after(tmp_path: Path) -> None:
     assert after["training"]["done"] == 4
     # 4 egos + Replay x (normal: 2 eval scenarios, hard: 1, cat: 2); the fake evaluation wrote one row a setting
     assert after["evaluation"] == {"rows": 15, "expected_rows": 25, "egos": 5, "complete_egos": 0}
+    # a reference ego in eval.egos is counted with the others (and the Replay ego not twice)
+    with_heuristic = run_status(preset, out, ["eval.egos=[heuristic, replay]"])["evaluation"]
+    assert with_heuristic == {"rows": 15, "expected_rows": 30, "egos": 6, "complete_egos": 0}
 
     # one run killed at its 40-step checkpoint, the others with their wall times: the time left at their pace
     runs = out / "runs"
