@@ -32,7 +32,13 @@ from seal.adversaries.candidate_path import candidate_track
 from seal.adversaries.candidate_sources import DEFAULT_STEER_ALPHA, DEFAULT_STEER_VECTOR, CandidateSource
 from seal.adversaries.cat.select import DECAY, N_KEPT_MODES, STRIDE_STEPS
 from seal.adversaries.seal.contact import predict_contact
-from seal.adversaries.seal.objective import DEFAULT_PRIOR_WEIGHT, Objective, Ranking, make_objective
+from seal.adversaries.seal.objective import (
+    DEFAULT_HEADS,
+    DEFAULT_PRIOR_WEIGHT,
+    Objective,
+    Ranking,
+    make_objective,
+)
 from seal.envs.behaviors import AdversaryBehavior
 from seal.envs.skill_behavior import SKILL_NOISE_SCALE, SWITCH_OFFSET_STEPS, SkillSwitchBehavior, switch_step_for
 
@@ -77,6 +83,8 @@ class SEALGenerator(CandidateGenerator):
             `seal.adversaries.seal.objective.Objective`.
         prior_weight: weight of the candidates' log prior probability added to the learned score (>= 0; 0 = the
             thesis's score alone); not used by ``objective="cat"``, which weighs its candidates by the prior itself.
+        objective_heads: the learned objective's predicted terms summed for the ranking: ``"coll+diff"`` (the
+            thesis), ``"coll"`` or ``"diff"`` alone (ablations; `seal.adversaries.seal.objective.LearnedObjective`).
         skills: skill model folder (``seal fit skills``); not needed with ``switch="none"``.
         switch: ``"adversarial"`` (SEAL), ``"benign"`` or ``"none"`` (trajectory only).
         switch_offset_steps: steps between the switch and the predicted collision / closest approach (10 = 1 s).
@@ -112,6 +120,7 @@ class SEALGenerator(CandidateGenerator):
         steer_vector: str = DEFAULT_STEER_VECTOR,
         steer_alpha: float | Sequence[float] | str = DEFAULT_STEER_ALPHA,
         project_road: bool | None = None,
+        objective_heads: str = DEFAULT_HEADS,
     ) -> None:
         check_follow(self.name, follow)
         if switch not in SWITCH_MODES:
@@ -122,8 +131,8 @@ class SEALGenerator(CandidateGenerator):
             raise ValueError(f"seal: noise_scale must be >= 0, got {noise_scale}")
         if skill_horizon is not None and int(skill_horizon) < 1:
             raise ValueError(f"seal: skill_horizon must be >= 1, got {skill_horizon}")
-        self.objective = make_objective(objective, prior_weight=float(prior_weight), stride=stride, decay=decay,
-                                        n_kept=n_kept_modes)
+        self.objective = make_objective(objective, prior_weight=float(prior_weight), heads=objective_heads,
+                                        stride=stride, decay=decay, n_kept=n_kept_modes)
         self.switch = Switch(switch)
         self.switch_offset_steps = int(switch_offset_steps)
         self.policy = policy if policy is not None or switch == Switch.NONE else load_skill_policy(

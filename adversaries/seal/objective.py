@@ -27,6 +27,8 @@ HEURISTIC = "cat"
 DEFAULT_PRIOR_WEIGHT = 0.02
 """Weight of ``log p(candidate)`` in SEAL's learned ranking (score units per nat; 0 = the thesis's score alone). Chosen
 on the train split among 0.02 / 0.05 / 0.1 / 0.2 (README, "Plausibility weight")."""
+DEFAULT_HEADS = "coll+diff"
+"""The learned ranking's predicted terms: the thesis's ``f_coll + f_diff``."""
 PROB_FLOOR = 1e-12
 """Probabilities are floored here before the log, so a candidate of probability 0 is penalised, not infinitely."""
 
@@ -91,19 +93,26 @@ class LearnedObjective:
     Args:
         path: a model file written by ``seal fit objective``.
         prior_weight: weight of the candidates' log prior probability (>= 0; 0 = the learned score alone).
+        heads: the predicted terms summed (`seal.models.objective.model.RANK_HEADS`): ``"coll+diff"`` (the
+            thesis), ``"coll"`` or ``"diff"`` alone (ablations of the ranking rule).
     """
 
-    def __init__(self, path: str | Path, prior_weight: float = DEFAULT_PRIOR_WEIGHT) -> None:
+    def __init__(self, path: str | Path, prior_weight: float = DEFAULT_PRIOR_WEIGHT, heads: str = DEFAULT_HEADS
+                 ) -> None:
         if not np.isfinite(prior_weight) or prior_weight < 0:
             raise ValueError(f"seal: prior_weight must be a finite number >= 0, got {prior_weight}")
         self.prior_weight = float(prior_weight)
         path = Path(path)
         try:
             from seal.models.objective import ObjectiveModel
+            from seal.models.objective.model import RANK_HEADS
         except ImportError as exc:
             raise ValueError(f"seal: objective={str(path)!r} needs the learned objective package "
                 f"seal.models.objective, "
                              f"which is not available ({exc}); use objective=cat for CAT's heuristic") from exc
+        if heads not in RANK_HEADS:
+            raise ValueError(f"seal: objective_heads must be one of {', '.join(RANK_HEADS)}, got {heads!r}")
+        self.heads = heads
         self.model = ObjectiveModel.load(path)
         self.name = path.name
         self.n_steps = int(self.model.config.n_steps)
@@ -119,8 +128,8 @@ class LearnedObjective:
             raise ValueError(f"seal: the objective model scores {n}-step futures, the candidates have "
                              f"{cands.xy.shape[1]} steps (use a candidate source with {n} future steps)")
         xy, heading, valid = align_ego_rollouts(ego_xy, ego_heading, ego_valid, n_steps=n)
-        learned = np.asarray(self.model.rank(cands.xy[:, :n], cands.heading[:, :n], xy, heading, valid),
-                             dtype=np.float64)
+        learned = np.asarray(self.model.rank(cands.xy[:, :n], cands.heading[:, :n], xy, heading, valid,
+                                             heads=self.heads), dtype=np.float64)
         if self.prior_weight == 0.0:
             return Ranking(int(np.argmax(learned)), learned, {})
         scores = learned + self.prior_weight * log_prior(cands.probs)
@@ -130,18 +139,20 @@ class LearnedObjective:
 
 
 def make_objective(spec: str | Path | Objective | None, prior_weight: float = DEFAULT_PRIOR_WEIGHT,
-                   **heuristic_options: Any) -> Objective:
+                   heads: str = DEFAULT_HEADS, **heuristic_options: Any) -> Objective:
     """``"cat"`` -> `HeuristicObjective` (with ``heuristic_options``); a file path -> `LearnedObjective` (with
-    ``prior_weight``); an `Objective` object is returned as is. ``prior_weight`` applies to a learned objective only
-    (CAT's heuristic weighs its candidates by the prior itself)."""
+    ``prior_weight`` and ``heads``); an `Objective` object is returned as is. ``prior_weight`` and ``heads`` apply to
+    a learned objective only (CAT's heuristic weighs its candidates by the prior itself and has no heads)."""
     if spec is None:
         raise ValueError("seal: option 'objective' is required: a learned objective file (seal fit objective) or "
                          "'cat' for CAT's heuristic selection")
     if not isinstance(spec, str | Path):
         return spec
     if str(spec) == HEURISTIC:
+        if heads != DEFAULT_HEADS:
+            raise ValueError(f"seal: objective_heads={heads!r} needs a learned objective file, not objective=cat")
         return HeuristicObjective(**heuristic_options)
     if not Path(spec).is_file():
         raise ValueError(f"seal: objective {str(spec)!r} is neither 'cat' nor an existing objective model file "
                          "(train one with `seal fit objective`)")
-    return LearnedObjective(spec, prior_weight)
+    return LearnedObjective(spec, prior_weight, heads)

@@ -119,7 +119,9 @@ def resolve_config(
     config_file: str | Path | None = None, gen_opts: Sequence[str] = (), **overrides: Any
 ) -> dict[str, Any]:
     """Defaults < YAML config file < explicit overrides (None values are ignored) < ``gen_opts``
-    (`apply_generator_options`); generators normalised to a mapping name -> constructor kwargs."""
+    (`apply_generator_options`); generators normalised to a mapping name -> constructor kwargs. Names given as an
+    override (``--generators``) that label entries of the file's ``generators`` mapping take those entries, so
+    ``--generators cat,seal_traj_only`` picks two configurations out of an ablation file."""
     config = dict(DEFAULTS)
     if config_file is not None:
         path = Path(config_file)
@@ -128,6 +130,11 @@ def resolve_config(
             raise ValueError(f"{path}: expected a mapping of options")
         check_keys(EvalGeneratorsConfig, loaded, str(path))
         config.update(loaded)
+    picked = overrides.get("generators")
+    if isinstance(picked, str | list | tuple) and isinstance(config.get("generators"), Mapping):
+        entries = config["generators"]
+        names = [n.strip() for n in picked.split(",")] if isinstance(picked, str) else [str(n) for n in picked]
+        overrides = {**overrides, "generators": {n: dict(entries.get(n) or {}) for n in names if n}}
     config.update({k: v for k, v in overrides.items() if v is not None})
     build(EvalGeneratorsConfig, config, str(config_file or "eval generators options"))  # types and ranges
     config["generators"] = parse_generators(config["generators"])

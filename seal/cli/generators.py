@@ -82,7 +82,8 @@ def _common(p: argparse.ArgumentParser, default_generators: str) -> None:
     p.add_argument("dataset", help="dataset directory (seal data generate / score / split)")
     p.add_argument(
         "--generators", default=None,
-        help=f"comma-separated generator names (default {default_generators}); e.g. replay,rule,cat,goose",
+        help=f"comma-separated generator names (default {default_generators}); e.g. replay,rule,cat,goose; with "
+             "--config, labels of its generators entries pick those configurations (e.g. cat,seal_traj_only)",
     )
     p.add_argument("--split", default=None, help="dataset split to use (default eval)")
     p.add_argument("--all-scenarios", action="store_true", help="ignore splits, use every scenario")

@@ -52,6 +52,17 @@ def test_resolve_config_layers(tmp_path: Path) -> None:
         resolve_config(cfg)
 
 
+def test_generators_option_picks_labelled_entries_of_the_config_file(tmp_path: Path) -> None:
+    cfg = tmp_path / "ablations.yaml"
+    cfg.write_text("generators: {cat: {follow: track}, seal_traj: {generator: seal, switch: none}, rule: {}}\n")
+    picked = resolve_config(cfg, generators="seal_traj, replay")
+    assert picked["generators"] == {"seal_traj": {"generator": "seal", "switch": "none"}, "replay": {}}
+    assert resolve_config(cfg, generators=["cat"])["generators"] == {"cat": {"follow": "track"}}
+    assert list(resolve_config(cfg)["generators"]) == ["cat", "seal_traj", "rule"]  # no --generators: all entries
+    with pytest.raises(ValueError, match="unknown generator.*seal_trajectory"):
+        resolve_config(cfg, generators="seal_trajectory")
+
+
 def test_shipped_preset_resolves() -> None:
     preset = Path(__file__).resolve().parents[2] / "experiments" / "configs" / "eval_generators.yaml"
     config = resolve_config(preset, candidates="lanes")

@@ -258,6 +258,27 @@ def test_prior_weight_trades_the_learned_score_for_plausibility(highway: list[Sc
     assert cat[0].chosen_candidate == cat[1].chosen_candidate and cat[0].extra["scores"] == cat[1].extra["scores"]
 
 
+def test_objective_heads_rank_by_one_predicted_term(highway: list[Scenario], tmp_path) -> None:
+    objective = pytest.importorskip("seal.models.objective", reason="seal.models.objective (learned "
+        "objective) not available yet")
+    torch.manual_seed(0)
+    path = tmp_path / "objective.pt"
+    objective.ObjectiveModel(objective.ObjectiveConfig(hidden=8)).save(path)
+    scenario = highway[0]
+    history = RolloutHistory().queue(scenario)
+    picks = {heads: _generator(objective=path, prior_weight=0.0, objective_heads=heads).generate(
+        scenario, history, np.random.default_rng(0)) for heads in ("coll+diff", "coll", "diff")}
+    # the thesis's score is the two heads' scores added; each variant picks its own score's argmax
+    np.testing.assert_allclose(picks["coll+diff"].extra["scores"],
+                               np.add(picks["coll"].extra["scores"], picks["diff"].extra["scores"]), atol=1e-6)
+    assert not np.allclose(picks["coll"].extra["scores"], picks["diff"].extra["scores"])
+    assert all(g.chosen_candidate == int(np.argmax(g.extra["scores"])) for g in picks.values())
+    with pytest.raises(ValueError, match=r"objective_heads must be one of coll\+diff, coll, diff, got 'both'"):
+        _generator(objective=path, objective_heads="both")
+    with pytest.raises(ValueError, match="objective_heads='coll' needs a learned objective file, not objective=cat"):
+        _generator(objective="cat", objective_heads="coll")
+
+
 def test_close_call_gap_between_ego_and_adversary_boxes() -> None:
     from seal.experiments.evaluation.generator_metrics import CLOSE_CALL_M, min_box_gap
 

@@ -92,3 +92,22 @@ def test_a_run_folder_trains_again_as_recorded(tmp_path: Path, preset: str, over
     assert load_train_config(run / "config.yaml") == resolved
     again = load_train_config(run, {"seed": 9}, sets=["deadline_obs=false"])
     assert again == {**resolved, "seed": 9, "deadline_obs": False}
+
+
+@pytest.mark.parametrize("name", ["eval_generators", "eval_seal_ablations"])
+def test_generator_entries_of_the_eval_configs_are_options_of_their_generators(name: str) -> None:
+    """Each entry of a `seal eval generators` config names options its generator's constructor takes (a typo such
+    as ``objective_head`` fails here, not after the first minutes of an evaluation)."""
+    import inspect
+
+    import yaml
+
+    from seal.adversaries.base import generator_class
+    from seal.experiments.evaluation.protocol import generator_name
+
+    path = Path(__file__).resolve().parents[2] / "experiments" / "configs" / f"{name}.yaml"
+    entries = yaml.safe_load(path.read_text())["generators"]
+    assert entries
+    for label, kwargs in entries.items():
+        params = inspect.signature(generator_class(generator_name(label, kwargs or {}))).parameters
+        assert set(kwargs or {}) - {"generator"} <= set(params), (label, kwargs)

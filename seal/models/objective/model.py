@@ -28,6 +28,9 @@ from seal.core.atomic import atomic_write_bytes, atomic_write_json
 from seal.core.weights_file import check_header, read_weights_file
 from seal.models.objective.network import ObjectiveConfig, ObjectiveNet
 
+RANK_HEADS = {"coll+diff": (0, 1), "coll": (0,), "diff": (1,)}
+"""Which predicted terms `ObjectiveModel.rank` sums: the thesis's ``f_coll + f_diff`` (default), or one head alone
+(an ablation of the ranking rule)."""
 FORMAT = "seal-objective-model"
 FORMAT_VERSION = 2
 """2: closest-approach inputs, dropout, learned closeness gains (version-1 files: retrain with seal fit objective)."""
@@ -100,10 +103,14 @@ class ObjectiveModel:
         return out.numpy().astype(np.float64)
 
     def rank(self, cand_xy: np.ndarray, cand_heading: np.ndarray, ego_xy: np.ndarray, ego_heading: np.ndarray,
-             ego_valid: np.ndarray) -> np.ndarray:
+             ego_valid: np.ndarray, heads: str = "coll+diff") -> np.ndarray:
         """SEAL's selection score ``[N]``: mean over the K roll-outs of predicted ``f_coll + f_diff`` (in [0, 2];
-        higher = more critical). Arguments as in `predict`."""
-        return self.predict(cand_xy, cand_heading, ego_xy, ego_heading, ego_valid).sum(axis=-1).mean(axis=0)
+        higher = more critical), or of one head alone (``heads``, a key of `RANK_HEADS`). Other arguments as in
+        `predict`."""
+        if heads not in RANK_HEADS:
+            raise ValueError(f"objective heads must be one of {', '.join(RANK_HEADS)}, got {heads!r}")
+        pred = self.predict(cand_xy, cand_heading, ego_xy, ego_heading, ego_valid)
+        return pred[..., list(RANK_HEADS[heads])].sum(axis=-1).mean(axis=0)
 
     # ------------------------------------------------------------------------------------------------------ I/O
     def save(self, path: str | os.PathLike[str]) -> None:
