@@ -28,7 +28,8 @@ DEFAULT_PRIOR_WEIGHT = 0.02
 """Weight of ``log p(candidate)`` in SEAL's learned ranking (score units per nat; 0 = the thesis's score alone). Chosen
 on the train split among 0.02 / 0.05 / 0.1 / 0.2 (README, "Plausibility weight")."""
 DEFAULT_HEADS = "coll+diff"
-"""The learned ranking's predicted terms: the thesis's ``f_coll + f_diff``."""
+"""The learned ranking's predicted terms: the thesis's ``f_coll + f_diff`` (`seal.models.objective.model.
+DEFAULT_RANK_HEADS`, named here too because that package is imported only when a learned objective is used)."""
 PROB_FLOOR = 1e-12
 """Probabilities are floored here before the log, so a candidate of probability 0 is penalised, not infinitely."""
 

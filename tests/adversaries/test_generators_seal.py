@@ -341,3 +341,10 @@ def test_generation_record_and_a_fresh_policy_per_generation(highway: list[Scena
     assert first.behavior.policy is not generator.policy and first.behavior.policy is not second.behavior.policy
     trajectory_only = _generator(switch="none").generate(scenario, queue, np.random.default_rng(0))
     assert trajectory_only.extra["switch"] == "none" and trajectory_only.extra["skill_seed"] is None
+
+
+def test_the_generator_and_the_model_default_to_the_same_heads() -> None:
+    objective = pytest.importorskip("seal.models.objective.model", reason="seal.models.objective not available")
+    from seal.adversaries.seal.objective import DEFAULT_HEADS
+
+    assert DEFAULT_HEADS == objective.DEFAULT_RANK_HEADS and DEFAULT_HEADS in objective.RANK_HEADS

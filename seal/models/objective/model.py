@@ -29,8 +29,9 @@ from seal.core.weights_file import check_header, read_weights_file
 from seal.models.objective.network import ObjectiveConfig, ObjectiveNet
 
 RANK_HEADS = {"coll+diff": (0, 1), "coll": (0,), "diff": (1,)}
-"""Which predicted terms `ObjectiveModel.rank` sums: the thesis's ``f_coll + f_diff`` (default), or one head alone
-(an ablation of the ranking rule)."""
+"""Which predicted terms `ObjectiveModel.rank` sums: the thesis's ``f_coll + f_diff`` (`DEFAULT_RANK_HEADS`), or one
+head alone (an ablation of the ranking rule)."""
+DEFAULT_RANK_HEADS = "coll+diff"
 FORMAT = "seal-objective-model"
 FORMAT_VERSION = 2
 """2: closest-approach inputs, dropout, learned closeness gains (version-1 files: retrain with seal fit objective)."""
@@ -103,7 +104,7 @@ class ObjectiveModel:
         return out.numpy().astype(np.float64)
 
     def rank(self, cand_xy: np.ndarray, cand_heading: np.ndarray, ego_xy: np.ndarray, ego_heading: np.ndarray,
-             ego_valid: np.ndarray, heads: str = "coll+diff") -> np.ndarray:
+             ego_valid: np.ndarray, heads: str = DEFAULT_RANK_HEADS) -> np.ndarray:
         """SEAL's selection score ``[N]``: mean over the K roll-outs of predicted ``f_coll + f_diff`` (in [0, 2];
         higher = more critical), or of one head alone (``heads``, a key of `RANK_HEADS`). Other arguments as in
         `predict`."""
