@@ -232,13 +232,20 @@ def test_learned_objective_ranks_with_the_model(highway: list[Scenario], tmp_pat
     assert gen.predicted_step == contact.step
 
 
-def test_prior_weight_trades_the_learned_score_for_plausibility(highway: list[Scenario], tmp_path) -> None:
+@pytest.fixture
+def untrained_objective(tmp_path) -> Path:
+    """An untrained pi_score file (seed 0): its two heads score the candidates differently."""
     objective = pytest.importorskip("seal.models.objective", reason="seal.models.objective (learned "
         "objective) not available yet")
     torch.manual_seed(0)
     path = tmp_path / "objective.pt"
     objective.ObjectiveModel(objective.ObjectiveConfig(hidden=8)).save(path)
-    scenario = highway[0]
+    return path
+
+
+def test_prior_weight_trades_the_learned_score_for_plausibility(highway: list[Scenario], untrained_objective: Path
+                                                                ) -> None:
+    path, scenario = untrained_objective, highway[0]
     history = RolloutHistory().queue(scenario)
     learned = _generator(objective=path, prior_weight=0.0).generate(scenario, history, np.random.default_rng(0))
     gap = abs(learned.extra["scores"][0] - learned.extra["scores"][1])
@@ -258,13 +265,8 @@ def test_prior_weight_trades_the_learned_score_for_plausibility(highway: list[Sc
     assert cat[0].chosen_candidate == cat[1].chosen_candidate and cat[0].extra["scores"] == cat[1].extra["scores"]
 
 
-def test_objective_heads_rank_by_one_predicted_term(highway: list[Scenario], tmp_path) -> None:
-    objective = pytest.importorskip("seal.models.objective", reason="seal.models.objective (learned "
-        "objective) not available yet")
-    torch.manual_seed(0)
-    path = tmp_path / "objective.pt"
-    objective.ObjectiveModel(objective.ObjectiveConfig(hidden=8)).save(path)
-    scenario = highway[0]
+def test_objective_heads_rank_by_one_predicted_term(highway: list[Scenario], untrained_objective: Path) -> None:
+    path, scenario = untrained_objective, highway[0]
     history = RolloutHistory().queue(scenario)
     picks = {heads: _generator(objective=path, prior_weight=0.0, objective_heads=heads).generate(
         scenario, history, np.random.default_rng(0)) for heads in ("coll+diff", "coll", "diff")}
