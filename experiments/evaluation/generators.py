@@ -81,16 +81,20 @@ SHARED_OPTIONS = ("prior", "candidates", "objective", "skills")
 """Options passed to every generator whose constructor has a parameter of that name."""
 
 
+def _names(spec: str | Sequence[str]) -> list[str]:
+    """Generator names or labels from comma-separated text or a list."""
+    parts = spec.split(",") if isinstance(spec, str) else [str(n) for n in spec]
+    return [n.strip() for n in parts if n.strip()]
+
+
 def parse_generators(spec: str | Sequence[str] | Mapping[str, Any]) -> dict[str, dict[str, Any]]:
     """Generator names (comma-separated text, a list, or a mapping name -> kwargs) checked against the
     registry; unknown names raise an error listing the available ones.
 
     In a mapping, an entry may name its generator with a ``generator`` key, so one generator can be compared in
     several configurations under labels of its own (e.g. ``seal_benign: {generator: seal, switch: benign}``)."""
-    if isinstance(spec, str):
-        spec = [s.strip() for s in spec.split(",") if s.strip()]
     parsed = {str(k): dict(v or {}) for k, v in spec.items()} if isinstance(spec, Mapping) else {
-        str(name): {} for name in spec
+        name: {} for name in _names(spec)
     }
     if not parsed:
         raise ValueError("--generators: no generator given")
@@ -133,8 +137,7 @@ def resolve_config(
     picked = overrides.get("generators")
     if isinstance(picked, str | list | tuple) and isinstance(config.get("generators"), Mapping):
         entries = config["generators"]
-        names = [n.strip() for n in picked.split(",")] if isinstance(picked, str) else [str(n) for n in picked]
-        overrides = {**overrides, "generators": {n: dict(entries.get(n) or {}) for n in names if n}}
+        overrides = {**overrides, "generators": {n: dict(entries.get(n) or {}) for n in _names(picked)}}
     config.update({k: v for k, v in overrides.items() if v is not None})
     build(EvalGeneratorsConfig, config, str(config_file or "eval generators options"))  # types and ranges
     config["generators"] = parse_generators(config["generators"])
