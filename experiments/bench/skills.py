@@ -1,10 +1,13 @@
 """``seal bench env --adversary seal``: cost of an env step with the SEAL skill adversary against a step with the
 replayed adversary, measured in the same run.
 
-Three `ScenarioEnv` variants play the same scenarios with the heuristic ego: the logged adversary replayed
+Four `ScenarioEnv` variants play the same scenarios with the heuristic ego: the logged adversary replayed
 (reference), the skill adversary from the first step (`SkillSwitchBehavior` with ``switch_step = CURRENT_STEP``:
-its own observation and a skill-policy step every env step, the worst case) and the skill adversary switching
-30 steps in (a typical SEAL episode: replay, then 1 s before a collision predicted 4 s in, the skill policy).
+its own observation and a skill-policy step every env step, the worst case), the skill adversary switching
+30 steps in (a typical SEAL episode: replay, then 1 s before a collision predicted 4 s in, the skill policy), and
+the same behaviour from the first step with the policy replaced by a zero action (``observation_only``: its
+observation, route projection and bicycle step every step, no policy step), which splits the worst case's extra
+cost into the observation's part and the policy's, both as they cost inside the env step.
 They play the same scenario sequence from the same seed (so they differ only in the adversary, not in their
 mix of roads) in interleaved blocks, so that load changes on a shared machine hit all three alike. Only time inside
 ``env.step`` / ``env.reset`` counts (the adversary's policy runs inside ``step``; the ego's does not), per wall
@@ -12,11 +15,14 @@ second and per CPU second of this process. Cost ratio = reference steps/s / vari
 issue 23), from each variant's fastest of ``repeats`` identical measurements (`timeit`'s rule: other load only
 adds time).
 
-Where the extra cost goes: the adversary's own observation (a second call of the compiled observation kernel,
-`seal.envs.obs_kernels.observe_viewer`, on the same box table), its route projection, and the skill policy step
-(`skill_policy_step_us`, one compiled decode per step and a compiled skill draw every 10 steps,
-`seal.models.skills.fast`, measured alone; inside the env it takes longer, its ~360 kB of weights and the env's
-arrays competing for the caches); its route is built once per scenario (`SkillSwitchBehavior.make_route`).
+Where the extra cost goes, each part measured alone (the floor): the adversary's own observation (a second call
+of the compiled observation kernel, `seal.envs.obs_kernels.observe_viewer`, on the same box table), its route
+projection, and the skill policy step (`skill_policy_step_us`, one compiled decode per step and a compiled skill
+draw every 10 steps, `seal.models.skills.fast`); its route is built once per scenario
+(`SkillSwitchBehavior.make_route`). Inside the env every part costs more than alone in a tight loop: the rest of
+the step evicts the policy's ~360 kB of weights, its code and the env's arrays from the caches between calls
+(the policy step about 2.4x on this machine in session 39), which ``policy_step_in_env_us`` (the worst case minus
+``observation_only``) shows.
 """
 
 from __future__ import annotations
@@ -31,6 +37,20 @@ from seal.core.scenario import CURRENT_STEP
 
 TARGET_COST_RATIO = 1.2
 TYPICAL_SWITCH_DELAY_STEPS = 30
+
+
+class ZeroActionPolicy:
+    """A `StepPolicy` that always answers the zero action (no steering, no acceleration): the ``observation_only``
+    variant's stand-in for the skill policy."""
+
+    def __init__(self, action_dim: int = 2) -> None:
+        self._action = np.zeros(action_dim, dtype=np.float32)
+
+    def reset(self, seed: int | None = None) -> None:
+        return None
+
+    def act(self, observation: np.ndarray) -> np.ndarray:
+        return self._action
 
 
 def skill_policy_for_bench(skills: str | Path | None, seed: int = 0) -> tuple[Any, str]:
@@ -73,6 +93,7 @@ def run_skill_bench(
         "skill_from_start": SkillSwitchBehavior(policy, switch_step=CURRENT_STEP),
         f"skill_after_{TYPICAL_SWITCH_DELAY_STEPS}": SkillSwitchBehavior(
             policy.clone(), switch_step=CURRENT_STEP + TYPICAL_SWITCH_DELAY_STEPS),
+        "observation_only": SkillSwitchBehavior(ZeroActionPolicy(), switch_step=CURRENT_STEP),
     }
     envs = {}
     for name, adversary in variants.items():
@@ -96,6 +117,7 @@ def run_skill_bench(
     policy_us = _policy_step_us(policy)
     parts = _floor_parts_us(envs["skill_from_start"], policy.clone(), seed)
     replay_step_us = best["replay"]["wall"] / n_steps * 1e6
+    step_us = {name: best[name]["wall"] / n_steps * 1e6 for name in variants}
     result.update({
         "meets_target": bool(worst <= TARGET_COST_RATIO),
         "target": f"skill-adversary step cost <= {TARGET_COST_RATIO} x replayed-adversary step (skill from start)",
@@ -103,6 +125,9 @@ def run_skill_bench(
         "replay_step_us": round(replay_step_us, 1),
         "adversary_observation_us": round(parts["observation_us"], 1),
         "skill_policy_step_on_recorded_obs_us": round(parts["policy_us"], 1),
+        # Inside the env: the worst case minus the zero-action variant (an estimate: the zero action drives
+        # differently, so the two play somewhat different episodes).
+        "policy_step_in_env_us": round(step_us["skill_from_start"] - step_us["observation_only"], 1),
         # The adversary's two irreducible parts alone (its observation: the policy's input, the same kernel as the
         # ego's; and the compiled policy step), everything else it adds (its bicycle step, collision checks,
         # Python glue) taken as free: no implementation with these models and this observation goes below it.

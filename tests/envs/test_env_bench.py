@@ -54,6 +54,16 @@ def test_skill_bench_repeats_play_the_same_episodes(tmp_path: Path, highway: lis
     ratio = result["replay_steps_per_s"] / result["skill_from_start_steps_per_s"]
     assert abs(result["skill_from_start_cost_ratio"] - ratio) < 0.01
     assert isinstance(result["meets_target"], bool)
+    # The zero-action variant observes like the skill adversary but takes no policy step; the policy's in-env cost
+    # is the difference of the two variants' step times.
+    assert result["episodes"]["observation_only"] >= 1 and result["observation_only_cost_ratio"] > 0
+    in_env = 1e6 / result["skill_from_start_steps_per_s"] - 1e6 / result["observation_only_steps_per_s"]
+    assert abs(result["policy_step_in_env_us"] - in_env) < 0.2
+    # The zero-action variant observes like the skill adversary but takes no policy step; the policy's in-env cost
+    # is the difference of the two variants' step times.
+    assert result["episodes"]["observation_only"] >= 1 and result["observation_only_cost_ratio"] > 0
+    in_env = 1e6 / result["skill_from_start_steps_per_s"] - 1e6 / result["observation_only_steps_per_s"]
+    assert abs(result["policy_step_in_env_us"] - in_env) < 0.2
     # The floor: the replayed step plus the adversary's observation and policy step, each measured alone.
     parts = result["adversary_observation_us"] + result["skill_policy_step_on_recorded_obs_us"]
     # The observation's share is a difference of two timings (two viewers minus one), clamped at 0: on a loaded
