@@ -9,8 +9,10 @@ every runner-up seed) while the margin is within the scenario-to-scenario noise 
 see. Then which pipelines beat which over all settings (the averaged probability of improvement, interval above
 0.5; a seed-level statement), the precision (the largest interval half-width against `TARGET_HALF_WIDTH`)
 and, from Table 6.2's intervals and the paired generator differences, the most realistic generator and the lowest
-collision speed; the reference egos (Replay, the heuristic driver) against each setting's leader; last, the
-thesis's findings checked one by one (`seal.experiments.report.thesis_claims`).
+collision speed; the reference egos (Replay, the heuristic driver) against each setting's leader; whether the
+pipeline leaves a trace in what the egos do (`seal.experiments.report.agreement`: egos of one pipeline against egos
+of different pipelines, scenario by scenario); last, the thesis's findings checked one by one
+(`seal.experiments.report.thesis_claims`).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from seal.experiments.report.agreement import ALL_SETTINGS, agreement_line
 from seal.experiments.report.generator_stats import generator_rows
 from seal.experiments.report.grouping import algo_of, is_trained
 from seal.experiments.report.stats import MIN_SEEDS_FOR_POI, enough_seeds
@@ -191,9 +194,13 @@ def _leader_verdict(first: Mapping[str, Any], second: Mapping[str, Any], key: st
 
 def first_page_markdown(cis: Sequence[Mapping[str, Any]], poi: Sequence[Mapping[str, Any]],
                         poi_by_setting: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[str, Any]],
-                        training_lines: Sequence[str] = (), gen_diff: Sequence[Mapping[str, Any]] = ()) -> str:
+                        training_lines: Sequence[str] = (), gen_diff: Sequence[Mapping[str, Any]] = (),
+                        agreement: Sequence[Mapping[str, Any]] = ()) -> str:
     """The report's first page (module docstring) as Markdown; ``training_lines`` (e.g.
-    `seal.experiments.report.convergence.convergence_line`) follow the precision line."""
+    `seal.experiments.report.convergence.convergence_line`) follow the precision line; ``agreement``
+    (`seal.experiments.report.agreement.agreement_table`) adds, per ego algorithm, whether the pipeline leaves a
+    trace in what the egos do."""
+    pooled = {r["algo"]: r for r in agreement if r["setting"] == ALL_SETTINGS}
     md = ["## Summary: who wins where\n",
           "Success rate: mean over seeds and scenarios with its 95 % stratified-bootstrap interval (rliable). "
           "P = probability that the leader's ego beats the runner-up's in that setting (per-seed success rates; "
@@ -210,6 +217,8 @@ def first_page_markdown(cis: Sequence[Mapping[str, Any]], poi: Sequence[Mapping[
         md.append("")
         md += overall_lines([r for r in poi if algo_of(r["pipeline"]) == algo]) or ["- (one pipeline only)"]
         md += reference_lines(cis, [v for v in verdicts if v["algo"] == algo])
+        if algo in pooled and (line := agreement_line(pooled[algo])):
+            md.append(line)
         md.append("")
     md.append(precision_line(cis))
     md += list(training_lines)

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from seal.core.atomic import atomic_write_bytes
+from seal.experiments.report.agreement import agreement_markdown, agreement_table
 from seal.experiments.report.ci_plots import plot_success_intervals
 from seal.experiments.report.compare import to_csv
 from seal.experiments.report.first_page import first_page_markdown, leader_pairs
@@ -40,7 +41,7 @@ from seal.experiments.report.stats import (
 )
 
 FILES = ("ego_ci.csv", "improvement.csv", "improvement_per_setting.csv", "paired.csv", "per_scenario.csv",
-         "generator_ci.csv", "discrimination.csv", "generator_differences.csv", "seed_profile.csv")
+         "generator_ci.csv", "discrimination.csv", "generator_differences.csv", "seed_profile.csv", "agreement.csv")
 
 
 @dataclass
@@ -73,8 +74,9 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
     gen_ci = generator_ci_table(ego_rows, [r["setting"] for r in t62], seed=seed)
     gen_diff = generator_difference_table(ego_rows, [r["setting"] for r in t62], seed=seed)
     seeds = seed_profile_table(ego_rows)
+    agreement = agreement_table(ego_rows, seed=seed)
     for name, table in zip(FILES, (cis, poi, poi_setting, paired, scenario_rates(ego_rows), gen_ci, discrimination,
-                                   gen_diff, seeds), strict=True):
+                                   gen_diff, seeds, agreement), strict=True):
         atomic_write_bytes(out / name, to_csv(table))
     figures = []
     if plots:
@@ -105,6 +107,12 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
         "and seed) succeeds, every one fails, and the rest. Only the rest can move a difference between "
         "pipelines.\n",
         discrimination_markdown(discrimination) if discrimination else "(no trained egos)\n",
+        "Does the pipeline change what the egos do? Two egos agree on a scenario when both succeed or both fail. "
+        "Mean agreement of the pairs of egos from the same pipeline (its seeds) and from different pipelines, the "
+        "difference, and the share of random relabellings of the egos with a difference at least as large (p; "
+        "small = the egos of one pipeline are more alike than the seeds' spread explains); each reference ego's "
+        "agreement with the trained egos (`agreement.csv`).\n",
+        agreement_markdown(agreement) if agreement else "(no trained egos)\n",
         "## Generators with intervals (Table 6.2)\n",
         "Realism Wasserstein distances and collision speed as in Table 6.2 [95 % bootstrap interval; the "
         "setting's scenarios resampled, each with all its episodes].\n",
@@ -114,5 +122,5 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
         "collisions) on the same scenarios. All statistics: `generator_differences.csv`.\n",
         generator_difference_markdown(gen_diff) if gen_diff else "(fewer than two generator settings)\n",
     ]
-    first_page = first_page_markdown(cis, poi, poi_setting, gen_ci, training_lines, gen_diff)
+    first_page = first_page_markdown(cis, poi, poi_setting, gen_ci, training_lines, gen_diff, agreement)
     return Uncertainty(cis, poi, poi_setting, paired, gen_ci, gen_diff, first_page, sections, figures)
