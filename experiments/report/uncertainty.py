@@ -57,6 +57,7 @@ class Uncertainty:
     first_page: str
     sections: list[str]
     figures: list[str] = field(default_factory=list)
+    agreement: list[dict[str, Any]] = field(default_factory=list)
 
 
 def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapping[str, Any]], out: Path,
@@ -123,4 +124,4 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
         generator_difference_markdown(gen_diff) if gen_diff else "(fewer than two generator settings)\n",
     ]
     first_page = first_page_markdown(cis, poi, poi_setting, gen_ci, training_lines, gen_diff, agreement)
-    return Uncertainty(cis, poi, poi_setting, paired, gen_ci, gen_diff, first_page, sections, figures)
+    return Uncertainty(cis, poi, poi_setting, paired, gen_ci, gen_diff, first_page, sections, figures, agreement)

@@ -247,6 +247,11 @@ def test_report_folder_has_the_statistics_first_page_and_json(tmp_path, capsys) 
             f"{100 * widest['seed_min']:.0f}-{100 * widest['seed_max']:.0f} %)") in precision_line(result["ego_ci"])
     poi = next(r for r in result["improvement"] if r["pipeline"] == "cat")
     assert poi["p_improvement"] == 1.0 and poi["settings"] == 2
+    # Agreement: noadv seed k wins s0..s(1+k), cat seed j s0..s(5+j); within a pipeline the seeds disagree on 1, 2
+    # and 1 of 8 scenarios, across on 4 + j - k: 40 / 48 agree within, 36 / 72 across.
+    pooled = next(r for r in result["agreement"] if r["setting"] == "all settings")
+    assert (pooled["within"], pooled["across"], pooled["scenarios"]) == pytest.approx((40 / 48, 0.5, 16))
+    assert (out / "agreement.csv").exists()
     md = (out / "report.md").read_text()
     assert md.index("## Summary: who wins where") < md.index("(thesis Table 6.1)")
     assert "| normal | cat | 87.5 % [" in md and "| noadv | 87.5 % [" not in md
