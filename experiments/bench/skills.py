@@ -9,7 +9,7 @@ the same behaviour from the first step with the policy replaced by a zero action
 observation, route projection and bicycle step every step, no policy step), which splits the worst case's extra
 cost into the observation's part and the policy's, both as they cost inside the env step.
 They play the same scenario sequence from the same seed (so they differ only in the adversary, not in their
-mix of roads) in interleaved blocks, so that load changes on a shared machine hit all three alike. Only time inside
+mix of roads) in interleaved blocks, so that load changes on a shared machine hit all of them alike. Only time inside
 ``env.step`` / ``env.reset`` counts (the adversary's policy runs inside ``step``; the ego's does not), per wall
 second and per CPU second of this process. Cost ratio = reference steps/s / variant steps/s (target <= 1.2,
 issue 23), from each variant's fastest of ``repeats`` identical measurements (`timeit`'s rule: other load only
