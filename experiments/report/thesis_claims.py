@@ -7,9 +7,11 @@ above 0.5, is *reversed* when it lies below, and is *not shown* otherwise (with 
 are read from the paired generator differences (`seal.experiments.report.generator_stats.generator_difference_table`:
 SEAL minus each other generator, scenario by scenario): "SEAL is the most realistic" / "SEAL has the lowest collision
 speed" hold when every difference's 95 % interval lies below 0, are reversed when one lies above 0, and are not
-shown otherwise. Without differences (a caller that has only the per-generator intervals) the same reading is made
-from those intervals: SEAL's below every other's, another's below SEAL's (a weaker test: two overlapping intervals
-can still differ when paired). A claim whose pipelines or generators were not evaluated is *not tested*.
+shown otherwise; with several ego algorithms, against all egos and against each algorithm's egos apart
+(`seal.experiments.report.grouping.ego_groups`). Without differences (a caller that has only the per-generator
+intervals) the same reading is made from those intervals: SEAL's below every other's, another's below SEAL's (a
+weaker test: two overlapping intervals can still differ when paired). A claim whose pipelines or generators were
+not evaluated is *not tested*.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from seal.experiments.report.generator_stats import generator_rows
-from seal.experiments.report.grouping import algo_of, base_pipeline
+from seal.experiments.report.grouping import ALL_EGOS, algo_of, base_pipeline, in_group
 from seal.experiments.report.stats import MIN_SEEDS_FOR_POI, ci_cell, enough_seeds
 
 EGO_CLAIMS = (("seal", "cat"), ("cat", "goose"), ("cat", "noadv"), ("seal", "goose"), ("seal", "noadv"),
@@ -88,9 +90,11 @@ def claims_markdown(poi: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[s
         evidence = (f"P = {r['p_improvement']:.2f} [{r['ci_low']:.2f}-{r['ci_high']:.2f}] over {r['settings']} "
                     "settings" if r else "-")
         md.append(f"| {c['claim']} | {c['algo'] or '-'} | {c['verdict']} | {evidence} |")
-    for c in generator_claims(gen_ci, gen_diff):
+    groups = list(dict.fromkeys(r.get("ego_group", ALL_EGOS) for r in gen_ci)) or [ALL_EGOS]
+    claims = [(g, c) for g in groups for c in generator_claims(in_group(gen_ci, g), in_group(gen_diff, g))]
+    for group, c in claims:
         if c["other"] is None:
-            md.append(f"| {c['claim']} | all | {c['verdict']} | - |")
+            md.append(f"| {c['claim']} | {group} | {c['verdict']} | - |")
             continue
         key, s, o = c["key"], c["seal"], c["other"]
         seal_cell = ci_cell(s[key], s[f"{key}_low"], s[f"{key}_high"], 1.0, 3)
@@ -98,6 +102,6 @@ def claims_markdown(poi: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[s
         d = c.get("diff")
         paired = (f"; paired difference {d[key]:+.3f} [{d[f'{key}_low']:+.3f} to {d[f'{key}_high']:+.3f}] over "
                   f"{d['scenarios']} scenarios" if d else "")
-        md.append(f"| {c['claim']} | all | {c['verdict']} | seal {seal_cell}, best other {o['setting']} {other_cell}"
-                  f"{paired} |")
+        md.append(f"| {c['claim']} | {group} | {c['verdict']} | seal {seal_cell}, best other {o['setting']} "
+                  f"{other_cell}{paired} |")
     return "\n".join(md) + "\n"

@@ -6,7 +6,7 @@ PNG files and returned as Markdown sections for ``report.md``."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,6 +22,7 @@ from seal.experiments.report.generator_stats import (
     generator_difference_markdown,
     generator_difference_table,
 )
+from seal.experiments.report.grouping import ego_groups, group_heading, in_group
 from seal.experiments.report.paired import (
     discrimination_counts,
     discrimination_markdown,
@@ -72,8 +73,12 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
     poi_setting = improvement_table(ego_rows, n_boot_poi, seed, per_setting=True, only=leader_pairs(cis))
     paired = paired_counts(ego_rows)
     discrimination = discrimination_counts(ego_rows)
-    gen_ci = generator_ci_table(ego_rows, [r["setting"] for r in t62], seed=seed)
-    gen_diff = generator_difference_table(ego_rows, [r["setting"] for r in t62], seed=seed)
+    groups = ego_groups(ego_rows)  # all egos, and each algorithm's apart when there are several
+    generator_settings = [r["setting"] for r in t62]
+    gen_ci = [{"ego_group": g, **r} for g, rows in groups
+              for r in generator_ci_table(rows, generator_settings, seed=seed)]
+    gen_diff = [{"ego_group": g, **r} for g, rows in groups
+                for r in generator_difference_table(rows, generator_settings, seed=seed)]
     seeds = seed_profile_table(ego_rows)
     agreement = agreement_table(ego_rows, seed=seed)
     for name, table in zip(FILES, (cis, poi, poi_setting, paired, scenario_rates(ego_rows), gen_ci, discrimination,
@@ -116,12 +121,25 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
         agreement_markdown(agreement) if agreement else "(no trained egos)\n",
         "## Generators with intervals (Table 6.2)\n",
         "Realism Wasserstein distances and collision speed as in Table 6.2 [95 % bootstrap interval; the "
-        "setting's scenarios resampled, each with all its episodes].\n",
-        generator_ci_markdown(gen_ci) if gen_ci else "(no generator settings evaluated)\n",
+        "setting's scenarios resampled, each with all its episodes]"
+        + ("; over all egos, then against each ego algorithm's egos apart (a generator perturbs the scenario "
+           "against the ego's own roll-outs, so its adversary depends on the ego)" if len(groups) > 1 else "")
+        + ".\n",
+        *_per_group(gen_ci, groups, generator_ci_markdown, "(no generator settings evaluated)\n"),
         "Row minus column, paired: the scenarios both generators perturbed drawn with replacement, each with all its "
         "episodes in both [95 % interval]; an interval below 0 = the row is lower (more realistic, slower "
         "collisions) on the same scenarios. All statistics: `generator_differences.csv`.\n",
-        generator_difference_markdown(gen_diff) if gen_diff else "(fewer than two generator settings)\n",
+        *_per_group(gen_diff, groups, generator_difference_markdown, "(fewer than two generator settings)\n"),
     ]
     first_page = first_page_markdown(cis, poi, poi_setting, gen_ci, training_lines, gen_diff, agreement)
     return Uncertainty(cis, poi, poi_setting, paired, gen_ci, gen_diff, first_page, sections, figures, agreement)
+
+
+def _per_group(table: Sequence[Mapping[str, Any]], groups: Sequence[tuple[str, Any]],
+               markdown: Callable[[Sequence[Mapping[str, Any]]], str], empty: str) -> list[str]:
+    """``markdown`` of each ego group's rows of ``table``, each under its heading (`group_heading`)."""
+    out = []
+    for group, _ in groups:
+        rows = in_group(table, group)
+        out += [group_heading(group, len(groups)), markdown(rows) if rows else empty]
+    return [part for part in out if part]

@@ -14,7 +14,7 @@ from seal.experiments.report.compare import (
     ego_markdown,
     ego_table,
     generator_markdown,
-    generator_table,
+    generator_table_by_group,
     ordered_pipelines,
     per_run_rates,
     setting_label,
@@ -45,7 +45,7 @@ def write_report(
     out = Path(out)
     rows, runs, settings_info = _read_store(store_path, pipelines, settings, datasets)
     ego_rows = label_by_algo(rows, runs)  # egos of different algorithms stay apart in the ego tables
-    t61, t62 = ego_table(ego_rows), generator_table(rows, settings_info)
+    t61, t62 = ego_table(ego_rows), generator_table_by_group(ego_rows, settings_info)
     per_run = [
         {"pipeline": p, "setting": setting_label(s), "run": run, **rates}
         for (p, s), by_run in per_run_rates(ego_rows).items() for run, rates in by_run.items()
