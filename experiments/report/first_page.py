@@ -23,7 +23,7 @@ from typing import Any
 
 from seal.experiments.report.agreement import ALL_SETTINGS, agreement_line
 from seal.experiments.report.generator_stats import generator_rows
-from seal.experiments.report.grouping import ALL_EGOS, algo_of, in_group, is_trained
+from seal.experiments.report.grouping import ALL_EGOS, algo_of, group_name, in_group, is_trained
 from seal.experiments.report.stats import MIN_SEEDS_FOR_POI, enough_seeds
 from seal.experiments.report.thesis_claims import claims_markdown
 
@@ -226,7 +226,7 @@ def first_page_markdown(cis: Sequence[Mapping[str, Any]], poi: Sequence[Mapping[
     for group in groups:  # with several ego algorithms: all egos, then each algorithm's apart
         lines = generator_lines(in_group(gen_ci, group), in_group(gen_diff, group))
         if len(groups) > 1 and lines:
-            md.append(f"- Generators against {'all egos' if group == ALL_EGOS else f'the {group} egos'}:")
+            md.append(f"- Generators against {group_name(group)}:")
             lines = ["  " + line for line in lines]
         md += lines
     md.append("")

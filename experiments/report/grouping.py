@@ -131,6 +131,11 @@ def in_group(table: Sequence[Mapping[str, Any]], group: str) -> list[Mapping[str
     return [r for r in table if r.get("ego_group", ALL_EGOS) == group]
 
 
+def group_name(group: str) -> str:
+    """``all egos`` / ``the <algo> egos``."""
+    return "all egos" if group == ALL_EGOS else f"the {group} egos"
+
+
 def group_heading(group: str, n_groups: int) -> str:
     """A line that says which egos the tables below are against (empty with one group)."""
-    return "" if n_groups < 2 else f"**Against {'all egos' if group == ALL_EGOS else f'the {group} egos'}**\n"
+    return "" if n_groups < 2 else f"**Against {group_name(group)}**\n"
