@@ -30,7 +30,15 @@ from seal.adversaries.base import pipeline_names
 from seal.experiments.evaluation.evaluate import REAL_PREFIX, REPLAY_SETTINGS
 from seal.experiments.evaluation.generator_metrics import format_markdown_table
 from seal.experiments.evaluation.metrics import pooled_realism
-from seal.experiments.report.grouping import ALL_EGOS, algo_of, base_pipeline, ego_groups, group_heading, in_group
+from seal.experiments.report.grouping import (
+    algo_of,
+    base_pipeline,
+    ego_groups,
+    group_heading,
+    groups_in,
+    in_group,
+    tag_by_group,
+)
 
 EGO_METRICS = ("success", "crash", "out_of_road")
 PIPELINE_ORDER = ("replay", "heuristic", *pipeline_names())
@@ -186,7 +194,7 @@ def generator_table_by_group(ego_rows: Sequence[Mapping[str, Any]], settings_inf
                              ) -> list[dict[str, Any]]:
     """`generator_table` over all egos and, when the rows are labelled with several ego algorithms, against each
     algorithm's egos apart (`seal.experiments.report.grouping.ego_groups`); each row says which in ``ego_group``."""
-    return [{"ego_group": g, **r} for g, rows in ego_groups(ego_rows) for r in generator_table(rows, settings_info)]
+    return tag_by_group(ego_groups(ego_rows), lambda rows: generator_table(rows, settings_info))
 
 
 def _per_episode_yaw_acc(eps: Sequence[Mapping[str, Any]]) -> float:
@@ -223,7 +231,7 @@ GENERATOR_COLUMNS = (
 def generator_markdown(table: Sequence[Mapping[str, Any]]) -> str:
     """Table 6.2 as Markdown; a table built per ego group (`seal.experiments.report.grouping.ego_groups`, key
     ``ego_group``) as one table per group under its heading."""
-    groups = list(dict.fromkeys(r.get("ego_group", ALL_EGOS) for r in table))
+    groups = groups_in(table)
     if len(groups) < 2:
         return format_markdown_table(table, GENERATOR_COLUMNS)
     return "\n".join(group_heading(g, len(groups)) + "\n" + format_markdown_table(in_group(table, g), GENERATOR_COLUMNS)

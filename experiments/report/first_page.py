@@ -23,7 +23,7 @@ from typing import Any
 
 from seal.experiments.report.agreement import ALL_SETTINGS, agreement_line
 from seal.experiments.report.generator_stats import generator_rows
-from seal.experiments.report.grouping import ALL_EGOS, algo_of, group_name, in_group, is_trained
+from seal.experiments.report.grouping import algo_of, group_name, groups_in, in_group, is_trained
 from seal.experiments.report.stats import MIN_SEEDS_FOR_POI, enough_seeds
 from seal.experiments.report.thesis_claims import claims_markdown
 
@@ -222,7 +222,7 @@ def first_page_markdown(cis: Sequence[Mapping[str, Any]], poi: Sequence[Mapping[
         md.append("")
     md.append(precision_line(cis))
     md += list(training_lines)
-    groups = list(dict.fromkeys(r.get("ego_group", ALL_EGOS) for r in gen_ci))
+    groups = groups_in(gen_ci)
     for group in groups:  # with several ego algorithms: all egos, then each algorithm's apart
         lines = generator_lines(in_group(gen_ci, group), in_group(gen_diff, group))
         if len(groups) > 1 and lines:

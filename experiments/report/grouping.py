@@ -20,7 +20,7 @@ egos, -0.10 against the TD3 egos), and a table over both mixes two populations t
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -124,6 +124,17 @@ def ego_groups(rows: Sequence[Mapping[str, Any]]) -> list[tuple[str, list[Mappin
     if len(algos) > 1:
         groups += [(a, [r for r in rows if is_trained(r["pipeline"]) and algo_of(r["pipeline"]) == a]) for a in algos]
     return groups
+
+
+def tag_by_group(groups: Sequence[tuple[str, Sequence[Mapping[str, Any]]]],
+                 table_of: Callable[[Sequence[Mapping[str, Any]]], list[dict[str, Any]]]) -> list[dict[str, Any]]:
+    """``table_of(rows)`` of every `ego_groups` group, each row tagged with its group in ``ego_group``."""
+    return [{"ego_group": g, **r} for g, rows in groups for r in table_of(rows)]
+
+
+def groups_in(table: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The ego groups of a table built per group (`tag_by_group`), in order; `ALL_EGOS` for an untagged one."""
+    return list(dict.fromkeys(r.get("ego_group", ALL_EGOS) for r in table))
 
 
 def in_group(table: Sequence[Mapping[str, Any]], group: str) -> list[Mapping[str, Any]]:

@@ -21,7 +21,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from seal.experiments.report.generator_stats import generator_rows
-from seal.experiments.report.grouping import ALL_EGOS, algo_of, base_pipeline, in_group
+from seal.experiments.report.grouping import ALL_EGOS, algo_of, base_pipeline, groups_in, in_group
 from seal.experiments.report.stats import MIN_SEEDS_FOR_POI, ci_cell, enough_seeds
 
 EGO_CLAIMS = (("seal", "cat"), ("cat", "goose"), ("cat", "noadv"), ("seal", "goose"), ("seal", "noadv"),
@@ -90,7 +90,7 @@ def claims_markdown(poi: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[s
         evidence = (f"P = {r['p_improvement']:.2f} [{r['ci_low']:.2f}-{r['ci_high']:.2f}] over {r['settings']} "
                     "settings" if r else "-")
         md.append(f"| {c['claim']} | {c['algo'] or '-'} | {c['verdict']} | {evidence} |")
-    groups = list(dict.fromkeys(r.get("ego_group", ALL_EGOS) for r in gen_ci)) or [ALL_EGOS]
+    groups = groups_in(gen_ci) or [ALL_EGOS]
     claims = [(g, c) for g in groups for c in generator_claims(in_group(gen_ci, g), in_group(gen_diff, g))]
     for group, c in claims:
         if c["other"] is None:

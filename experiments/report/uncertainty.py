@@ -22,7 +22,7 @@ from seal.experiments.report.generator_stats import (
     generator_difference_markdown,
     generator_difference_table,
 )
-from seal.experiments.report.grouping import ego_groups, group_heading, in_group
+from seal.experiments.report.grouping import ego_groups, group_heading, in_group, tag_by_group
 from seal.experiments.report.paired import (
     discrimination_counts,
     discrimination_markdown,
@@ -75,10 +75,8 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
     discrimination = discrimination_counts(ego_rows)
     groups = ego_groups(ego_rows)  # all egos, and each algorithm's apart when there are several
     generator_settings = [r["setting"] for r in t62]
-    gen_ci = [{"ego_group": g, **r} for g, rows in groups
-              for r in generator_ci_table(rows, generator_settings, seed=seed)]
-    gen_diff = [{"ego_group": g, **r} for g, rows in groups
-                for r in generator_difference_table(rows, generator_settings, seed=seed)]
+    gen_ci = tag_by_group(groups, lambda rows: generator_ci_table(rows, generator_settings, seed=seed))
+    gen_diff = tag_by_group(groups, lambda rows: generator_difference_table(rows, generator_settings, seed=seed))
     seeds = seed_profile_table(ego_rows)
     agreement = agreement_table(ego_rows, seed=seed)
     for name, table in zip(FILES, (cis, poi, poi_setting, paired, scenario_rates(ego_rows), gen_ci, discrimination,
