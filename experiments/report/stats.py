@@ -46,8 +46,7 @@ from seal.experiments.report.grouping import algo_of, comparable, is_trained
 N_BOOT = 2000
 """Bootstrap resamples of the mean / IQM intervals."""
 N_BOOT_POI = 1000
-"""Bootstrap resamples of the probability of improvement (rliable's estimator calls scipy's Mann-Whitney test once
-per setting and resample, ~1 ms each)."""
+"""Bootstrap resamples of the probability of improvement (each resample is one `pairwise_improvement`, ~20 us)."""
 CONFIDENCE = 0.95
 MIN_SEEDS_FOR_POI = 3
 """Seeds a side below which no verdict rests on a probability of improvement: it compares seeds, and with one seed
@@ -175,9 +174,19 @@ def poi_interval(x: Sequence[np.ndarray], y: Sequence[np.ndarray], n_boot: int =
     sx, sy = np.stack([np.asarray(v, np.float64) for v in x], 1), np.stack([np.asarray(v, np.float64) for v in y], 1)
     point = float(metrics.probability_of_improvement(sx, sy))
     bootstrap = IndependentSamplesBootstrap(sx, sy, seed=np.random.default_rng(seed))
-    ci = bootstrap.conf_int(lambda a, b: np.array([metrics.probability_of_improvement(a, b)]), reps=n_boot,
+    ci = bootstrap.conf_int(lambda a, b: np.array([pairwise_improvement(a, b)]), reps=n_boot,
                             method="percentile", size=CONFIDENCE).ravel()
     return point, float(ci[0]), float(ci[1])
+
+
+def pairwise_improvement(scores_x: np.ndarray, scores_y: np.ndarray) -> float:
+    """rliable's `probability_of_improvement` of ``scores_x [runs_x, tasks]`` over ``scores_y [runs_y, tasks]``
+    (per task the Mann-Whitney U of x over y divided by ``runs_x * runs_y``: the share of run pairs where x is
+    higher, ties counting one half; averaged over tasks), with every pair compared at once. Written out because
+    the bootstrap calls it a thousand times per interval and rliable calls scipy's test once per task (~1 ms each:
+    7 of the 9.5 min `seal compare` took on the fifth decisive run's store); the tests check it equals rliable's."""
+    diff = scores_x[:, None, :] - scores_y[None, :, :]  # [runs_x, runs_y, tasks]
+    return float(((diff > 0) + 0.5 * (diff == 0)).mean())
 
 
 def _same_egos(matrices: Mapping[tuple[str, str], ScoreMatrix], pipeline: str, settings: Sequence[str]) -> bool:

@@ -30,6 +30,7 @@ from seal.experiments.report.stats import (
     improvement_table,
     iqm_columns,
     mean_iqm_intervals,
+    pairwise_improvement,
     poi_interval,
     score_matrices,
     seed_profile_markdown,
@@ -112,6 +113,23 @@ def test_probability_of_improvement_counts_pairs_and_half_ties() -> None:
     p, _, _ = poi_interval([np.array([0.6, 0.8]), np.array([0.1, 0.1])], [np.array([0.4, 0.6]), np.array([0.3, 0.3])],
                            n_boot=100)
     assert p == pytest.approx((0.875 + 0.0) / 2)
+
+
+def test_pairwise_improvement_equals_rliable_and_leaves_the_interval_unchanged() -> None:
+    from arch.bootstrap import IndependentSamplesBootstrap
+    from rliable import metrics
+
+    rng = np.random.default_rng(5)
+    for runs_x, runs_y, tasks in ((4, 4, 10), (8, 4, 3), (3, 5, 1)):
+        # rates of 300 scenarios: coarse values, so ties within and across the two sides are common
+        x, y = rng.integers(140, 160, (runs_x, tasks)) / 300, rng.integers(140, 160, (runs_y, tasks)) / 300
+        assert pairwise_improvement(x, y) == pytest.approx(metrics.probability_of_improvement(x, y), abs=1e-12)
+        assert pairwise_improvement(x, x) == 0.5
+        p, lo, hi = poi_interval(list(x.T), list(y.T), n_boot=300, seed=2)
+        reference = IndependentSamplesBootstrap(x, y, seed=np.random.default_rng(2)).conf_int(
+            lambda a, b: np.array([metrics.probability_of_improvement(a, b)]), reps=300, method="percentile",
+            size=0.95).ravel()
+        assert (lo, hi) == pytest.approx(tuple(reference), abs=1e-12)
 
 
 def test_improvement_table_covers_every_pair_both_ways() -> None:
