@@ -3,11 +3,12 @@ numbers of `seal.experiments.report.stats` (nothing about who wins is written by
 
 Per ego algorithm and setting: the pipeline with the highest mean success rate, the runner-up, the margin in
 points, both 95 % intervals and the probability that the leader's egos beat the runner-up's in that setting
-(rliable, over seeds). The leader is called ahead only when that probability's 95 % interval lies above 0.5 *and*
-the two success intervals do not overlap: with few seeds that probability can be 1 [1-1] (every leader seed beats
+(rliable, over seeds). The leader is called ahead only when that probability beats 0.5 (its 95 % interval above
+0.5 and its permutation test's p below `seal.experiments.report.stats.ALPHA`: `poi_verdict`) *and* the two success
+intervals do not overlap: with few seeds that probability can be 1 [1-1] (every leader seed beats
 every runner-up seed) while the margin is within the scenario-to-scenario noise that only the success intervals
-see. Then which pipelines beat which over all settings (the averaged probability of improvement, interval above
-0.5; a seed-level statement), the precision (the largest interval half-width against `TARGET_HALF_WIDTH`)
+see. Then which pipelines beat which over all settings (the averaged probability of improvement, by the same
+`poi_verdict`; a seed-level statement), the precision (the largest interval half-width against `TARGET_HALF_WIDTH`)
 and, from Table 6.2's intervals and the paired generator differences, the most realistic generator and the lowest
 collision speed; the reference egos (Replay, the heuristic driver) against each setting's leader; whether the
 pipeline leaves a trace in what the egos do (`seal.experiments.report.agreement`: egos of one pipeline against egos
@@ -24,7 +25,7 @@ from typing import Any
 from seal.experiments.report.agreement import ALL_SETTINGS, agreement_line
 from seal.experiments.report.generator_stats import generator_rows
 from seal.experiments.report.grouping import algo_of, group_name, groups_in, in_group, is_trained
-from seal.experiments.report.stats import MIN_SEEDS_FOR_POI, enough_seeds
+from seal.experiments.report.stats import ALPHA, MIN_SEEDS_FOR_POI, enough_seeds, poi_verdict
 from seal.experiments.report.thesis_claims import claims_markdown
 
 TARGET_HALF_WIDTH = 0.05
@@ -54,14 +55,14 @@ def setting_verdicts(cis: Sequence[Mapping[str, Any]], poi_by_setting: Sequence[
                      ) -> list[dict[str, Any]]:
     """One row per (algorithm, setting) over the trained pipelines: ``best``, ``runner_up`` (None with one
     pipeline), their CI rows, ``margin`` (rate difference), the leader's per-setting probability of improvement
-    row (``poi``, or None), ``seeds_agree`` (its interval above 0.5), ``apart`` (the two success intervals do not
+    row (``poi``, or None), ``seeds_agree`` (`poi_verdict` holds), ``apart`` (the two success intervals do not
     overlap) and ``ahead`` (both)."""
     poi = {(r["pipeline"], r["reference"], r["setting"]): r for r in poi_by_setting}
     out = []
     for (algo, setting), ranked in _ranked(cis).items():
         best, second = ranked[0], (ranked[1] if len(ranked) > 1 else None)
         p = poi.get((best["pipeline"], second["pipeline"], setting)) if second else None
-        agree = bool(p and enough_seeds(p) and p["ci_low"] > 0.5)
+        agree = bool(p and poi_verdict(p) == "holds")
         apart = bool(second and best["ci_low"] > second["ci_high"])
         out.append({"algo": algo, "setting": setting, "best": best, "runner_up": second,
                     "margin": best["mean"] - second["mean"] if second else math.nan,
@@ -70,7 +71,7 @@ def setting_verdicts(cis: Sequence[Mapping[str, Any]], poi_by_setting: Sequence[
 
 
 def _verdict(v: Mapping[str, Any]) -> str:
-    """The verdict words, from the two tests: the seeds' P above 0.5 and the intervals apart."""
+    """The verdict words, from the two tests: the seeds' P beats 0.5 (`poi_verdict`) and the intervals apart."""
     leader = v["best"]["pipeline"]
     if v["ahead"]:
         return f"{leader} ahead"
@@ -79,7 +80,7 @@ def _verdict(v: Mapping[str, Any]) -> str:
     few = bool(v["poi"]) and not enough_seeds(v["poi"])
     if v["apart"]:
         return f"{leader}'s interval is above, but " + (
-            f"fewer than {MIN_SEEDS_FOR_POI} seeds: not sure" if few else "P's interval reaches 0.5: not sure")
+            f"fewer than {MIN_SEEDS_FOR_POI} seeds: not sure" if few else "P does not beat 0.5: not sure")
     if few:
         return f"no clear winner (fewer than {MIN_SEEDS_FOR_POI} seeds a side for P)"
     return "no clear winner" if v["poi"] else "not compared (seed counts differ)"
@@ -114,24 +115,28 @@ def reference_lines(cis: Sequence[Mapping[str, Any]], verdicts: Sequence[Mapping
 
 
 def overall_lines(poi: Sequence[Mapping[str, Any]]) -> list[str]:
-    """Sentences on which pipeline beats which over all common settings (interval of P above 0.5)."""
+    """Sentences on which pipeline beats which over all common settings (`poi_verdict`)."""
     lines = []
     if poi and not any(enough_seeds(r) for r in poi):
         return [f"- Fewer than {MIN_SEEDS_FOR_POI} seeds a pipeline: no pipeline is said to beat another."]
     poi = [r for r in poi if enough_seeds(r)]
     pipelines = list(dict.fromkeys(r["pipeline"] for r in poi))
     for a in pipelines:
-        beaten = [r for r in poi if r["pipeline"] == a and r["ci_low"] > 0.5]
+        beaten = [r for r in poi if r["pipeline"] == a and poi_verdict(r) == "holds"]
         if beaten:
             lines.append(f"- **{a}** beats " + ", ".join(
-                f"{r['reference']} (P = {r['p_improvement']:.2f} [{r['ci_low']:.2f}-{r['ci_high']:.2f}], "
-                f"{r['settings']} settings)" for r in beaten))
+                f"{r['reference']} ({_p_text(r)}, {r['settings']} settings)" for r in beaten))
     if not lines and poi:
         best = max((r for r in poi), key=lambda r: r["ci_low"])
-        lines.append("- No pipeline beats another with 95 % confidence over the settings; the closest: "
-                     f"{best['pipeline']} over {best['reference']}, P = {best['p_improvement']:.2f} "
-                     f"[{best['ci_low']:.2f}-{best['ci_high']:.2f}].")
+        lines.append("- No pipeline beats another with 95 % confidence over the settings (P's interval above 0.5 "
+                     f"and permutation p < {ALPHA}); the closest: {best['pipeline']} over {best['reference']}, "
+                     f"{_p_text(best)}.")
     return lines
+
+
+def _p_text(r: Mapping[str, Any]) -> str:
+    return (f"P = {r['p_improvement']:.2f} [{r['ci_low']:.2f}-{r['ci_high']:.2f}], permutation p = "
+            f"{r['p_perm']:.3f}")
 
 
 def precision_line(cis: Sequence[Mapping[str, Any]]) -> str:
@@ -204,9 +209,10 @@ def first_page_markdown(cis: Sequence[Mapping[str, Any]], poi: Sequence[Mapping[
     md = ["## Summary: who wins where\n",
           "Success rate: mean over seeds and scenarios with its 95 % stratified-bootstrap interval (rliable). "
           "P = probability that the leader's ego beats the runner-up's in that setting (per-seed success rates; "
-          "0.5 = no difference). The leader is *ahead* only when both tests agree: P's 95 % interval lies above "
-          "0.5 (its seeds beat the runner-up's) and the two success intervals do not overlap (the margin is larger "
-          "than the scenario-to-scenario noise).\n"]
+          "0.5 = no difference). The leader is *ahead* only when both tests agree: its seeds beat the runner-up's (P's "
+          f"95 % interval lies above 0.5 and a permutation test of P, whole egos relabelled, gives p < {ALPHA}; "
+          "the interval alone covers too little with 4 seeds) and the two success intervals do not overlap (the "
+          "margin is larger than the scenario-to-scenario noise).\n"]
     verdicts = setting_verdicts(cis, poi_by_setting)
     for algo in dict.fromkeys(v["algo"] for v in verdicts):
         if algo:

@@ -2,7 +2,8 @@
 
 Ego claims (thesis Table 6.1 / 7.2) are read from the averaged probability of improvement over all settings
 (`seal.experiments.report.stats.improvement_table`): a claim "X > Y" *holds* when P(X > Y)'s 95 % interval lies
-above 0.5, is *reversed* when it lies below, and is *not shown* otherwise (with fewer than
+above 0.5 and its permutation test gives p < `seal.experiments.report.stats.ALPHA`, is *reversed* when the interval
+lies below and p < ALPHA, and is *not shown* otherwise (`seal.experiments.report.stats.poi_verdict`; with fewer than
 `seal.experiments.report.stats.MIN_SEEDS_FOR_POI` seeds a side: *too few seeds*). Generator claims (Table 6.2)
 are read from the paired generator differences (`seal.experiments.report.generator_stats.generator_difference_table`:
 SEAL minus each other generator, scenario by scenario): "SEAL is the most realistic" / "SEAL has the lowest collision
@@ -22,7 +23,7 @@ from typing import Any
 
 from seal.experiments.report.generator_stats import generator_rows
 from seal.experiments.report.grouping import ALL_EGOS, algo_of, base_pipeline, groups_in, in_group
-from seal.experiments.report.stats import MIN_SEEDS_FOR_POI, ci_cell, enough_seeds
+from seal.experiments.report.stats import ALPHA, MIN_SEEDS_FOR_POI, ci_cell, enough_seeds, poi_verdict
 
 EGO_CLAIMS = (("seal", "cat"), ("cat", "goose"), ("cat", "noadv"), ("seal", "goose"), ("seal", "noadv"),
               ("cat-rcg", "cat"), ("seal-rcg", "seal"))
@@ -42,7 +43,7 @@ def ego_claims(poi: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
         for algo in algos:
             r = rows.get((x, y, algo))
             verdict = ("not tested" if r is None else f"too few seeds (< {MIN_SEEDS_FOR_POI})" if not enough_seeds(r)
-                       else "holds" if r["ci_low"] > 0.5 else "reversed" if r["ci_high"] < 0.5 else "not shown")
+                       else poi_verdict(r))
             out.append({"claim": f"{x} > {y} (success)", "algo": algo, "verdict": verdict, "poi": r})
     return out
 
@@ -79,16 +80,17 @@ def claims_markdown(poi: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[s
     """The claims as a Markdown table with the numbers each verdict rests on."""
     seeds = min((min(r["seeds"], r["reference_seeds"]) for r in poi), default=0)
     md = ["### The thesis's findings, checked\n",
-          "holds / reversed: the 95 % interval lies on one side (P above or below 0.5; SEAL minus another "
-          "generator, scenario by scenario, below or above 0); not shown: it does not. P compares the pipelines' "
+          "holds / reversed: the 95 % interval lies on one side (P above or below 0.5, and its permutation test, "
+          f"whole egos relabelled, gives p < {ALPHA}; SEAL minus another generator, scenario by scenario, below or "
+          "above 0); not shown: it does not. P compares the pipelines' "
           f"seeds (each seed's success rate per setting; here as few as {seeds} seeds a pipeline), so it says how "
           "consistently one training pipeline beats another, not by how much: read it with the success intervals "
           "above.\n",
           "| claim | ego | verdict | evidence |", "|---|---|---|---|"]
     for c in ego_claims(poi):
         r = c["poi"]
-        evidence = (f"P = {r['p_improvement']:.2f} [{r['ci_low']:.2f}-{r['ci_high']:.2f}] over {r['settings']} "
-                    "settings" if r else "-")
+        evidence = (f"P = {r['p_improvement']:.2f} [{r['ci_low']:.2f}-{r['ci_high']:.2f}], permutation p = "
+                    f"{r['p_perm']:.3f}, over {r['settings']} settings" if r else "-")
         md.append(f"| {c['claim']} | {c['algo'] or '-'} | {c['verdict']} | {evidence} |")
     groups = groups_in(gen_ci) or [ALL_EGOS]
     claims = [(g, c) for g in groups for c in generator_claims(in_group(gen_ci, g), in_group(gen_diff, g))]

@@ -32,6 +32,8 @@ from seal.experiments.report.stats import (
     mean_iqm_intervals,
     pairwise_improvement,
     poi_interval,
+    poi_permutation_p,
+    poi_verdict,
     score_matrices,
     seed_profile_markdown,
     seed_profile_table,
@@ -132,6 +134,46 @@ def test_pairwise_improvement_equals_rliable_and_leaves_the_interval_unchanged()
         assert (lo, hi) == pytest.approx(tuple(reference), abs=1e-12)
 
 
+def test_permutation_p_counts_the_splits_at_least_as_extreme() -> None:
+    # 2 + 2 egos, one setting, fully separated: of the C(4, 2) = 6 splits only the observed one and its mirror give
+    # |P - 0.5| = 0.5
+    assert poi_permutation_p([np.array([0.8, 0.9])], [np.array([0.1, 0.2])]) == pytest.approx(2 / 6)
+    # 4 + 4 egos separated in every setting: 2 of 70 splits
+    x, y = [np.array([0.6, 0.7, 0.8, 0.9])] * 3, [np.array([0.1, 0.2, 0.3, 0.4])] * 3
+    assert poi_permutation_p(x, y) == pytest.approx(2 / 70)
+    assert poi_permutation_p(x, x) == 1.0  # P = 0.5 exactly: every split is at least as extreme
+    # more splits than n_perm: random splits, (hits + 1) / (n + 1), reproducible with the seed
+    big_x, big_y = [np.linspace(0.5, 0.9, 9)], [np.linspace(0.1, 0.5, 9)]
+    p = poi_permutation_p(big_x, big_y, n_perm=500, seed=1)
+    assert p == poi_permutation_p(big_x, big_y, n_perm=500, seed=1) and 1 / 501 <= p < 0.01
+
+
+def test_poi_verdict_needs_the_interval_and_the_permutation_test() -> None:
+    row = {"seeds": 4, "reference_seeds": 4, "p_improvement": 0.8, "ci_low": 0.6, "ci_high": 0.95, "p_perm": 0.03}
+    assert poi_verdict(row) == "holds"
+    assert poi_verdict({**row, "p_perm": 0.11}) == "not shown"  # interval above 0.5, permutation test not
+    assert poi_verdict({**row, "ci_low": 0.45}) == "not shown"
+    assert poi_verdict({**row, "p_improvement": 0.2, "ci_low": 0.05, "ci_high": 0.4}) == "reversed"
+    assert poi_verdict({**row, "reference_seeds": 2}) == "not shown"
+
+
+def test_poi_verdict_is_calibrated_on_pipelines_without_a_difference() -> None:
+    # 4 + 4 seeds drawn from one distribution of per-seed rates in 10 settings (a seed offset shared by its
+    # settings, as one ego plays them all): the verdict may call at most ~5 % of them either way
+    rng = np.random.default_rng(0)
+    verdicts, bootstrap_only = [], []
+    for i in range(300):
+        rates = 0.5 + rng.normal(0, 0.04, (8, 1)) + rng.normal(0, 0.02, (8, 10))
+        x, y = list(rates[:4].T), list(rates[4:].T)
+        p, lo, hi = poi_interval(x, y, n_boot=200, seed=i)
+        row = {"seeds": 4, "reference_seeds": 4, "p_improvement": p, "ci_low": lo, "ci_high": hi,
+               "p_perm": poi_permutation_p(x, y)}
+        verdicts.append(poi_verdict(row) != "not shown")
+        bootstrap_only.append(lo > 0.5 or hi < 0.5)
+    assert np.mean(verdicts) <= 0.05
+    assert np.mean(bootstrap_only) > np.mean(verdicts)
+
+
 def test_improvement_table_covers_every_pair_both_ways() -> None:
     rows = _rows("cat", [0.2, 0.4]) + _rows("cat-rcg", [0.5, 0.7]) + _rows("noadv", [0.3, 0.3])
     rows += _rows("cat", [0.1, 0.1], setting="hard") + _rows("cat-rcg", [0.1, 0.3], setting="hard")
@@ -148,7 +190,7 @@ def test_improvement_table_covers_every_pair_both_ways() -> None:
                    for r in improvement_table(rows, n_boot=200, per_setting=True)}
     assert per_setting[("cat-rcg", "cat", "hard")]["p_improvement"] == pytest.approx(0.75)
     md = improvement_markdown(list(poi.values()))
-    assert "| cat-rcg | 1.00 [1.00-1.00] | 0.88 [" in md and md.index("| noadv |") < md.index("| cat-rcg |")
+    assert "| cat-rcg | 1.00 [1.00-1.00] p=0.33 | 0.88 [" in md and md.index("| noadv |") < md.index("| cat-rcg |")
 
 
 def test_algorithms_are_labelled_apart_and_compared_only_within() -> None:
@@ -360,15 +402,16 @@ def test_generator_differences_pair_the_scenarios() -> None:
 def test_thesis_claims_read_the_intervals() -> None:
     from seal.experiments.report.thesis_claims import claims_markdown, ego_claims, generator_claims
 
-    def p(a: str, b: str, lo: float, hi: float) -> dict:
+    def p(a: str, b: str, lo: float, hi: float, p_perm: float = 0.01) -> dict:
         return {"pipeline": a, "reference": b, "p_improvement": (lo + hi) / 2, "ci_low": lo, "ci_high": hi,
-                "settings": 3, "seeds": 4, "reference_seeds": 3}
+                "settings": 3, "seeds": 4, "reference_seeds": 3, "p_perm": p_perm}
 
     poi = [p("seal (td3)", "cat (td3)", 0.6, 0.9), p("cat (td3)", "goose (td3)", 0.3, 0.7),
-           p("cat (td3)", "noadv (td3)", 0.1, 0.4)]
+           p("cat (td3)", "noadv (td3)", 0.1, 0.4), p("seal (td3)", "goose (td3)", 0.55, 0.9, p_perm=0.2)]
     verdicts = {c["claim"]: c["verdict"] for c in ego_claims(poi)}
     assert verdicts["seal > cat (success)"] == "holds" and verdicts["cat > goose (success)"] == "not shown"
     assert verdicts["cat > noadv (success)"] == "reversed" and verdicts["cat-rcg > cat (success)"] == "not tested"
+    assert verdicts["seal > goose (success)"] == "not shown"  # interval above 0.5, permutation test not
     # One seed a side: the bootstrap interval has zero width whatever the data, so no verdict rests on it.
     lone = [{**p("seal", "cat", 0.61, 0.61), "seeds": 1, "reference_seeds": 1}]
     assert ego_claims(lone)[0]["verdict"] == "too few seeds (< 3)"
@@ -383,7 +426,8 @@ def test_thesis_claims_read_the_intervals() -> None:
     assert claims == {"SEAL is the most rea": "holds", "SEAL's collisions ar": "not shown"}
     assert generator_claims([g("cat", 0.1, 0.2)])[0]["verdict"] == "not tested"
     md = claims_markdown(poi, [g("seal", 0.5, 0.6), g("cat", 0.1, 0.2)])
-    assert "| seal > cat (success) | td3 | holds | P = 0.75 [0.60-0.90] over 3 settings |" in md
+    assert ("| seal > cat (success) | td3 | holds | P = 0.75 [0.60-0.90], permutation p = 0.010, over 3 settings |"
+            in md)
     assert "as few as 3 seeds a pipeline" in md
     assert ("| SEAL is the most realistic generator (lowest mean WD) | all | reversed | seal 0.550 [0.500-0.600], "
             "best other cat 0.150 [0.100-0.200] |") in md
