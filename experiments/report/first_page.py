@@ -23,6 +23,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from seal.experiments.report.agreement import ALL_SETTINGS, agreement_line
+from seal.experiments.report.differences import bound_line
 from seal.experiments.report.generator_stats import generator_rows
 from seal.experiments.report.grouping import algo_of, group_name, groups_in, in_group, is_trained
 from seal.experiments.report.stats import ALPHA, MIN_SEEDS_FOR_POI, enough_seeds, poi_verdict
@@ -200,11 +201,13 @@ def _leader_verdict(first: Mapping[str, Any], second: Mapping[str, Any], key: st
 def first_page_markdown(cis: Sequence[Mapping[str, Any]], poi: Sequence[Mapping[str, Any]],
                         poi_by_setting: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[str, Any]],
                         training_lines: Sequence[str] = (), gen_diff: Sequence[Mapping[str, Any]] = (),
-                        agreement: Sequence[Mapping[str, Any]] = ()) -> str:
+                        agreement: Sequence[Mapping[str, Any]] = (), differences: Sequence[Mapping[str, Any]] = ()
+                        ) -> str:
     """The report's first page (module docstring) as Markdown; ``training_lines`` (e.g.
     `seal.experiments.report.convergence.convergence_line`) follow the precision line; ``agreement``
     (`seal.experiments.report.agreement.agreement_table`) adds, per ego algorithm, whether the pipeline leaves a
-    trace in what the egos do."""
+    trace in what the egos do; ``differences`` (`seal.experiments.report.differences.difference_table`) how large a
+    success difference from the No-Adv pipeline the data allow."""
     pooled = {r["algo"]: r for r in agreement if r["setting"] == ALL_SETTINGS}
     md = ["## Summary: who wins where\n",
           "Success rate: mean over seeds and scenarios with its 95 % stratified-bootstrap interval (rliable). "
@@ -222,6 +225,8 @@ def first_page_markdown(cis: Sequence[Mapping[str, Any]], poi: Sequence[Mapping[
         md += [_verdict_row(v) for v in verdicts if v["algo"] == algo]
         md.append("")
         md += overall_lines([r for r in poi if algo_of(r["pipeline"]) == algo]) or ["- (one pipeline only)"]
+        if line := bound_line(differences, algo):
+            md.append(line)
         md += reference_lines(cis, [v for v in verdicts if v["algo"] == algo])
         if algo in pooled and (line := agreement_line(pooled[algo])):
             md.append(line)

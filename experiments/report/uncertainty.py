@@ -15,6 +15,7 @@ from seal.core.atomic import atomic_write_bytes
 from seal.experiments.report.agreement import agreement_markdown, agreement_table
 from seal.experiments.report.ci_plots import plot_success_intervals
 from seal.experiments.report.compare import to_csv
+from seal.experiments.report.differences import difference_markdown, difference_table
 from seal.experiments.report.first_page import first_page_markdown, leader_pairs
 from seal.experiments.report.generator_stats import (
     generator_ci_markdown,
@@ -42,7 +43,8 @@ from seal.experiments.report.stats import (
 )
 
 FILES = ("ego_ci.csv", "improvement.csv", "improvement_per_setting.csv", "paired.csv", "per_scenario.csv",
-         "generator_ci.csv", "discrimination.csv", "generator_differences.csv", "seed_profile.csv", "agreement.csv")
+         "generator_ci.csv", "discrimination.csv", "generator_differences.csv", "seed_profile.csv", "agreement.csv",
+         "success_differences.csv")
 
 
 @dataclass
@@ -59,6 +61,7 @@ class Uncertainty:
     sections: list[str]
     figures: list[str] = field(default_factory=list)
     agreement: list[dict[str, Any]] = field(default_factory=list)
+    differences: list[dict[str, Any]] = field(default_factory=list)
 
 
 def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapping[str, Any]], out: Path,
@@ -79,8 +82,9 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
     gen_diff = tag_by_group(groups, lambda rows: generator_difference_table(rows, generator_settings, seed=seed))
     seeds = seed_profile_table(ego_rows)
     agreement = agreement_table(ego_rows, seed=seed)
+    differences = difference_table(ego_rows)
     for name, table in zip(FILES, (cis, poi, poi_setting, paired, scenario_rates(ego_rows), gen_ci, discrimination,
-                                   gen_diff, seeds, agreement), strict=True):
+                                   gen_diff, seeds, agreement, differences), strict=True):
         atomic_write_bytes(out / name, to_csv(table))
     figures = []
     if plots:
@@ -99,6 +103,11 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
         "every setting; 0.5 = no difference). Per setting, for each setting's leader and runner-up: "
         "`improvement_per_setting.csv`.\n",
         improvement_markdown(poi) if poi else "(fewer than two comparable pipelines)\n",
+        "How large a difference the data allow: each pipeline's success rate minus the No-Adv pipeline's, in points "
+        "[Welch's 95 % interval over the seeds' rates, on the scenarios both played; the seeds' bootstrap covers too "
+        "little with 4 seeds] "
+        "(`success_differences.csv`).\n",
+        difference_markdown(differences) if differences else "(no No-Adv pipeline to compare with)\n",
         "Each seed's success rate averaged over its pipeline's settings: the probability of improvement above compares "
         "these egos whole, so one seed far from its siblings moves every comparison of its pipeline "
         "(`seed_profile.csv`).\n",
@@ -129,8 +138,9 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
         "collisions) on the same scenarios. All statistics: `generator_differences.csv`.\n",
         *_per_group(gen_diff, groups, generator_difference_markdown, "(fewer than two generator settings)\n"),
     ]
-    first_page = first_page_markdown(cis, poi, poi_setting, gen_ci, training_lines, gen_diff, agreement)
-    return Uncertainty(cis, poi, poi_setting, paired, gen_ci, gen_diff, first_page, sections, figures, agreement)
+    first_page = first_page_markdown(cis, poi, poi_setting, gen_ci, training_lines, gen_diff, agreement, differences)
+    return Uncertainty(cis, poi, poi_setting, paired, gen_ci, gen_diff, first_page, sections, figures, agreement,
+                       differences)
 
 
 def _per_group(table: Sequence[Mapping[str, Any]], groups: Sequence[tuple[str, Any]],

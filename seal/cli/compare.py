@@ -44,8 +44,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
         from seal.experiments.evaluation.generators import jsonable
 
         keys = ("table_6_1", "table_6_2", "ego_ci", "improvement", "improvement_per_setting", "paired",
-                "generator_ci", "agreement", "outcomes", "by_layout", "by_source", "failures", "figures", "videos",
-                "failure_videos", "episodes")
+                "generator_ci", "agreement", "success_differences", "outcomes", "by_layout", "by_source", "failures",
+                "figures", "videos", "failure_videos", "episodes")
         print(json.dumps(jsonable({k: result[k] for k in keys}), default=str))
         return 0
     print(ego_markdown(result["table_6_1"]))
