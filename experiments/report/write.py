@@ -104,9 +104,8 @@ def write_report(
     atomic_write_bytes(out / "report.md", "\n".join(md).encode())
     return {"table_6_1": t61, "table_6_2": t62, "ego_ci": stats.ego_ci, "improvement": stats.improvement,
             "improvement_per_setting": stats.improvement_per_setting, "paired": stats.paired,
-            "generator_ci": stats.generator_ci, "agreement": stats.agreement,
-            "success_differences": stats.differences, "figures": figures,
-            "videos": video_files, "episodes": len(rows), "outcomes": where["outcomes"],
+            "generator_ci": stats.generator_ci, "agreement": stats.agreement, "success_differences": stats.differences,
+            "figures": figures, "videos": video_files, "episodes": len(rows), "outcomes": where["outcomes"],
             "by_layout": where["by_layout"], "by_source": where["by_source"], "failures": where["failures"],
             "failure_videos": where["videos"], "convergence": convergence}
 
