@@ -91,7 +91,7 @@ def _verdict_row(v: Mapping[str, Any]) -> str:
     best, second, p = v["best"], v["runner_up"], v["poi"]
     if second is None:
         return f"| {v['setting']} | {best['pipeline']} | {_pct(best)} | - | - | - | - | only one pipeline |"
-    p_text = f"{p['p_improvement']:.2f} [{p['ci_low']:.2f}-{p['ci_high']:.2f}]" if p else "-"
+    p_text = f"{p['p_improvement']:.2f} [{p['ci_low']:.2f}-{p['ci_high']:.2f}], p = {p['p_perm']:.2f}" if p else "-"
     verdict = _verdict(v)
     return (f"| {v['setting']} | {best['pipeline']} | {_pct(best)} | {second['pipeline']} | {_pct(second)} | "
             f"{100 * v['margin']:+.1f} | {p_text} | {verdict} |")
