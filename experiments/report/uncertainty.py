@@ -13,7 +13,7 @@ from typing import Any
 
 from seal.core.atomic import atomic_write_bytes
 from seal.experiments.report.agreement import agreement_markdown, agreement_table
-from seal.experiments.report.ci_plots import plot_success_intervals
+from seal.experiments.report.ci_plots import plot_success_differences, plot_success_intervals
 from seal.experiments.report.compare import to_csv
 from seal.experiments.report.differences import difference_markdown, difference_table
 from seal.experiments.report.first_page import first_page_markdown, leader_pairs
@@ -89,6 +89,7 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
     figures = []
     if plots:
         figures = [p.name for s in ("mean", "iqm") if (p := plot_success_intervals(cis, out, s)) is not None]
+        figures += [p.name for p in plot_success_differences(differences, out)]
     sections = [
         "## Uncertainty (rliable)\n",
         "Success rate in %: mean over seeds and scenarios [95 % stratified-bootstrap interval; seeds and, within "

@@ -98,3 +98,15 @@ def test_welch_interval_is_calibrated_where_a_bootstrap_of_four_seeds_is_not() -
         lo, hi = np.percentile(boot, [2.5, 97.5])
         bootstrap.append(lo > 0 or hi < 0)
     assert np.mean(welch) <= 0.07 and np.mean(bootstrap) >= 0.10
+
+
+def test_difference_figure_per_algorithm(tmp_path) -> None:
+    from seal.experiments.report.ci_plots import plot_success_differences
+
+    rows = (_rows("noadv (td3)", NOADV) + _rows("cat (td3)", CAT) + _rows("noadv (reskill)", NOADV)
+            + _rows("cat (reskill)", [[1, 1]] * 3) + _rows("noadv (reskill)", NOADV, "hard")
+            + _rows("cat (reskill)", NOADV, "hard"))
+    paths = plot_success_differences(difference_table(rows), tmp_path)
+    assert sorted(p.name for p in paths) == ["success_differences_reskill.png", "success_differences_td3.png"]
+    assert all(p.stat().st_size > 1000 for p in paths)
+    assert plot_success_differences([], tmp_path) == []
