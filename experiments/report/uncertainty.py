@@ -72,7 +72,7 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
     ``training_lines`` go onto the first page (`first_page_markdown`)."""
     cis = ego_ci_table(ego_rows, n_boot, seed)
     poi = improvement_table(ego_rows, n_boot_poi, seed)
-    # Per setting only what the first page reads (leader vs runner-up): each pair costs ~1 s per setting.
+    # Per setting only what the first page reads (leader vs runner-up): the rest would be noise to read.
     poi_setting = improvement_table(ego_rows, n_boot_poi, seed, per_setting=True, only=leader_pairs(cis))
     paired = paired_counts(ego_rows)
     discrimination = discrimination_counts(ego_rows)

@@ -103,7 +103,7 @@ def register(tree: CommandTree) -> None:
                    help=f"bootstrap resamples of the success / crash intervals (default {N_BOOT_DEFAULT})")
     p.add_argument("--poi-reps", type=positive_int("--poi-reps"), default=N_BOOT_POI_DEFAULT,
                    help=f"bootstrap resamples of the probabilities of improvement (default {N_BOOT_POI_DEFAULT}; "
-                   "~1 ms each per pipeline pair and setting)")
+                   "~20 us each per pipeline pair)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_plugin_option(p)
     p.set_defaults(func=cmd_compare)
