@@ -72,8 +72,8 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
     ``training_lines`` go onto the first page (`first_page_markdown`)."""
     cis = ego_ci_table(ego_rows, n_boot, seed)
     poi = improvement_table(ego_rows, n_boot_poi, seed)
-    # Per setting only what the first page reads (leader vs runner-up): every pair in every setting would add about a
-    # minute on the decisive store (mostly the permutation tests of 8-seed pipelines).
+    # Per setting only what the first page reads (leader vs runner-up): every pair in every setting would add ~42 s
+    # on the decisive store (measured: 840 rows; mostly the permutation tests of 8-seed pipelines).
     poi_setting = improvement_table(ego_rows, n_boot_poi, seed, per_setting=True, only=leader_pairs(cis))
     paired = paired_counts(ego_rows)
     discrimination = discrimination_counts(ego_rows)
