@@ -73,7 +73,7 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
     cis = ego_ci_table(ego_rows, n_boot, seed)
     poi = improvement_table(ego_rows, n_boot_poi, seed)
     # Per setting only what the first page reads (leader vs runner-up): every pair in every setting would add ~42 s
-    # on the decisive store (measured: 840 rows; mostly the permutation tests of 8-seed pipelines).
+    # on the decisive store (measured, 840 rows).
     poi_setting = improvement_table(ego_rows, n_boot_poi, seed, per_setting=True, only=leader_pairs(cis))
     paired = paired_counts(ego_rows)
     discrimination = discrimination_counts(ego_rows)
