@@ -312,7 +312,12 @@ def test_report_folder_has_the_statistics_first_page_and_json(tmp_path, capsys) 
     pooled = next(r for r in result["agreement"] if r["setting"] == "all settings")
     assert (pooled["within"], pooled["across"], pooled["scenarios"]) == pytest.approx((40 / 48, 0.5, 16))
     assert (out / "agreement.csv").exists()
+    assert poi["p_perm"] == pytest.approx(2 / 20)  # 3 + 3 egos fully apart: 2 of the 20 splits
+    diff = next(r for r in result["success_differences"] if r["setting"] == "all settings")
+    assert diff["difference"] == pytest.approx((6 + 7 + 8 - 2 - 3 - 4) / 24) and diff["low"] < 0.5 < diff["high"]
+    assert {"success_differences.csv", "success_differences.png"} <= {p.name for p in out.iterdir()}
     md = (out / "report.md").read_text()
+    assert "- How large a difference the data allow (success minus noadv" in md
     assert md.index("## Summary: who wins where") < md.index("(thesis Table 6.1)")
     assert "| normal | cat | 87.5 % [" in md and "| noadv | 87.5 % [" not in md
 
