@@ -46,8 +46,8 @@ def _paired(x: ScoreMatrix, r: ScoreMatrix) -> tuple[np.ndarray, np.ndarray]:
 def difference_interval(pairs: Sequence[tuple[np.ndarray, np.ndarray]]) -> tuple[float, float, float]:
     """``(difference, low, high)`` of the mean per-seed success rate X - R over the settings of ``pairs`` (per setting
     the outcomes ``x [scenarios, seeds_x]`` and ``r [scenarios, seeds_r]`` on the same scenarios; a seed column is
-    the same ego in every setting), rates in [0, 1], with Welch's 95 % interval (module docstring); the interval is
-    NaN with fewer than 2 seeds a side or no spread among the seeds."""
+    the same ego in every setting), rates in [0, 1], with Welch's 95 % interval (module docstring) clipped to
+    [-1, 1]; the interval is NaN with fewer than 2 seeds a side or no spread among the seeds."""
     x = np.mean([px.mean(axis=0) for px, _ in pairs], axis=0)  # each seed's rate, averaged over the settings
     r = np.mean([pr.mean(axis=0) for _, pr in pairs], axis=0)
     difference = float(x.mean() - r.mean())
@@ -56,7 +56,8 @@ def difference_interval(pairs: Sequence[tuple[np.ndarray, np.ndarray]]) -> tuple
     with warnings.catch_warnings():  # scipy warns of "catastrophic cancellation" when the two sides are equal
         warnings.simplefilter("ignore", RuntimeWarning)
         ci = stats.ttest_ind(x, r, equal_var=False).confidence_interval(CONFIDENCE)
-    return difference, float(ci.low), float(ci.high)
+    # a difference of two rates lies in [-1, 1]; with 2 seeds a side the t interval can reach far past it
+    return difference, max(-1.0, float(ci.low)), min(1.0, float(ci.high))
 
 
 def difference_table(rows: Sequence[Mapping[str, Any]], reference: str = REFERENCE_PIPELINE) -> list[dict[str, Any]]:
@@ -117,9 +118,10 @@ def bound_line(table: Sequence[Mapping[str, Any]], algo: str) -> str | None:
     if not rows or not per_setting:
         return None
     ref = rows[0]["reference"]
+    seeds = min(min(r["seeds"], r["reference_seeds"]) for r in rows)
     lows, highs = min(r["low"] for r in per_setting), max(r["high"] for r in per_setting)
     overall = ("; over all settings " + ", ".join(f"{base_pipeline(r['pipeline'])} {_cell(r)}" for r in pooled)
                if pooled else "")
     return (f"- How large a difference the data allow (success minus {ref}, points, Welch's 95 % intervals over the "
-            f"seeds): every pipeline's interval lies within {100 * lows:+.1f} to {100 * highs:+.1f} in every setting"
-            f"{overall}.")
+            f"seeds, here as few as {seeds} a pipeline): every pipeline's interval lies within {100 * lows:+.1f} to "
+            f"{100 * highs:+.1f} in every setting{overall}.")

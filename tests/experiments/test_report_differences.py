@@ -32,7 +32,7 @@ def test_difference_and_welch_interval_by_hand() -> None:
     assert (row["pipeline"], row["reference"], row["setting"]) == ("cat (td3)", "noadv (td3)", "normal")
     assert row["difference"] == pytest.approx(0.75 - 0.25)
     ci = stats.ttest_ind([0.75, 0.5, 1.0], [0.25, 0.5, 0.0], equal_var=False).confidence_interval(0.95)
-    assert (row["low"], row["high"]) == pytest.approx((ci.low, ci.high))
+    assert (row["low"], row["high"]) == pytest.approx((ci.low, min(1.0, ci.high)))  # clipped to a rate difference
     assert row["seeds"] == row["reference_seeds"] == 3 and row["scenarios"] == 4
     assert "| cat (td3) | +50.0 [" in difference_markdown(table)
 
@@ -70,6 +70,9 @@ def test_other_algorithms_and_missing_reference_are_not_compared() -> None:
 def test_no_spread_gives_no_interval() -> None:
     d, low, high = difference_interval([(np.ones((4, 3)), np.ones((4, 2)))])
     assert d == 0.0 and math.isnan(low) and math.isnan(high)
+    # 2 seeds a side: the t interval (1-2 degrees of freedom) is clipped to what a difference of rates can be
+    _, low, high = difference_interval([(np.array([[1.0, 0.0]]), np.array([[1.0, 0.0]]))])
+    assert (low, high) == (-1.0, 1.0)
     (row,) = difference_table(_rows("noadv", [[1, 1]] * 3) + _rows("cat", [[1, 1]] * 3))
     assert "+0.0 [no spread]" in difference_markdown([row])
 
@@ -82,6 +85,7 @@ def test_first_page_sentence_gives_the_range_and_the_pooled_rows() -> None:
     per_setting = [r for r in table if r["setting"] != ALL_SETTINGS]
     low, high = min(r["low"] for r in per_setting), max(r["high"] for r in per_setting)
     assert line is not None and f"within {100 * low:+.1f} to {100 * high:+.1f} in every setting" in line
+    assert "here as few as 3 a pipeline" in line
     assert "; over all settings cat +25.0 [" in line
     assert bound_line(table, "reskill") is None
 
