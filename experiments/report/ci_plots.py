@@ -12,8 +12,43 @@ from typing import Any
 import numpy as np
 
 from seal.experiments.report.compare import ordered_pipelines
+from seal.experiments.report.grouping import algo_of
 
 STATISTICS = {"mean": ("mean", "ci_low", "ci_high"), "iqm": ("iqm", "iqm_low", "iqm_high")}
+
+
+def _interval_figure(cells: Mapping[tuple[str, str], tuple[float, float, float]], settings: Sequence[str],
+                     xlabel: str, xlim: tuple[float, float], path: Path, zero_line: bool = False,
+                     xticks: Sequence[float] | None = None) -> Path:
+    """One panel per setting, one row per pipeline (report order, top-down) of ``cells[(pipeline, setting)] =
+    (point, low, high)``; missing cells left empty; every panel on the scale ``xlim``; saved to ``path``."""
+    import matplotlib
+
+    matplotlib.use("Agg")  # files only, no display
+    import matplotlib.pyplot as plt
+    from rliable import plot_utils
+
+    # rliable draws the first algorithm at the bottom: reverse so the report's order reads top-down.
+    pipelines = ordered_pipelines({p for p, _ in cells})[::-1]
+    # One panel per setting: rliable indexes the axes as an array, which needs two panels or more.
+    names = list(settings) if len(settings) > 1 else [*settings, ""]
+    empty = (np.nan, np.nan, np.nan)
+    got = {p: np.array([cells.get((p, s), empty) for s in names], dtype=np.float64) for p in pipelines}
+    points = {p: v[:, 0] for p, v in got.items()}
+    intervals = {p: v[:, 1:].T for p, v in got.items()}
+    fig, axes = plot_utils.plot_interval_estimates(
+        points, intervals, metric_names=names, algorithms=pipelines, subfigure_width=2.6, row_height=0.45,
+        xlabel=xlabel, xlabel_y_coordinate=-0.02 - 0.6 / max(2, len(pipelines)), wspace=0.25)
+    for ax in np.ravel(axes):  # one scale in every panel, so the settings compare at a glance
+        ax.set_xlim(*xlim)
+        if xticks is not None:
+            ax.set_xticks(list(xticks))
+        if zero_line:
+            ax.axvline(0.0, color="black", linewidth=0.8)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100, bbox_inches="tight")
+    plt.close(fig)
+    return path
 
 
 def plot_success_intervals(table: Sequence[Mapping[str, Any]], out: Path, statistic: str = "mean",
@@ -23,83 +58,30 @@ def plot_success_intervals(table: Sequence[Mapping[str, Any]], out: Path, statis
     rows = [r for r in table if r["metric"] == metric]
     if not rows:
         return None
-    import matplotlib
-
-    matplotlib.use("Agg")  # files only, no display
-    import matplotlib.pyplot as plt
-    from rliable import plot_utils
-
-    point_key, low_key, high_key = STATISTICS[statistic]
+    keys = STATISTICS[statistic]
+    cells = {(r["pipeline"], r["setting"]): tuple(100 * r[k] for k in keys) for r in rows}
     settings = list(dict.fromkeys(r["setting"] for r in rows))
-    # rliable draws the first algorithm at the bottom: reverse so the report's order reads top-down.
-    pipelines = ordered_pipelines(r["pipeline"] for r in rows)[::-1]
-    cells = {(r["pipeline"], r["setting"]): r for r in rows}
-    points, intervals = {}, {}
-    for p in pipelines:
-        got = [cells.get((p, s)) for s in settings]
-        points[p] = np.array([100 * c[point_key] if c else np.nan for c in got])
-        intervals[p] = np.array([[100 * c[low_key] if c else np.nan for c in got],
-                                 [100 * c[high_key] if c else np.nan for c in got]])
-    # One panel per setting: rliable indexes the axes as an array, which needs two panels or more.
-    names = settings if len(settings) > 1 else [*settings, ""]
-    if len(settings) == 1:
-        points = {p: np.append(v, np.nan) for p, v in points.items()}
-        intervals = {p: np.hstack([v, [[np.nan], [np.nan]]]) for p, v in intervals.items()}
-    fig, axes = plot_utils.plot_interval_estimates(
-        points, intervals, metric_names=names, algorithms=pipelines, subfigure_width=2.6,
-        row_height=0.45, xlabel=f"ego {metric.replace('_', '-')} rate (%), {statistic} with 95 % interval",
-        xlabel_y_coordinate=-0.02 - 0.6 / max(2, len(pipelines)), wspace=0.25)
-    for ax in np.ravel(axes):  # one scale in every panel, so the settings compare at a glance
-        ax.set_xlim(-2, 102)
-        ax.set_xticks([0, 50, 100])
-    path = out / f"ci_{metric}_{statistic}.png"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100, bbox_inches="tight")
-    plt.close(fig)
-    return path
+    return _interval_figure(cells, settings, f"ego {metric.replace('_', '-')} rate (%), {statistic} with 95 % interval",
+                            (-2, 102), out / f"ci_{metric}_{statistic}.png", xticks=(0, 50, 100))
 
 
 def plot_success_differences(table: Sequence[Mapping[str, Any]], out: Path) -> list[Path]:
     """``success_differences[_<algo>].png`` in ``out``, one per reference pipeline of
     `seal.experiments.report.differences.difference_table` rows: per setting (and over all settings) each pipeline's
     success minus the reference's in points with its 95 % interval, a line at 0; [] without rows."""
-    if not table:
-        return []
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from rliable import plot_utils
-
-    paths = []
     references = list(dict.fromkeys(r["reference"] for r in table))
+    paths = []
     for ref in references:
         rows = [r for r in table if r["reference"] == ref]
+        # no spread among the seeds: no interval, drawn as the point alone
+        cells = {(r["pipeline"], r["setting"]): (100 * r["difference"],
+                                                 100 * (r["low"] if np.isfinite(r["low"]) else r["difference"]),
+                                                 100 * (r["high"] if np.isfinite(r["high"]) else r["difference"]))
+                 for r in rows}
+        bound = max(1.0, max(abs(v) for c in cells.values() for v in c))  # one symmetric scale, 0 marked
+        algo = algo_of(ref)
+        name = f"success_differences_{algo}.png" if algo and len(references) > 1 else "success_differences.png"
         settings = list(dict.fromkeys(r["setting"] for r in rows))
-        names = settings if len(settings) > 1 else [*settings, ""]
-        pipelines = ordered_pipelines(r["pipeline"] for r in rows)[::-1]
-        cells = {(r["pipeline"], r["setting"]): r for r in rows}
-        points, intervals = {}, {}
-        for p in pipelines:
-            got = [cells.get((p, s)) for s in names]
-            d = np.array([100 * c["difference"] if c else np.nan for c in got])
-            # no spread among the seeds: no interval, drawn as the point alone
-            low = np.array([100 * c["low"] if c and np.isfinite(c["low"]) else v for c, v in zip(got, d, strict=True)])
-            high = np.array([100 * c["high"] if c and np.isfinite(c["high"]) else v
-                             for c, v in zip(got, d, strict=True)])
-            points[p], intervals[p] = d, np.stack([low, high])
-        bound = max(1.0, float(np.nanmax(np.abs(np.concatenate([v.ravel() for v in intervals.values()])))))
-        fig, axes = plot_utils.plot_interval_estimates(
-            points, intervals, metric_names=names, algorithms=pipelines, subfigure_width=2.6, row_height=0.45,
-            xlabel=f"success minus {ref} (points), 95 % interval", wspace=0.25,
-            xlabel_y_coordinate=-0.02 - 0.6 / max(2, len(pipelines)))
-        for ax in np.ravel(axes):  # one symmetric scale, 0 marked: which side of no difference, at a glance
-            ax.set_xlim(-1.05 * bound, 1.05 * bound)
-            ax.axvline(0.0, color="black", linewidth=0.8)
-        algo = ref[ref.index("(") + 1:-1] if ref.endswith(")") else ""
-        path = out / (f"success_differences_{algo}.png" if algo and len(references) > 1 else "success_differences.png")
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=100, bbox_inches="tight")
-        plt.close(fig)
-        paths.append(path)
+        paths.append(_interval_figure(cells, settings, f"success minus {ref} (points), 95 % interval",
+                                      (-1.05 * bound, 1.05 * bound), out / name, zero_line=True))
     return paths

@@ -184,12 +184,17 @@ def poi_interval(x: Sequence[np.ndarray], y: Sequence[np.ndarray], n_boot: int =
     from arch.bootstrap import IndependentSamplesBootstrap
     from rliable import metrics
 
-    sx, sy = np.stack([np.asarray(v, np.float64) for v in x], 1), np.stack([np.asarray(v, np.float64) for v in y], 1)
+    sx, sy = _seeds_by_task(x), _seeds_by_task(y)
     point = float(metrics.probability_of_improvement(sx, sy))
     bootstrap = IndependentSamplesBootstrap(sx, sy, seed=np.random.default_rng(seed))
     ci = bootstrap.conf_int(lambda a, b: np.array([pairwise_improvement(a, b)]), reps=n_boot,
                             method="percentile", size=CONFIDENCE).ravel()
     return point, float(ci[0]), float(ci[1])
+
+
+def _seeds_by_task(scores: Sequence[np.ndarray]) -> np.ndarray:
+    """``[seeds, tasks]`` float64 from the per-task seed scores ``scores[t] [seeds]`` (rliable's layout)."""
+    return np.stack([np.asarray(v, np.float64) for v in scores], 1)
 
 
 def pairwise_improvement(scores_x: np.ndarray, scores_y: np.ndarray) -> float:
@@ -209,7 +214,7 @@ def poi_permutation_p(x: Sequence[np.ndarray], y: Sequence[np.ndarray], n_perm: 
     [seeds_y]`` of `poi_interval`: the share of splits of the pooled egos (whole egos, every task kept together)
     into groups of the two sizes whose ``|P - 0.5|`` is at least the observed one. Exact (every split, the observed
     one included) when there are at most ``n_perm``; else ``n_perm`` random splits, ``(hits + 1) / (n_perm + 1)``."""
-    sx, sy = np.stack([np.asarray(v, np.float64) for v in x], 1), np.stack([np.asarray(v, np.float64) for v in y], 1)
+    sx, sy = _seeds_by_task(x), _seeds_by_task(y)
     pooled, n, total = np.concatenate([sx, sy]), len(sx), len(sx) + len(sy)
     observed = abs(pairwise_improvement(sx, sy) - 0.5) - 1e-12  # float slack: equal statistics count as hits
     exact = math.comb(total, n) <= n_perm

@@ -107,8 +107,7 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
         improvement_markdown(poi) if poi else "(fewer than two comparable pipelines)\n",
         "How large a difference the data allow: each pipeline's success rate minus the No-Adv pipeline's, in points "
         "[Welch's 95 % interval over the seeds' rates, on the scenarios both played; the seeds' bootstrap covers too "
-        "little with 4 seeds] "
-        "(`success_differences.csv`).\n",
+        "little with 4 seeds] (`success_differences.csv`).\n",
         difference_markdown(differences) if differences else "(no No-Adv pipeline to compare with)\n",
         "Each seed's success rate averaged over its pipeline's settings: the probability of improvement above compares "
         "these egos whole, so one seed far from its siblings moves every comparison of its pipeline "
