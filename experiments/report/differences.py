@@ -13,6 +13,12 @@ rate is its mean over the settings (one ego plays them all). Why not a bootstrap
 it covers too little. Splitting each of the fifth decisive run's TD3 pipelines' 8 seeds 4 against 4 (35 splits x 7
 pipelines, no true difference), a percentile bootstrap of the seeds put 0 outside its 95 % interval in 13.5 % of the
 per-setting and 15.1 % of the all-settings differences, Welch's interval in 5.0 % and 5.3 %.
+New scenarios of the same kind: the two pipelines play the same scenarios, so the scenario-to-scenario variation
+mostly cancels in their difference, and what is left is already in each seed's rate. A paired crossed bootstrap
+(scenarios drawn once for both pipelines and all their seeds, each pipeline's seeds drawn apart) gave median
+half-widths of 2.8 / 4.8 points (ReSkill / TD3, every pipeline minus No-Adv in every setting of that run), Welch's
+2.8 / 4.6; the scenario part alone 1.6 / 2.2. A single pipeline's rate is another matter
+(`seal.experiments.report.stats`).
 """
 
 from __future__ import annotations

@@ -210,7 +210,7 @@ def first_page_markdown(cis: Sequence[Mapping[str, Any]], poi: Sequence[Mapping[
     success difference from the No-Adv pipeline the data allow."""
     pooled = {r["algo"]: r for r in agreement if r["setting"] == ALL_SETTINGS}
     md = ["## Summary: who wins where\n",
-          "Success rate: mean over seeds and scenarios with its 95 % stratified-bootstrap interval (rliable). "
+          "Success rate: mean over seeds and scenarios with its 95 % interval (seeds and scenarios resampled). "
           "P = probability that the leader's ego beats the runner-up's in that setting (per-seed success rates; "
           "0.5 = no difference). The leader is *ahead* only when both tests agree: its seeds beat the runner-up's (P's "
           f"95 % interval lies above 0.5 and a permutation test of P, whole egos relabelled, gives p < {ALPHA}; "

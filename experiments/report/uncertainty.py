@@ -93,8 +93,9 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
         figures += [p.name for p in plot_success_differences(differences, out)]
     sections = [
         "## Uncertainty (rliable)\n",
-        "Success rate in %: mean over seeds and scenarios [95 % stratified-bootstrap interval; seeds and, within "
-        "each, scenarios resampled].\n",
+        "Success rate in %: mean over seeds and scenarios [95 % crossed-bootstrap interval: seeds and scenarios "
+        "resampled, the same scenarios for every drawn seed, so it holds on scenarios not seen; rliable's stratified "
+        "interval, which redraws the scenarios per seed and covers too little, is in `ego_ci.csv`].\n",
         ci_markdown(cis) if cis else "(none)\n",
         "Success rate in %: IQM (interquartile mean) of the seeds' rates [95 % interval, same bootstrap].\n",
         ci_markdown(cis, statistic="iqm") if cis else "(none)\n",

@@ -65,7 +65,7 @@ def register(tree: CommandTree) -> None:
         description="Read the evaluation episodes of a results store (seal eval runs / seal run) and write into "
         "--out: report.md (first page: which pipeline wins where, by how much, how sure; the thesis's findings "
         "checked); ego_ci.csv (per pipeline x setting, rliable: mean and IQM of the seeds' rates with 95 % "
-        "stratified-bootstrap intervals over seeds and scenarios); improvement.csv (probability of improvement of "
+        "crossed-bootstrap intervals over seeds and scenarios); improvement.csv (probability of improvement of "
         "every pipeline over every other, with its interval and a permutation test's p); success_differences.csv "
         "(each pipeline's success minus No-Adv's per setting and over all settings, Welch's interval over the seeds; "
         "success_differences*.png); agreement.csv (do egos of one pipeline fail the same scenarios?); paired.csv / "

@@ -25,6 +25,8 @@ from seal.experiments.report.paired import (
     scenario_rates,
 )
 from seal.experiments.report.stats import (
+    ScoreMatrix,
+    crossed_bootstrap,
     ego_ci_table,
     improvement_markdown,
     improvement_table,
@@ -82,6 +84,43 @@ def test_mean_and_iqm_intervals_contain_the_estimates_and_shrink_with_more_scena
         widths.append(est["mean_high"] - est["mean_low"])
     assert widths[1] < widths[0] / 2
 
+
+def _crossed_matrix(rng: np.random.Generator, seeds: int, scenarios: int) -> ScoreMatrix:
+    """0/1 successes of a crossed design: a scenario's difficulty (logit sd 3) is shared by every seed, each seed
+    has its own skill (logit sd 0.3)."""
+    logit = rng.normal(0.0, 3.0, scenarios)[:, None] + rng.normal(0.0, 0.3, seeds)[None, :]
+    success = rng.random((scenarios, seeds)) < 1 / (1 + np.exp(-logit))
+    values = np.stack([success, ~success, np.zeros_like(success)], axis=2).astype(np.float64)
+    return ScoreMatrix(tuple(map(str, range(scenarios))), tuple(map(str, range(seeds))), values)
+
+
+def test_crossed_interval_covers_the_population_rate_where_the_stratified_one_does_not() -> None:
+    """New seeds on new scenarios of the same kind: the population rate (E sigmoid(a + b), a ~ N(0, 3^2),
+    b ~ N(0, 0.3^2), 0.5 by symmetry) lies in the crossed 95 % interval about 95 % of the time (measured 94 %), and
+    in rliable's stratified one (scenarios redrawn per seed) far less often (72 %), because that one divides the
+    scenario variance by the 8 seeds."""
+    rng = np.random.default_rng(7)
+    covered = {"crossed": 0, "stratified": 0}
+    trials = 120
+    for t in range(trials):
+        est = mean_iqm_intervals(_crossed_matrix(rng, seeds=8, scenarios=150), n_boot=400, seed=t)["success"]
+        covered["crossed"] += est["mean_low"] <= 0.5 <= est["mean_high"]
+        covered["stratified"] += est["stratified_low"] <= 0.5 <= est["stratified_high"]
+        assert est["stratified_high"] - est["stratified_low"] < est["mean_high"] - est["mean_low"]
+    assert covered["crossed"] / trials >= 0.88
+    assert covered["stratified"] / trials <= 0.8
+
+
+def test_crossed_bootstrap_draws_one_scenario_set_for_all_seeds() -> None:
+    """Two seeds with identical outcomes stay identical in every resample (the scenarios are drawn once for both),
+    so the IQM and the mean resample alike; a seed's resampled rate is a rate of the drawn scenarios."""
+    values = np.zeros((5, 2, 1))
+    values[:2, :, 0] = 1.0  # scenarios 0-1 solved by both seeds
+    boot = crossed_bootstrap(values, n_boot=300, seed=1)
+    assert boot.shape == (300, 2, 1)
+    assert np.array_equal(boot[:, 0, 0], boot[:, 1, 0])
+    assert set(np.round(boot[:, 0, 0] * 5).astype(int)) <= set(range(6))
+    assert 0.3 < boot[:, 0, 0].mean() < 0.5  # centred on the rate 2 / 5
 
 def test_iqm_columns_equal_rliables_iqm() -> None:
     from rliable import metrics
