@@ -1,19 +1,19 @@
 """The first page of the report: which pipeline wins where, by how much and how sure we are, written from the
 numbers of `seal.experiments.report.stats` (nothing about who wins is written by hand).
 
-Per ego algorithm and setting: the pipeline with the highest mean success rate, the runner-up, the margin in
-points, both 95 % intervals and the probability that the leader's egos beat the runner-up's in that setting
-(rliable, over seeds). The leader is called ahead only when that probability beats 0.5 (its 95 % interval above
-0.5 and its permutation test's p below `seal.experiments.report.stats.ALPHA`: `poi_verdict`) *and* the two success
-intervals do not overlap: with few seeds that probability can be 1 [1-1] (every leader seed beats
-every runner-up seed) while the margin is within the scenario-to-scenario noise that only the success intervals
-see. Then which pipelines beat which over all settings (the averaged probability of improvement, by the same
-`poi_verdict`; a seed-level statement), the precision (the largest interval half-width against `TARGET_HALF_WIDTH`)
-and, from Table 6.2's intervals and the paired generator differences, the most realistic generator and the lowest
-collision speed; the reference egos (Replay, the heuristic driver) against each setting's leader; whether the
-pipeline leaves a trace in what the egos do (`seal.experiments.report.agreement`: egos of one pipeline against egos
-of different pipelines, scenario by scenario); last, the thesis's findings checked one by one
-(`seal.experiments.report.thesis_claims`).
+Per ego algorithm and setting: the pipeline with the highest mean success rate, the runner-up, the margin in points,
+both 95 % intervals and the probability that the leader's egos beat the runner-up's in that setting (rliable, over
+seeds). The leader is called ahead only when that probability beats 0.5 (its 95 % interval above 0.5 and its
+permutation test's p below `seal.experiments.report.stats.ALPHA`: `poi_verdict`) *and* the margin's paired interval
+(`seal.experiments.report.gaps`: the scenarios drawn once for both) lies above 0: with few seeds that probability
+can be 1 [1-1] (every leader seed beats every runner-up seed) while the margin is within the scenario-to-scenario
+noise that only the scenarios' resampling sees. Then which pipelines beat which over all settings (the averaged
+probability of improvement, by the same `poi_verdict`; a seed-level statement), the precision (the largest interval
+half-width against `TARGET_HALF_WIDTH`) and, from Table 6.2's intervals and the paired generator differences, the
+most realistic generator and the lowest collision speed; the reference egos (Replay, the heuristic driver) against
+each setting's leader (paired gaps); whether the pipeline leaves a trace in what the egos do
+(`seal.experiments.report.agreement`: egos of one pipeline against egos of different pipelines, scenario by
+scenario); last, the thesis's findings checked one by one (`seal.experiments.report.thesis_claims`).
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ from typing import Any
 
 from seal.experiments.report.agreement import ALL_SETTINGS, agreement_line
 from seal.experiments.report.differences import bound_line
+from seal.experiments.report.gaps import gap_lookup
 from seal.experiments.report.generator_stats import generator_rows
 from seal.experiments.report.grouping import algo_of, group_name, groups_in, in_group, is_trained
 from seal.experiments.report.stats import ALPHA, MIN_SEEDS_FOR_POI, enough_seeds, poi_verdict
@@ -52,21 +53,33 @@ def leader_pairs(cis: Sequence[Mapping[str, Any]]) -> list[tuple[str, str, str]]
     return [(r[0]["pipeline"], r[1]["pipeline"], setting) for (_, setting), r in _ranked(cis).items() if len(r) > 1]
 
 
-def setting_verdicts(cis: Sequence[Mapping[str, Any]], poi_by_setting: Sequence[Mapping[str, Any]]
-                     ) -> list[dict[str, Any]]:
+def reference_pairs(cis: Sequence[Mapping[str, Any]]) -> list[tuple[str, str, str]]:
+    """``(leader, reference ego, setting)`` per algorithm and setting for every reference ego (trained by no
+    pipeline) evaluated there: the paired gaps `reference_lines` reads."""
+    refs = {(r["pipeline"], r["setting"]) for r in cis if r["metric"] == "success" and not is_trained(r["pipeline"])
+            and math.isfinite(r["mean"])}
+    return [(ranked[0]["pipeline"], ref, setting) for (_, setting), ranked in _ranked(cis).items()
+            for ref, s in sorted(refs) if s == setting]
+
+
+def setting_verdicts(cis: Sequence[Mapping[str, Any]], poi_by_setting: Sequence[Mapping[str, Any]],
+                     gaps: Sequence[Mapping[str, Any]] = ()) -> list[dict[str, Any]]:
     """One row per (algorithm, setting) over the trained pipelines: ``best``, ``runner_up`` (None with one
-    pipeline), their CI rows, ``margin`` (rate difference), the leader's per-setting probability of improvement
-    row (``poi``, or None), ``seeds_agree`` (`poi_verdict` holds), ``apart`` (the two success intervals do not
-    overlap) and ``ahead`` (both)."""
+    pipeline), their CI rows, ``margin`` (rate difference), ``gap`` (the leader-minus-runner-up row of ``gaps``,
+    `seal.experiments.report.gaps.gap_table`, or None), the leader's per-setting probability of improvement row
+    (``poi``, or None), ``seeds_agree`` (`poi_verdict` holds), ``apart`` (the gap's paired interval lies above 0)
+    and ``ahead`` (both)."""
     poi = {(r["pipeline"], r["reference"], r["setting"]): r for r in poi_by_setting}
+    gap_rows = gap_lookup(gaps)
     out = []
     for (algo, setting), ranked in _ranked(cis).items():
         best, second = ranked[0], (ranked[1] if len(ranked) > 1 else None)
         p = poi.get((best["pipeline"], second["pipeline"], setting)) if second else None
+        gap = gap_rows.get((best["pipeline"], second["pipeline"], setting)) if second else None
         agree = bool(p and poi_verdict(p) == "holds")
-        apart = bool(second and best["ci_low"] > second["ci_high"])
+        apart = bool(gap and gap["gap_low"] > 0)
         out.append({"algo": algo, "setting": setting, "best": best, "runner_up": second,
-                    "margin": best["mean"] - second["mean"] if second else math.nan,
+                    "margin": best["mean"] - second["mean"] if second else math.nan, "gap": gap,
                     "poi": p, "seeds_agree": agree, "apart": apart, "ahead": agree and apart})
     return out
 
@@ -77,10 +90,10 @@ def _verdict(v: Mapping[str, Any]) -> str:
     if v["ahead"]:
         return f"{leader} ahead"
     if v["seeds_agree"]:
-        return f"{leader} ahead on the seeds, but the success intervals overlap: not sure"
+        return f"{leader} ahead on the seeds, but the margin is within the scenarios' noise: not sure"
     few = bool(v["poi"]) and not enough_seeds(v["poi"])
     if v["apart"]:
-        return f"{leader}'s interval is above, but " + (
+        return f"{leader}'s margin is beyond the scenarios' noise, but " + (
             f"fewer than {MIN_SEEDS_FOR_POI} seeds: not sure" if few else "P does not beat 0.5: not sure")
     if few:
         return f"no clear winner (fewer than {MIN_SEEDS_FOR_POI} seeds a side for P)"
@@ -93,25 +106,32 @@ def _verdict_row(v: Mapping[str, Any]) -> str:
         return f"| {v['setting']} | {best['pipeline']} | {_pct(best)} | - | - | - | - | only one pipeline |"
     p_text = f"{p['p_improvement']:.2f} [{p['ci_low']:.2f}-{p['ci_high']:.2f}], p = {p['p_perm']:.2f}" if p else "-"
     verdict = _verdict(v)
+    g = v["gap"]
+    margin = f"{100 * v['margin']:+.1f}" + (f" [{100 * g['gap_low']:+.1f}, {100 * g['gap_high']:+.1f}]" if g else "")
     return (f"| {v['setting']} | {best['pipeline']} | {_pct(best)} | {second['pipeline']} | {_pct(second)} | "
-            f"{100 * v['margin']:+.1f} | {p_text} | {verdict} |")
+            f"{margin} | {p_text} | {verdict} |")
 
 
-def reference_lines(cis: Sequence[Mapping[str, Any]], verdicts: Sequence[Mapping[str, Any]]) -> list[str]:
+def reference_lines(cis: Sequence[Mapping[str, Any]], verdicts: Sequence[Mapping[str, Any]],
+                    gaps: Sequence[Mapping[str, Any]] = ()) -> list[str]:
     """One sentence per reference ego (``replay``, ``heuristic``: trained by no pipeline) in the settings of
-    ``verdicts`` (one algorithm's): its success rate per setting, and in how many of them the leading pipeline's
-    interval lies above / below the reference's (the question "does training beat the heuristic driver?")."""
+    ``verdicts`` (one algorithm's): its success rate per setting, and in how many of them the leading pipeline is
+    above / below it beyond the noise (the paired gap's interval of ``gaps`` above / below 0; the question "does
+    training beat the heuristic driver?")."""
     leaders = {v["setting"]: v["best"] for v in verdicts}
+    gap_rows = gap_lookup(gaps)
     refs = [r for r in cis if r["metric"] == "success" and not is_trained(r["pipeline"])
             and r["setting"] in leaders and math.isfinite(r["mean"])]
     lines = []
     for name in dict.fromkeys(r["pipeline"] for r in refs):
         rows = [r for r in refs if r["pipeline"] == name]
-        above = sum(leaders[r["setting"]]["ci_low"] > r["ci_high"] for r in rows)
-        below = sum(leaders[r["setting"]]["ci_high"] < r["ci_low"] for r in rows)
+        found = [g for r in rows if (g := gap_rows.get((leaders[r["setting"]]["pipeline"], name, r["setting"])))]
+        above = sum(g["gap_low"] > 0 for g in found)
+        below = sum(g["gap_high"] < 0 for g in found)
         cells = ", ".join(f"{r['setting']} {100 * r['mean']:.1f} %" for r in rows)
-        lines.append(f"- Reference ego **{name}** (no training): {cells}; the leading pipeline's interval lies above "
-                     f"its interval in {above}, below it in {below} of {len(rows)} settings.")
+        lines.append(f"- Reference ego **{name}** (no training): {cells}; the leading pipeline is above it in "
+                     f"{above}, below it in {below} of {len(found)} settings (paired 95 % interval of the gap on "
+                     "the same scenarios).")
     return lines
 
 
@@ -201,33 +221,35 @@ def _leader_verdict(first: Mapping[str, Any], second: Mapping[str, Any], key: st
 def first_page_markdown(cis: Sequence[Mapping[str, Any]], poi: Sequence[Mapping[str, Any]],
                         poi_by_setting: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[str, Any]],
                         training_lines: Sequence[str] = (), gen_diff: Sequence[Mapping[str, Any]] = (),
-                        agreement: Sequence[Mapping[str, Any]] = (), differences: Sequence[Mapping[str, Any]] = ()
-                        ) -> str:
+                        agreement: Sequence[Mapping[str, Any]] = (), differences: Sequence[Mapping[str, Any]] = (),
+                        gaps: Sequence[Mapping[str, Any]] = ()) -> str:
     """The report's first page (module docstring) as Markdown; ``training_lines`` (e.g.
     `seal.experiments.report.convergence.convergence_line`) follow the precision line; ``agreement``
     (`seal.experiments.report.agreement.agreement_table`) adds, per ego algorithm, whether the pipeline leaves a
     trace in what the egos do; ``differences`` (`seal.experiments.report.differences.difference_table`) how large a
-    success difference from the No-Adv pipeline the data allow."""
+    success difference from the No-Adv pipeline the data allow; ``gaps`` (`seal.experiments.report.gaps.gap_table`
+    of `leader_pairs` and `reference_pairs`) the paired margins of each setting's leader."""
     pooled = {r["algo"]: r for r in agreement if r["setting"] == ALL_SETTINGS}
     md = ["## Summary: who wins where\n",
           "Success rate: mean over seeds and scenarios with its 95 % interval (seeds and scenarios resampled). "
           "P = probability that the leader's ego beats the runner-up's in that setting (per-seed success rates; "
           "0.5 = no difference). The leader is *ahead* only when both tests agree: its seeds beat the runner-up's (P's "
           f"95 % interval lies above 0.5 and a permutation test of P, whole egos relabelled, gives p < {ALPHA}; "
-          "the interval alone covers too little with 4 seeds) and the two success intervals do not overlap (the "
-          "margin is larger than the scenario-to-scenario noise).\n"]
-    verdicts = setting_verdicts(cis, poi_by_setting)
+          "the interval alone covers too little with 4 seeds) and the margin's paired 95 % interval (the same "
+          "scenarios drawn for both, each side's seeds apart) lies above 0 (it is larger than the "
+          "scenario-to-scenario noise).\n"]
+    verdicts = setting_verdicts(cis, poi_by_setting, gaps)
     for algo in dict.fromkeys(v["algo"] for v in verdicts):
         if algo:
             md.append(f"### Ego algorithm: {algo}\n")
-        md += ["| setting | leader | success [95 % CI] | runner-up | success [95 % CI] | margin (points) | "
+        md += ["| setting | leader | success [95 % CI] | runner-up | success [95 % CI] | margin (points) [95 % CI] | "
                "P(leader > runner-up) | verdict |", "|---|---|---:|---|---:|---:|---:|---|"]
         md += [_verdict_row(v) for v in verdicts if v["algo"] == algo]
         md.append("")
         md += overall_lines([r for r in poi if algo_of(r["pipeline"]) == algo]) or ["- (one pipeline only)"]
         if line := bound_line(differences, algo):
             md.append(line)
-        md += reference_lines(cis, [v for v in verdicts if v["algo"] == algo])
+        md += reference_lines(cis, [v for v in verdicts if v["algo"] == algo], gaps)
         if algo in pooled and (line := agreement_line(pooled[algo])):
             md.append(line)
         md.append("")

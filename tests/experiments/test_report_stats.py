@@ -15,8 +15,10 @@ from seal.experiments.report.first_page import (
     generator_lines,
     leader_pairs,
     overall_lines,
+    reference_pairs,
     setting_verdicts,
 )
+from seal.experiments.report.gaps import gap_table
 from seal.experiments.report.grouping import algo_of, base_pipeline, comparable, label_by_algo
 from seal.experiments.report.paired import (
     discrimination_counts,
@@ -216,7 +218,9 @@ def test_first_page_names_the_leader_from_the_numbers() -> None:
     poi, per_setting = improvement_table(rows, n_boot=300), improvement_table(rows, n_boot=300, per_setting=True,
                                                                               only=pairs)
     assert {r["setting"] for r in per_setting} == {"normal", "hard", "seal"} and len(per_setting) == 6
-    verdicts = {v["setting"]: v for v in setting_verdicts(cis, per_setting)}
+    gaps = gap_table(rows, pairs + reference_pairs(cis), n_boot=300)
+    assert sorted(reference_pairs(cis)) == [("cat", "heuristic", "normal"), ("noadv", "heuristic", "hard")]
+    verdicts = {v["setting"]: v for v in setting_verdicts(cis, per_setting, gaps)}
     assert verdicts["normal"]["best"]["pipeline"] == "cat" and verdicts["normal"]["ahead"]
     assert verdicts["normal"]["margin"] == pytest.approx(0.9 - 0.4625)
     assert not verdicts["hard"]["ahead"]  # noadv 47.5 vs cat 46.3 %: no clear winner
@@ -226,11 +230,12 @@ def test_first_page_names_the_leader_from_the_numbers() -> None:
                "collision_speed_mps": 4.0, "collision_speed_mps_low": 3.0, "collision_speed_mps_high": 5.0},
               {"setting": "seal", "realism": 0.2, "realism_low": 0.15, "realism_high": 0.24,
                "collision_speed_mps": 5.0, "collision_speed_mps_low": 4.5, "collision_speed_mps_high": 5.5}]
-    md = first_page_markdown(cis, poi, per_setting, gen_ci)
+    md = first_page_markdown(cis, poi, per_setting, gen_ci, gaps=gaps)
     assert "| normal | cat | 90.0 % [" in md and "| cat ahead |" in md and "| no clear winner |" in md
-    assert "seal ahead on the seeds, but the success intervals overlap: not sure" in md
-    assert ("- Reference ego **heuristic** (no training): normal 50.0 %, hard 45.0 %; the leading pipeline's interval "
-            "lies above its interval in 1, below it in 0 of 2 settings.") in md
+    assert "| +15.0 [+0.0, +38.8] |" in md  # paired: every scenario's gap >= 0, 3 of 10 scenarios differ
+    assert "seal ahead on the seeds, but the margin is within the scenarios' noise: not sure" in md
+    assert ("- Reference ego **heuristic** (no training): normal 50.0 %, hard 45.0 %; the leading pipeline is above "
+            "it in 1, below it in 0 of 2 settings (paired 95 % interval of the gap on the same scenarios).") in md
     assert ("most realistic generator (lowest mean WD to the logged adversaries): **seal 0.2 [0.15-0.24]** (then "
             "cat 0.3 [0.25-0.35]); its interval lies below the next one's.") in md
     assert "lowest collision speed: **cat 4 m/s [3-5]** (then seal 5 m/s [4.5-5.5]); its interval overlaps" in md
