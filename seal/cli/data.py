@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from seal.cli.args import LAYOUTS, CliError, add_plugin_option, layouts, positive_int, share
+from seal.cli.args import LAYOUTS, CliError, add_plugin_option, layouts, non_negative_int, positive_int, share
 from seal.cli.tree import CommandTree
 
 
@@ -254,7 +254,8 @@ def _register_dataset_tools(data_sub: argparse._SubParsersAction) -> None:
     split.add_argument("--score", choices=("gt", "fe", "as", "ac"), default="ac",
                        help="SafeShift score variant the Hard rule ranks by (default ac)")
     split.add_argument("--hard-quantile", type=share("--hard-quantile"), default=0.8, help="default 0.8")
-    split.add_argument("--n-train", type=positive_int("--n-train"), default=400, help="default 400")
+    split.add_argument("--n-train", type=non_negative_int("--n-train"), default=400,
+                       help="default 400; 0 = a pool held out for evaluation only (eval and hard splits)")
     split.add_argument("--n-eval", type=positive_int("--n-eval"), default=100, help="default 100")
     split.add_argument("--n-hard", type=positive_int("--n-hard"), default=100, help="default 100")
     split.add_argument("--seed", type=int, default=42, help="default 42")

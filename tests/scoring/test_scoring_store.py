@@ -181,3 +181,16 @@ def test_splits_of_one_recording_are_refused_with_the_option_to_change(tmp_path:
     score_dataset(root, workers=1, progress=False)
     with pytest.raises(SplitError, match="groups .* never go to two splits"):
         make_splits(root, n_train=2, n_eval=2, n_hard=1, hard_by="scene", hard_quantile=0.5)
+
+
+def test_a_pool_held_out_for_evaluation_only_has_no_train_split(scored: Path) -> None:
+    """`seal data split --n-train 0`: eval and hard filled, train empty (a second pool to evaluate trained egos on
+    scenarios from traffic runs they never saw)."""
+    from seal.cli import main
+
+    assert main(["data", "split", str(scored), "--n-train", "0", "--n-eval", "8", "--n-hard", "4",
+                 "--hard-by", "scene", "--hard-quantile", "0.7"]) == 0
+    splits = Dataset.open(scored).splits
+    assert (len(splits["train"]), len(splits["eval"]), len(splits["hard"])) == (0, 8, 4)
+    with pytest.raises(SystemExit):  # argparse: "--n-train must be >= 0, got -1"
+        main(["data", "split", str(scored), "--n-train", "-1"])
