@@ -68,8 +68,9 @@ def chunk_jobs(
     plan, 1 to 20 scenarios each (small enough to balance the workers, large enough that job overhead stays
     small), and the last ``n_workers`` chunks cut in halves (`_halve_tail`)."""
     session = uuid.uuid4().hex
+    split_ids: dict[tuple[str, str | None, int | None], list[str]] = {}  # each split read once for all egos
     with ResultsStore(store_path) as store:
-        plans = [(ego, plan_ego(store, ego, settings, config)) for ego in egos]
+        plans = [(ego, plan_ego(store, ego, settings, config, split_ids)) for ego in egos]
     auto = chunk_size is None
     if chunk_size is None:
         largest = max((len(items) for _, items in plans), default=1)

@@ -63,6 +63,22 @@ def test_chunks_cover_every_missing_scenario_once(tmp_path: Path) -> None:
     assert chunk_jobs(store, egos, settings, config, n_workers=2) == []
 
 
+def test_planning_reads_each_split_once_for_all_egos(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A split is read from every shard of the pool (~3 s at 10,000 scenes): the plans of several egos share it."""
+    import seal.core.dataset as dataset_module
+
+    data = _dataset(tmp_path / "data")
+    reads: list[str | None] = []
+    real = dataset_module.load_split
+    monkeypatch.setattr(dataset_module, "load_split", lambda root, split, *a, **k: reads.append(split) or
+                        real(root, split, *a, **k))
+    egos = [read_run("heuristic"), read_run("replay"), read_run("heuristic")]
+    jobs = chunk_jobs(str(tmp_path / "r.sqlite"), egos, parse_settings("normal,hard", data), resolve_eval_config(k=1),
+                      chunk_size=10)
+    assert sorted(reads) == ["eval", "hard"]
+    assert [len(j["items"]) for j in jobs] == [6, 6, 6]  # each ego still gets its whole plan
+
+
 def test_automatic_chunks_end_in_halves(tmp_path: Path) -> None:
     """Automatic sizes: the last ``n_workers`` chunks are cut in two (a shorter final round), every scenario once."""
     data = _dataset(tmp_path / "data")
