@@ -59,7 +59,8 @@ def fake_eval(job) -> dict:
     pipeline, seed = cfg.get("pipeline", job["run"]), cfg.get("seed", 0)
     with ResultsStore(job["store"]) as store:
         store.upsert_episodes([
-            episode(run=job["run"], setting=s["name"], pipeline=pipeline, seed=seed) for s in job["settings"]
+            episode(run=job["run"], setting=s["name"], pipeline=pipeline, seed=seed, dataset=s["dataset"])
+            for s in job["settings"]
         ])
         for s in job["settings"]:
             store.upsert_setting(s["dataset"], s["name"], "generator" if s["generator"] else "replay", s["split"],

@@ -26,7 +26,7 @@ from seal.experiments.pipeline.references import (
 from seal.experiments.pipeline.tasks import FIT_CONFIGS, FIT_DEFAULTS, OPTIONS
 from seal.experiments.training.config import ALGOS
 
-RUN_EVAL_KEYS = ("settings", "replay_ego", "egos")
+RUN_EVAL_KEYS = ("settings", "replay_ego", "egos", "heldout")
 """Keys of a preset's ``eval`` section besides `seal.experiments.evaluation.evaluate.EvalRunsConfig`'s."""
 REPORT_KEYS = {"plots": bool, "videos": int, "video_format": str, "reps": int, "poi_reps": int}
 BACKEND_KEYS = {"name": str, "workers": int, "address": str, "train_workers": int, "fit_workers": int}
@@ -45,6 +45,7 @@ def check_plan(
     generators = {name: substitute(dict((config.get("generators") or {}).get(name) or {}), models)
                   for name in generators_in_use(config)}
     _check_eval(config.get("eval") or {}, dataset)
+    _check_heldout(config, dataset)
     resolved = with_models(config, models)
     for pipeline, seed, algo in planned_runs(config).values():
         try:
@@ -195,6 +196,36 @@ def _check_eval(ev: Mapping[str, Any], dataset: str) -> None:
         parse_settings(settings, dataset)
     except (ValueError, DatasetError) as exc:
         raise ValueError(f"eval: {exc}") from None
+
+
+def _check_heldout(config: Mapping[str, Any], dataset: str) -> None:
+    """``eval.heldout``: dataset folders other than the run's own, each with the splits the settings read, and not
+    generated from the same traffic runs (same generator seed) as the run's pool."""
+    from seal.core.dataset import Dataset, DatasetError
+    from seal.experiments.pipeline.references import eval_settings, heldout_pools
+
+    pools = (config.get("eval") or {}).get("heldout")
+    if pools is None:
+        return
+    if not isinstance(pools, list) or not all(isinstance(p, str) for p in pools):
+        raise ValueError(f"eval.heldout must be a list of dataset folders, got {pools!r}")
+    own_seed = ((config.get("data") or {}).get("generate") or {}).get("seed", 0)
+    for pool in heldout_pools(config):
+        if pool == str(Path(dataset).resolve()):
+            raise ValueError(f"eval.heldout: {pool} is the run's own dataset")
+        try:
+            ds = Dataset.open(pool)
+        except DatasetError as exc:
+            raise ValueError(f"eval.heldout: {exc}") from None
+        prov = ds.manifest.get("provenance") or {}
+        if not (config.get("data") or {}).get("path") and prov.get("source") == "highway-env" \
+                and prov.get("seed") == own_seed:
+            raise ValueError(f"eval.heldout: {pool} was generated with seed {own_seed}, as the run's pool: the same "
+                             "traffic runs, not held out (generate it with another --seed)")
+        needed = sorted({str(s.split) for s in eval_settings(config, dataset) if s.dataset == pool})
+        if missing := [sp for sp in needed if not ds.splits.get(sp)]:
+            raise ValueError(f"eval.heldout: {pool} has no {' / '.join(missing)} split; run `seal data split "
+                             f"{pool} --n-train 0 ...`")
 
 
 def _check_reference_egos(egos: Any) -> None:

@@ -7,6 +7,7 @@ preset through these helpers.
 from __future__ import annotations
 
 import re
+from pathlib import Path
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -155,3 +156,22 @@ def eval_egos(config: Mapping[str, Any], trained: Sequence[str]) -> list[str]:
     ev = config.get("eval") or {}
     egos = [*trained, *(str(e) for e in ev.get("egos") or []), *(["replay"] if ev.get("replay_ego", True) else [])]
     return list(dict.fromkeys(egos))
+
+
+def heldout_pools(config: Mapping[str, Any]) -> list[str]:
+    """The preset's ``eval.heldout`` dataset folders (``~`` expanded, resolved), each once."""
+    pools = (config.get("eval") or {}).get("heldout") or []
+    return list(dict.fromkeys(str(Path(str(p)).expanduser().resolve()) for p in pools))
+
+
+def eval_settings(config: Mapping[str, Any], dataset: str) -> list[Any]:
+    """The eval step's `seal.experiments.evaluation.evaluate.Setting`\\ s: ``eval.settings`` on the run's own pool
+    ``dataset``, then the same settings but ``real:DIR`` on each ``eval.heldout`` pool (its eval / hard splits; the
+    store keeps the pools apart and the report labels them ``normal@<pool>``)."""
+    from seal.experiments.evaluation.evaluate import REAL_PREFIX, parse_settings
+
+    spec = (config.get("eval") or {}).get("settings") or ["normal", "hard"]
+    settings = parse_settings(spec, dataset)
+    for pool in heldout_pools(config):
+        settings += [s for s in parse_settings(spec, pool) if not s.name.startswith(REAL_PREFIX)]
+    return settings

@@ -46,7 +46,10 @@ The preset's sections (all but ``train`` belong to this module; ``train`` is pas
   (``{noadv-dl: {generator: noadv, train: {deadline_obs: true}}}``: the time-aware No-Adv ego).
 * ``eval``: ``settings`` (list, as ``seal eval runs --settings``), ``k``, ``limit``, ``seed``, ``prior``,
   ``candidates``, ``env``, ``replay_ego`` (default true), ``egos`` (reference egos evaluated beside the
-  trained ones: ``[heuristic]``, or run folders / SB3 models / ``seal.egos`` entry points of other experiments).
+  trained ones: ``[heuristic]``, or run folders / SB3 models / ``seal.egos`` entry points of other experiments),
+  ``heldout`` (dataset folders whose eval / hard splits the egos also play, every setting but ``real:``: pools
+  generated with another seed and split with ``seal data split --n-train 0``, scenarios from traffic runs that
+  neither the training nor the fits saw; the report labels them ``normal@<pool>``).
 * ``report``: ``plots`` (default true), ``videos`` (per generator, default 0), ``video_format``, ``reps`` /
   ``poi_reps`` (bootstrap resamples of the intervals / probabilities of improvement, as ``seal compare``).
 * ``backend``: ``name`` (local | ray), ``workers``, ``address`` (Ray), ``train_workers`` (local: concurrent train
@@ -73,9 +76,11 @@ from seal.experiments.pipeline.plan import check_plan
 from seal.experiments.pipeline.references import (
     dotted,
     eval_egos,
+    eval_settings,
     fits_needed,
     generator_of,
     generators_in_use,
+    heldout_pools,
     planned_runs,
     substitute,
     variant_of,
@@ -255,7 +260,8 @@ def check_run(config_path: str | Path, out: str | Path, sets: Sequence[str] = ()
     return {"preset": config["preset"], "out": str(out), "runs": list(planned_runs(config)),
             "fits": fits_needed(config), "generators": generators_in_use(config),
             "reuse": describe(config, fits_needed(config)) if config.get("reuse") else None,
-            "eval_settings": list(ev.get("settings") or ["normal", "hard"]), "eval_k": ev.get("k", DEFAULTS["k"])}
+            "eval_settings": list(ev.get("settings") or ["normal", "hard"]), "eval_k": ev.get("k", DEFAULTS["k"]),
+            "eval_heldout": heldout_pools(config)}
 
 
 def run_pipeline(
@@ -350,14 +356,14 @@ def _train_step(run: _Run, dataset: str, generators: Mapping[str, Any]) -> tuple
 def _eval_step(run: _Run, dataset: str, generators: Mapping[str, Any], trained: Sequence[str]) -> str:
     """4. evaluate every trained ego, the preset's reference egos (``eval.egos``) and the Replay ego into
     OUT/results.sqlite; returns the store path."""
-    from seal.experiments.evaluation.evaluate import parse_settings, resolve_eval_config
+    from seal.experiments.evaluation.evaluate import resolve_eval_config
 
     ev = dict(run.config.get("eval") or {})
     store = str(run.out / "results.sqlite")
     eval_config = resolve_eval_config(k=ev.get("k"), limit=ev.get("limit"), seed=ev.get("seed"), prior=ev.get("prior"),
                                       candidates=ev.get("candidates"), env=ev.get("env"))
     eval_config["generators"] = generators
-    settings = parse_settings(ev.get("settings") or ["normal", "hard"], dataset)
+    settings = eval_settings(run.config, dataset)
     egos = eval_egos(run.config, trained)
     jobs = [{"name": Path(e).name, "store": store, "run": e, "settings": [vars(s) for s in settings],
              "config": eval_config, "progress": False} for e in egos]

@@ -26,7 +26,7 @@ from typing import Any
 import yaml
 
 from seal.core.dataset import MANIFEST
-from seal.experiments.pipeline.references import eval_egos, fits_needed, planned_runs
+from seal.experiments.pipeline.references import eval_egos, eval_settings, fits_needed, planned_runs
 from seal.experiments.pipeline.reuse import describe
 from seal.experiments.pipeline.run import load_run_config
 from seal.experiments.pipeline.steps import StepJob, Steps, data_steps, fit_steps
@@ -117,7 +117,6 @@ def _evaluation(out: Path, config: Mapping[str, Any], dataset: str, runs: Sequen
                 ) -> dict[str, Any]:
     """Rows in the results store, and the rows a complete evaluation of the planned egos writes (None before the
     data exist)."""
-    from seal.experiments.evaluation.evaluate import parse_settings
     from seal.experiments.evaluation.results_store import ResultsStore
     from seal.experiments.evaluation.store_progress import expected_rows
 
@@ -128,7 +127,7 @@ def _evaluation(out: Path, config: Mapping[str, Any], dataset: str, runs: Sequen
     complete_egos = None
     expected = None
     if Path(dataset, MANIFEST).is_file():
-        settings = parse_settings(ev.get("settings") or ["normal", "hard"], dataset)
+        settings = eval_settings(config, dataset)
         names = [s.name for s in settings]
         expected = expected_rows(egos, settings, ev.get("limit"))
         per_ego = expected // max(len(egos), 1)

@@ -88,6 +88,36 @@ def test_reference_egos_are_evaluated_beside_the_trained_ones(tmp_path: Path) ->
         assert store.count() == 6 * 3 and store.count(run="heuristic") == 3
 
 
+def test_heldout_pools_are_evaluated_beside_the_runs_own(tmp_path: Path) -> None:
+    """``eval.heldout``: every setting but ``real:`` also on another pool's eval / hard splits, into the same store
+    (rows keyed by dataset); a pool that is the run's own, lacks a split or is not a list fails the plan check."""
+    pool = tmp_path / "heldout"
+    FakeTasks()({"task": "generate", "dataset": str(pool), "options": {}})
+    FakeTasks()({"task": "split", "dataset": str(pool), "options": {}})
+    out, commands, seen = tmp_path / "out", FakeTasks(), []
+
+    def evaluate(job):
+        seen.append(sorted((s["name"], Path(s["dataset"]).name) for s in job["settings"]))
+        return fake_eval(job)
+
+    settings = ["normal", "hard", "cat", f"real:{pool}"]
+    run(write_preset(tmp_path, eval={"settings": settings, "k": 2, "limit": 2, "heldout": [str(pool)]}), out,
+        commands, evaluate=evaluate)
+    assert seen[0] == sorted([("normal", "data"), ("hard", "data"), ("cat", "data"), (f"real:{pool.resolve()}",
+                                                                                     "heldout"),
+                              ("normal", "heldout"), ("hard", "heldout"), ("cat", "heldout")])
+    with ResultsStore(out / "results.sqlite") as store:
+        assert store.count() == 5 * 7  # 4 trained egos + Replay, 3 settings on each pool + the real one
+    assert "normal@heldout" in (out / "report" / "report.md").read_text()
+    for heldout, message in (([str(out / "data")], "is the run's own dataset"), ("x", "must be a list"),
+                             ([str(tmp_path / "none")], "eval.heldout: .*none")):
+        with pytest.raises(ValueError, match=message):
+            run(write_preset(tmp_path, eval={"settings": settings, "heldout": heldout}), out, commands)
+    Dataset.open(pool).update_manifest(splits={"train": [], "eval": Dataset.open(pool).splits["eval"], "hard": []})
+    with pytest.raises(ValueError, match="has no hard split"):
+        run(write_preset(tmp_path, eval={"settings": settings, "heldout": [str(pool)]}), out, commands)
+
+
 def test_failed_job_is_reported_and_retried(tmp_path: Path) -> None:
     out, commands = tmp_path / "out", FakeTasks()
     with pytest.raises(RuntimeError, match=r"(?s)1 job\(s\) failed.*cat-s13: RuntimeError: diverged"):
