@@ -36,6 +36,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(json.dumps(plan, indent=2) if args.json else
               f"{args.config}: plan ok: {len(plan['runs'])} training runs, fits {', '.join(plan['fits']) or 'none'}, "
               f"evaluation on {', '.join(plan['eval_settings'])} (K = {plan['eval_k']})"
+              + (f", also on the held-out pools {', '.join(plan['eval_heldout'])}" if plan.get("eval_heldout") else "")
               + (f"; {plan['reuse']}" if plan.get("reuse") else ""))
         return 0
     bcfg = config.get("backend") or {}
