@@ -7,8 +7,8 @@ preset through these helpers.
 from __future__ import annotations
 
 import re
-from pathlib import Path
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 from seal.adversaries.base import NO_ADVERSARY

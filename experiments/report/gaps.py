@@ -16,7 +16,14 @@ from typing import Any
 import numpy as np
 
 from seal.experiments.report.compare import EGO_METRICS, setting_label
-from seal.experiments.report.stats import CONFIDENCE, N_BOOT, ScoreMatrix, score_matrices
+from seal.experiments.report.stats import (
+    CONFIDENCE,
+    N_BOOT,
+    ScoreMatrix,
+    drawn_seed_rates,
+    scenario_draws,
+    score_matrices,
+)
 
 
 def paired_gap(x: ScoreMatrix, y: ScoreMatrix, metric: str = "success", n_boot: int = N_BOOT, seed: int = 0
@@ -33,18 +40,12 @@ def paired_gap(x: ScoreMatrix, y: ScoreMatrix, metric: str = "success", n_boot: 
     vx = x.values[[ix[s] for s in common], :, j]  # [scenarios, seeds_x]
     vy = y.values[[iy[s] for s in common], :, j]
     rng = np.random.default_rng(seed)
-    n = len(common)
-    counts = rng.multinomial(n, np.full(n, 1.0 / n), size=n_boot).astype(np.float64)  # [B, scenarios]
-
-    def resampled_mean(v: np.ndarray) -> np.ndarray:
-        rates = counts @ v / n  # [B, seeds]: each seed's rate on the drawn scenarios
-        drawn = rng.integers(0, v.shape[1], size=(n_boot, v.shape[1]))
-        return np.take_along_axis(rates, drawn, axis=1).mean(axis=1)
-
-    boot = resampled_mean(vx) - resampled_mean(vy)
+    counts = scenario_draws(len(common), n_boot, rng)  # one draw of the scenarios for both sides
+    boot = drawn_seed_rates(vx, counts, rng).mean(axis=1) - drawn_seed_rates(vy, counts, rng).mean(axis=1)
     tail = 100 * (1 - CONFIDENCE) / 2
     low, high = np.percentile(boot, [tail, 100 - tail])
-    return {"gap": float(vx.mean() - vy.mean()), "gap_low": float(low), "gap_high": float(high), "scenarios": n}
+    return {"gap": float(vx.mean() - vy.mean()), "gap_low": float(low), "gap_high": float(high),
+            "scenarios": len(common)}
 
 
 def gap_table(rows: Sequence[Mapping[str, Any]], pairs: Collection[tuple[str, str, str]], n_boot: int = N_BOOT,

@@ -17,13 +17,12 @@ a training pipeline) on one scenario of a setting. Per (pipeline, setting) the s
   stratified bootstrap (`rliable.library.get_interval_estimates` with ``task_bootstrap``, tasks = seeds, runs =
   scenarios) redraws the scenarios independently within each drawn seed, as if each seed had played its own
   scenarios, which divides the scenario-to-scenario variance by the number of seeds. Measured on the fifth decisive
-  run's episodes: random half-against-half splits of one pipeline's egos and
-  scenarios in one setting (TD3: 4 seeds x 150 scenarios against the other 4 seeds x the other 150; ReSkill: 2 x
-  150; no true difference, 1,260 splits each) differed by more than their two intervals allow (|z| > 1.96) in 14.4 /
-  13.8 % (TD3 / ReSkill) with rliable's stratified bootstrap, 3.7 / 4.0 % with the crossed one, 32.5 / 76.7 % with
-  the seeds alone resampled (nominal 5 %). So the crossed interval is the one that holds
-  on scenarios the evaluation has not seen; rliable's stays in ``ego_ci.csv`` as ``stratified_low`` /
-  ``stratified_high`` for comparison.
+  run's episodes: random half-against-half splits of one pipeline's egos and scenarios in one setting (TD3: 4 seeds
+  x 150 scenarios against the other 4 seeds x the other 150; ReSkill: 2 x 150; no true difference, 1,260 splits
+  each) differed by more than their two intervals allow (|z| > 1.96) in 14.4 / 13.8 % (TD3 / ReSkill) with rliable's
+  stratified bootstrap, 3.7 / 4.0 % with the crossed one, 32.5 / 76.7 % with the seeds alone resampled (nominal 5
+  %). So the crossed interval is the one that holds on scenarios the evaluation has not seen; rliable's stays in
+  ``ego_ci.csv`` as ``stratified_low`` / ``stratified_high`` for comparison.
 * **probability of improvement** P(X > Y) (`rliable.metrics.probability_of_improvement`): per setting the
   Mann-Whitney statistic of the two pipelines' per-seed success rates over all seed pairs (ties count one half),
   averaged over the settings both were evaluated on. Its interval resamples each pipeline's seeds as whole egos
@@ -130,16 +129,28 @@ def iqm_columns(scores: np.ndarray) -> np.ndarray:
     return np.sort(scores, axis=0)[cut:scores.shape[0] - cut].mean(axis=0)
 
 
+def scenario_draws(n_scenarios: int, n_boot: int, rng: np.random.Generator) -> np.ndarray:
+    """``[n_boot, n_scenarios]`` float counts: how often each scenario is drawn (with replacement) per resample."""
+    p = np.full(n_scenarios, 1.0 / n_scenarios)
+    return rng.multinomial(n_scenarios, p, size=n_boot).astype(np.float64)
+
+
+def drawn_seed_rates(values: np.ndarray, counts: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """``[n_boot, seeds, ...]``: the rates of seeds drawn with replacement (``values [scenarios, seeds, ...]``), each
+    on the scenarios ``counts`` (`scenario_draws`) drew for that resample, the same ones for every seed."""
+    n_scen, n_seeds = values.shape[:2]
+    rates = np.tensordot(counts, values, axes=(1, 0)) / n_scen  # [B, seeds, ...]
+    drawn = rng.integers(0, n_seeds, size=(counts.shape[0], n_seeds))
+    return np.take_along_axis(rates, drawn.reshape(drawn.shape + (1,) * (rates.ndim - 2)), axis=1)
+
+
 def crossed_bootstrap(values: np.ndarray, n_boot: int = N_BOOT, seed: int = 0) -> np.ndarray:
     """``[n_boot, 2, metrics]`` resampled (mean, IQM over seeds) of ``values [scenarios, seeds, metrics]`` under the
     crossed (pigeonhole) bootstrap: each resample draws the seeds with replacement and, once for all of them, the
     scenarios with replacement (module docstring). The IQM is rliable's (`iqm_columns`)."""
-    n_scen, n_seeds = values.shape[:2]
     rng = np.random.default_rng(seed)
-    counts = rng.multinomial(n_scen, np.full(n_scen, 1.0 / n_scen), size=n_boot).astype(np.float64)  # [B, S]
-    rates = np.einsum("bs,snm->bnm", counts, values) / n_scen  # [B, seeds, metrics]: each seed on the drawn set
-    drawn = rng.integers(0, n_seeds, size=(n_boot, n_seeds))
-    rates = np.take_along_axis(rates, drawn[:, :, None], axis=1)
+    rates = drawn_seed_rates(values, scenario_draws(values.shape[0], n_boot, rng), rng)  # [B, seeds, metrics]
+    n_seeds = values.shape[1]
     cut = int(0.25 * n_seeds)
     iqm = np.sort(rates, axis=1)[:, cut:n_seeds - cut].mean(axis=1)
     return np.stack([rates.mean(axis=1), iqm], axis=1)
