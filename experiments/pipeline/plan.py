@@ -209,7 +209,9 @@ def _check_heldout(config: Mapping[str, Any], dataset: str) -> None:
         return
     if not isinstance(pools, list) or not all(isinstance(p, str) for p in pools):
         raise ValueError(f"eval.heldout must be a list of dataset folders, got {pools!r}")
-    own_seed = ((config.get("data") or {}).get("generate") or {}).get("seed", 0)
+    data = config.get("data") or {}
+    own = (Dataset.open(dataset).manifest.get("provenance") or {}) if data.get("path") else \
+        {"source": "highway-env", "seed": (data.get("generate") or {}).get("seed", 0)}
     for pool in heldout_pools(config):
         if pool == str(Path(dataset).resolve()):
             raise ValueError(f"eval.heldout: {pool} is the run's own dataset")
@@ -218,10 +220,9 @@ def _check_heldout(config: Mapping[str, Any], dataset: str) -> None:
         except DatasetError as exc:
             raise ValueError(f"eval.heldout: {exc}") from None
         prov = ds.manifest.get("provenance") or {}
-        if not (config.get("data") or {}).get("path") and prov.get("source") == "highway-env" \
-                and prov.get("seed") == own_seed:
-            raise ValueError(f"eval.heldout: {pool} was generated with seed {own_seed}, as the run's pool: the same "
-                             "traffic runs, not held out (generate it with another --seed)")
+        if prov.get("source") == own.get("source") == "highway-env" and prov.get("seed") == own.get("seed"):
+            raise ValueError(f"eval.heldout: {pool} was generated with seed {own['seed']}, as the run's pool: the "
+                             "same traffic runs, not held out (generate it with another --seed)")
         needed = sorted({str(s.split) for s in eval_settings(config, dataset) if s.dataset == pool})
         if missing := [sp for sp in needed if not ds.splits.get(sp)]:
             raise ValueError(f"eval.heldout: {pool} has no {' / '.join(missing)} split; run `seal data split "

@@ -116,6 +116,12 @@ def test_heldout_pools_are_evaluated_beside_the_runs_own(tmp_path: Path) -> None
     Dataset.open(pool).update_manifest(splits={"train": [], "eval": Dataset.open(pool).splits["eval"], "hard": []})
     with pytest.raises(ValueError, match="has no hard split"):
         run(write_preset(tmp_path, eval={"settings": settings, "heldout": [str(pool)]}), out, commands)
+    # a given dataset (data.path) generated with the pool's seed: the same traffic runs
+    for root in (out / "data", pool):
+        Dataset.open(root).update_manifest(provenance={"source": "highway-env", "seed": 5})
+    with pytest.raises(ValueError, match="generated with seed 5, as the run's pool"):
+        run(write_preset(tmp_path, data={"path": str(out / "data")},
+                         eval={"settings": ["normal"], "heldout": [str(pool)]}), tmp_path / "out2", commands)
 
 
 def test_failed_job_is_reported_and_retried(tmp_path: Path) -> None:
