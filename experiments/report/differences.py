@@ -32,21 +32,12 @@ import numpy as np
 from scipy import stats
 
 from seal.experiments.report.agreement import ALL_SETTINGS
-from seal.experiments.report.compare import EGO_METRICS, ordered_pipelines, ordered_settings, setting_label
+from seal.experiments.report.compare import ordered_pipelines, ordered_settings, setting_label
 from seal.experiments.report.grouping import algo_of, base_pipeline, comparable
-from seal.experiments.report.stats import CONFIDENCE, ScoreMatrix, score_matrices
+from seal.experiments.report.stats import CONFIDENCE, paired_outcomes, score_matrices
 
 REFERENCE_PIPELINE = "noadv"
 """The pipeline every other is differenced against (trained on the logged scenarios alone)."""
-
-
-def _paired(x: ScoreMatrix, r: ScoreMatrix) -> tuple[np.ndarray, np.ndarray]:
-    """The success outcomes ``[scenarios, seeds]`` of both cells on the scenarios both played, in the same order."""
-    common = sorted(set(x.scenario_ids) & set(r.scenario_ids))
-    xi, ri = ({s: i for i, s in enumerate(m.scenario_ids)} for m in (x, r))
-    success = EGO_METRICS.index("success")
-    return (x.values[[xi[s] for s in common], :, success].astype(np.float64),
-            r.values[[ri[s] for s in common], :, success].astype(np.float64))
 
 
 def difference_interval(pairs: Sequence[tuple[np.ndarray, np.ndarray]]) -> tuple[float, float, float]:
@@ -77,7 +68,7 @@ def difference_table(rows: Sequence[Mapping[str, Any]], reference: str = REFEREN
     for ref in (p for p in pipelines if base_pipeline(p) == reference):
         for x in (p for p in pipelines if p != ref and comparable(p, ref)):
             settings = [s for s in ordered_settings(s for p, s in matrices if p == x) if (ref, s) in matrices]
-            pairs = {s: _paired(matrices[(x, s)], matrices[(ref, s)]) for s in settings}
+            pairs = {s: paired_outcomes(matrices[(x, s)], matrices[(ref, s)]) for s in settings}
             pairs = {s: p for s, p in pairs.items() if p[0].shape[0]}
             for s, pair in pairs.items():
                 out.append(_row(x, ref, setting_label(s), [pair]))

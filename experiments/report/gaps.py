@@ -15,12 +15,13 @@ from typing import Any
 
 import numpy as np
 
-from seal.experiments.report.compare import EGO_METRICS, setting_label
+from seal.experiments.report.compare import setting_label
 from seal.experiments.report.stats import (
     CONFIDENCE,
     N_BOOT,
     ScoreMatrix,
     drawn_seed_rates,
+    paired_outcomes,
     scenario_draws,
     score_matrices,
 )
@@ -32,20 +33,17 @@ def paired_gap(x: ScoreMatrix, y: ScoreMatrix, metric: str = "success", n_boot: 
     scenarios, with the 95 % percentile interval of the paired crossed bootstrap (the common scenarios drawn with
     replacement once per resample for both, each side's seeds drawn with replacement apart). NaNs without a common
     scenario."""
-    common = sorted(set(x.scenario_ids) & set(y.scenario_ids))
-    if not common:
+    vx, vy = paired_outcomes(x, y, metric)  # [scenarios, seeds_x], [scenarios, seeds_y]
+    n = vx.shape[0]
+    if not n:
         return {"gap": np.nan, "gap_low": np.nan, "gap_high": np.nan, "scenarios": 0}
-    j = EGO_METRICS.index(metric)
-    ix, iy = ({s: k for k, s in enumerate(m.scenario_ids)} for m in (x, y))
-    vx = x.values[[ix[s] for s in common], :, j]  # [scenarios, seeds_x]
-    vy = y.values[[iy[s] for s in common], :, j]
     rng = np.random.default_rng(seed)
-    counts = scenario_draws(len(common), n_boot, rng)  # one draw of the scenarios for both sides
+    counts = scenario_draws(n, n_boot, rng)  # one draw of the scenarios for both sides
     boot = drawn_seed_rates(vx, counts, rng).mean(axis=1) - drawn_seed_rates(vy, counts, rng).mean(axis=1)
     tail = 100 * (1 - CONFIDENCE) / 2
     low, high = np.percentile(boot, [tail, 100 - tail])
     return {"gap": float(vx.mean() - vy.mean()), "gap_low": float(low), "gap_high": float(high),
-            "scenarios": len(common)}
+            "scenarios": n}
 
 
 def gap_table(rows: Sequence[Mapping[str, Any]], pairs: Collection[tuple[str, str, str]], n_boot: int = N_BOOT,

@@ -120,6 +120,16 @@ def score_matrices(rows: Sequence[Mapping[str, Any]]) -> dict[tuple[str, str], S
     return out
 
 
+def paired_outcomes(x: ScoreMatrix, y: ScoreMatrix, metric: str = "success") -> tuple[np.ndarray, np.ndarray]:
+    """The ``metric`` outcomes ``[scenarios, seeds]`` of both cells on the scenarios both played (sorted ids), in
+    the same order."""
+    common = sorted(set(x.scenario_ids) & set(y.scenario_ids))
+    xi, yi = ({s: i for i, s in enumerate(m.scenario_ids)} for m in (x, y))
+    j = EGO_METRICS.index(metric)
+    return (x.values[[xi[s] for s in common], :, j].astype(np.float64),
+            y.values[[yi[s] for s in common], :, j].astype(np.float64))
+
+
 def iqm_columns(scores: np.ndarray) -> np.ndarray:
     """rliable's IQM (`rliable.metrics.aggregate_iqm`: scipy's ``trim_mean(proportiontocut=0.25)``) of each column
     of ``scores [runs, columns]``: sort, drop ``int(0.25 runs)`` from each end, average. Written out because the
