@@ -107,8 +107,12 @@ def write_shard(path: Path, scenarios: Sequence[Scenario]) -> dict[str, Any]:
     return {"n_scenarios": len(scenarios), "bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()}
 
 
-def read_shard(path: Path, expected: dict[str, Any] | None = None) -> list[Scenario]:
-    """Load the scenarios of one shard, checking size and checksum against ``expected`` when given."""
+def read_shard(
+    path: Path, expected: dict[str, Any] | None = None, wanted: set[str] | None = None
+) -> list[Scenario]:
+    """Load the scenarios of one shard (only those whose id is in ``wanted``, when given), checking size and
+    checksum against ``expected`` when given. Scenarios left out are not decoded: picking a split's few hundred
+    scenarios from thousands then costs the decompression, not a `Scenario` per scenario of the shard."""
     try:
         data = path.read_bytes()
     except FileNotFoundError:
@@ -135,6 +139,8 @@ def read_shard(path: Path, expected: dict[str, Any] | None = None) -> list[Scena
         out = []
         offsets = arrays["agent_offsets"]
         for i, sid in enumerate(arrays["scenario_ids"]):
+            if wanted is not None and str(sid) not in wanted:
+                continue
             a, b = int(offsets[i]), int(offsets[i + 1])
             out.append(
                 Scenario(
@@ -217,8 +223,7 @@ class Dataset:
         for entry in self.manifest["shards"]:
             if limit is not None and len(out) >= limit:
                 return out[:limit]
-            scenarios = read_shard(self.root / entry["file"], entry)
-            out.extend(self.apply_roles(s) for s in scenarios if wanted is None or s.scenario_id in wanted)
+            out.extend(self.apply_roles(s) for s in read_shard(self.root / entry["file"], entry, wanted))
         if limit is not None:
             out = out[:limit]
         if ids is not None:

@@ -8,7 +8,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from seal.core.dataset import BUILD_STATE, MANIFEST, Dataset, DatasetBuilder, DatasetError, summarize, write_dataset
+from seal.core.dataset import (
+    BUILD_STATE,
+    MANIFEST,
+    Dataset,
+    DatasetBuilder,
+    DatasetError,
+    read_shard,
+    summarize,
+    write_dataset,
+)
 from seal.core.road import LaneSpec, RoadDescription
 from seal.core.scenario import N_STEPS, VALID, Scenario, X
 
@@ -49,6 +58,16 @@ def test_round_trip_preserves_everything(tmp_path: Path) -> None:
         assert dict(a.metadata) == dict(b.metadata)
     assert [s.scenario_id for s in ds.load(ids=["s0003", "s0017"])] == ["s0003", "s0017"]
     assert [s.scenario_id for s in ds.load(limit=12)] == [s.scenario_id for s in scenarios[:12]]
+
+
+def test_read_shard_decodes_only_the_wanted_scenarios(tmp_path: Path) -> None:
+    scenarios = [_scenario(i, n_agents=3 + i % 3) for i in range(8)]
+    ds = write_dataset(tmp_path / "ds", scenarios, shard_size=8)
+    entry = ds.manifest["shards"][0]
+    picked = read_shard(ds.root / entry["file"], entry, wanted={"s0006", "s0001", "absent"})
+    assert [s.scenario_id for s in picked] == ["s0001", "s0006"]  # shard order, unknown ids ignored
+    np.testing.assert_array_equal(picked[1].tracks, scenarios[6].tracks)  # offsets of the skipped ones respected
+    assert read_shard(ds.root / entry["file"], entry, wanted=set()) == []
 
 
 def test_splits_recorded_in_manifest(tmp_path: Path) -> None:
@@ -93,8 +112,6 @@ def test_truncated_shard_names_the_file(tmp_path: Path) -> None:
 
 
 def test_corrupt_shard_without_manifest_check_names_the_file(tmp_path: Path) -> None:
-    from seal.core.dataset import read_shard
-
     write_dataset(tmp_path / "ds", [_scenario(i) for i in range(3)])
     shard = tmp_path / "ds" / "shards" / "shard-00000.npz"
     data = bytearray(shard.read_bytes())
