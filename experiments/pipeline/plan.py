@@ -9,12 +9,14 @@ write (the dataset, the fitted models). Errors are `ValueError`s whose message s
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 from seal.adversaries.base import NO_ADVERSARY, available_generators
 from seal.experiments.pipeline.references import (
+    HELDOUT_DIR,
     fit_kind,
     fits_needed,
     generators_in_use,
@@ -45,7 +47,7 @@ def check_plan(
     generators = {name: substitute(dict((config.get("generators") or {}).get(name) or {}), models)
                   for name in generators_in_use(config)}
     _check_eval(config.get("eval") or {}, dataset)
-    _check_heldout(config, dataset)
+    _check_heldout(config, dataset, out)
     resolved = with_models(config, models)
     for pipeline, seed, algo in planned_runs(config).values():
         try:
@@ -80,44 +82,50 @@ def _check_data(data: Mapping[str, Any], out: Path) -> str:
         if not ds.splits.get("eval"):
             raise ValueError(f"data.path: {root} has no eval split; run `seal data score` and `seal data split`")
         return str(root.resolve())
-    for task in DATA_TASKS:
-        options = data.get(task) or {}
-        if not isinstance(options, Mapping):
-            raise ValueError(f"data.{task} must be a mapping of options, got {options!r}")
-        unknown = sorted(set(options) - set(OPTIONS[task]))
-        if unknown:
-            raise ValueError(f"data.{task}: unknown option(s) {unknown}; known: {list(OPTIONS[task])}")
-    _check_generate(data.get("generate") or {})
-    _check_split(data.get("split") or {})
+    _check_pool_options(data, "data")
     return str(out / "data")
 
 
-def _check_generate(o: Mapping[str, Any]) -> None:
+def _check_pool_options(data: Mapping[str, Any], section: str) -> None:
+    """The generate / score / split options of a pool the run builds (``data``, or an ``eval.heldout`` entry)."""
+    for task in DATA_TASKS:
+        options = data.get(task) or {}
+        if not isinstance(options, Mapping):
+            raise ValueError(f"{section}.{task} must be a mapping of options, got {options!r}")
+        unknown = sorted(set(options) - set(OPTIONS[task]))
+        if unknown:
+            raise ValueError(f"{section}.{task}: unknown option(s) {unknown}; known: {list(OPTIONS[task])}")
+    _check_generate(data.get("generate") or {}, section)
+    _check_split(data.get("split") or {}, section)
+
+
+def _check_generate(o: Mapping[str, Any], section: str) -> None:
     from seal.envs.generate import _check_args
 
     if "n" not in o:
-        raise ValueError("data.generate.n: missing (the number of scenarios), or give data.path")
+        raise ValueError(f"{section}.generate.n: missing (the number of scenarios)"
+                         + (", or give data.path" if section == "data" else ""))
     try:
         _check_args(o["n"], o.get("seed", 0), o.get("layouts") or ["highway"], o.get("workers"),
                     o.get("inattentive_share", 0.15), o.get("aggressive_share", 0.15))
     except ValueError as exc:
-        raise ValueError(f"data.generate: {exc}") from None
+        raise ValueError(f"{section}.generate: {exc}") from None
 
 
-def _check_split(o: Mapping[str, Any]) -> None:
+def _check_split(o: Mapping[str, Any], section: str) -> None:
     from seal.scoring.splits import SplitError, _check_options
 
     for key in ("n_train", "n_eval", "n_hard", "seed"):
         if key in o and (isinstance(o[key], bool) or not isinstance(o[key], int)):
-            raise ValueError(f"data.split.{key} must be an integer, got {o[key]!r}")
+            raise ValueError(f"{section}.split.{key} must be an integer, got {o[key]!r}")
     quantile = o.get("hard_quantile", 0.8)
     if isinstance(quantile, bool) or not isinstance(quantile, int | float):
-        raise ValueError(f"data.split.hard_quantile must be a number, got {quantile!r}")
+        raise ValueError(f"{section}.split.hard_quantile must be a number, got {quantile!r}")
     try:
         _check_options(float(quantile), o.get("n_train", 400), o.get("n_eval", 100), o.get("n_hard", 100),
                        o.get("score", "ac"), o.get("hard_by", "pair"))
     except SplitError as exc:
-        raise ValueError(f"data.split: {exc}") from None
+        raise ValueError(f"{section}.split: {exc}") from None
 
 
 def _check_pipelines(config: Mapping[str, Any]) -> None:
@@ -198,23 +206,30 @@ def _check_eval(ev: Mapping[str, Any], dataset: str) -> None:
         raise ValueError(f"eval: {exc}") from None
 
 
-def _check_heldout(config: Mapping[str, Any], dataset: str) -> None:
-    """``eval.heldout``: dataset folders other than the run's own, each with the splits the settings read, and not
-    generated from the same traffic runs (same generator seed) as the run's pool."""
+def _check_heldout(config: Mapping[str, Any], dataset: str, out: Path) -> None:
+    """``eval.heldout``: dataset folders other than the run's own, each with the splits the settings read, or pools
+    the run builds (``{name, generate, score, split}``); none generated from the same traffic runs (same generator
+    seed) as the run's pool."""
     from seal.core.dataset import Dataset, DatasetError
     from seal.experiments.pipeline.references import eval_settings, heldout_pools
 
     pools = (config.get("eval") or {}).get("heldout")
     if pools is None:
         return
-    if not isinstance(pools, list) or not all(isinstance(p, str) for p in pools):
-        raise ValueError(f"eval.heldout must be a list of dataset folders, got {pools!r}")
+    if not isinstance(pools, list) or not all(isinstance(p, str | Mapping) for p in pools):
+        raise ValueError(f"eval.heldout must be a list of dataset folders or {{name, generate, score, split}} "
+                         f"pools to build, got {pools!r}")
     data = config.get("data") or {}
     own = (Dataset.open(dataset).manifest.get("provenance") or {}) if data.get("path") else \
         {"source": "highway-env", "seed": (data.get("generate") or {}).get("seed", 0)}
-    for pool in heldout_pools(config):
+    built = [_check_heldout_build(entry, own) for entry in pools if isinstance(entry, Mapping)]
+    if len(set(built)) < len(built):
+        raise ValueError(f"eval.heldout: two pools to build share a name ({sorted(built)})")
+    for pool in heldout_pools(config, out):
         if pool == str(Path(dataset).resolve()):
             raise ValueError(f"eval.heldout: {pool} is the run's own dataset")
+        if Path(pool).parent == out.resolve() / HELDOUT_DIR:
+            continue  # built by the run (its split options were checked above)
         try:
             ds = Dataset.open(pool)
         except DatasetError as exc:
@@ -223,10 +238,29 @@ def _check_heldout(config: Mapping[str, Any], dataset: str) -> None:
         if prov.get("source") == own.get("source") == "highway-env" and prov.get("seed") == own.get("seed"):
             raise ValueError(f"eval.heldout: {pool} was generated with seed {own['seed']}, as the run's pool: the "
                              "same traffic runs, not held out (generate it with another --seed)")
-        needed = sorted({str(s.split) for s in eval_settings(config, dataset) if s.dataset == pool})
+        needed = sorted({str(s.split) for s in eval_settings(config, dataset, out) if s.dataset == pool})
         if missing := [sp for sp in needed if not ds.splits.get(sp)]:
             raise ValueError(f"eval.heldout: {pool} has no {' / '.join(missing)} split; run `seal data split "
                              f"{pool} --n-train 0 ...`")
+
+
+def _check_heldout_build(entry: Mapping[str, Any], own: Mapping[str, Any]) -> str:
+    """One ``eval.heldout`` pool the run builds: a folder name, the generate / score / split options as ``data``'s,
+    a generator seed other than the run's pool's; returns its name."""
+    unknown = sorted(set(entry) - {"name", *DATA_TASKS})
+    if unknown:
+        raise ValueError(f"eval.heldout: unknown key(s) {unknown} in a pool to build; known: name, "
+                         f"{', '.join(DATA_TASKS)}")
+    name = entry.get("name")
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", name):
+        raise ValueError(f"eval.heldout: a pool to build needs a folder name (letters, digits, _ . -), got {name!r}")
+    section = f"eval.heldout[{name}]"
+    _check_pool_options(entry, section)
+    seed = (entry.get("generate") or {}).get("seed", 0)
+    if own.get("source") == "highway-env" and seed == own.get("seed"):
+        raise ValueError(f"{section}.generate.seed: {seed} is the run's pool's seed (the same traffic runs, not "
+                         "held out); give another seed")
+    return name
 
 
 def _check_reference_egos(egos: Any) -> None:

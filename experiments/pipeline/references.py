@@ -158,13 +158,23 @@ def eval_egos(config: Mapping[str, Any], trained: Sequence[str]) -> list[str]:
     return list(dict.fromkeys(egos))
 
 
-def heldout_pools(config: Mapping[str, Any]) -> list[str]:
-    """The preset's ``eval.heldout`` dataset folders (``~`` expanded, resolved), each once."""
-    pools = (config.get("eval") or {}).get("heldout") or []
-    return list(dict.fromkeys(str(Path(str(p)).expanduser().resolve()) for p in pools))
+HELDOUT_DIR = "heldout"
+"""OUT/heldout/<name>: the held-out pools a run builds itself (``eval.heldout`` entries with ``generate``)."""
 
 
-def eval_settings(config: Mapping[str, Any], dataset: str) -> list[Any]:
+def heldout_pools(config: Mapping[str, Any], out: Path) -> list[str]:
+    """The preset's ``eval.heldout`` dataset folders, each once: a folder given as a path (``~`` expanded,
+    resolved), and OUT/heldout/<name> for a pool the run builds (an entry ``{name, generate, score, split}``)."""
+    pools = []
+    for entry in (config.get("eval") or {}).get("heldout") or []:
+        if isinstance(entry, Mapping):
+            pools.append(str(Path(out).resolve() / HELDOUT_DIR / str(entry.get("name"))))
+        else:
+            pools.append(str(Path(str(entry)).expanduser().resolve()))
+    return list(dict.fromkeys(pools))
+
+
+def eval_settings(config: Mapping[str, Any], dataset: str, out: Path) -> list[Any]:
     """The eval step's `seal.experiments.evaluation.evaluate.Setting`\\ s: ``eval.settings`` on the run's own pool
     ``dataset``, then the same settings but ``real:DIR`` on each ``eval.heldout`` pool (its eval / hard splits; the
     store keeps the pools apart and the report labels them ``normal@<pool>``)."""
@@ -172,6 +182,6 @@ def eval_settings(config: Mapping[str, Any], dataset: str) -> list[Any]:
 
     spec = (config.get("eval") or {}).get("settings") or ["normal", "hard"]
     settings = parse_settings(spec, dataset)
-    for pool in heldout_pools(config):
+    for pool in heldout_pools(config, out):
         settings += [s for s in parse_settings(spec, pool) if not s.name.startswith(REAL_PREFIX)]
     return settings

@@ -8,9 +8,10 @@ Read top to bottom, the steps are:
             generators in use reference (``"${fit.NAME}"`` in ``generators``), or the file given as ``fit.NAME.path``
 3. train    one job per pipeline x seed (`seal.experiments.training.train.train_run`) into OUT/runs/<pipeline>-s<seed>
             (x algorithm with ``algos``: OUT/runs/<pipeline>-<algo>-s<seed>)
-4. eval     one job per trained ego, plus the Replay ego (`seal.experiments.evaluation.evaluate.evaluate_job`) into
-            OUT/results.sqlite; the progress bar counts the episodes in the store as the jobs write them
-            (`seal.experiments.evaluation.store_progress`)
+4. eval     the held-out pools the preset builds (``eval.heldout`` entries with ``generate``: generate / score /
+            split into OUT/heldout/<name>), then one job per trained ego, plus the Replay ego
+            (`seal.experiments.evaluation.evaluate.evaluate_job`) into OUT/results.sqlite; the progress bar counts
+            the episodes in the store as the jobs write them (`seal.experiments.evaluation.store_progress`)
 5. report   `seal.experiments.report.write.write_report` into OUT/report
 
 Each step leaves a marker ``OUT/steps/<step>.json`` holding a hash of its parameters; a step whose marker
@@ -47,9 +48,10 @@ The preset's sections (all but ``train`` belong to this module; ``train`` is pas
 * ``eval``: ``settings`` (list, as ``seal eval runs --settings``), ``k``, ``limit``, ``seed``, ``prior``,
   ``candidates``, ``env``, ``replay_ego`` (default true), ``egos`` (reference egos evaluated beside the
   trained ones: ``[heuristic]``, or run folders / SB3 models / ``seal.egos`` entry points of other experiments),
-  ``heldout`` (dataset folders whose eval / hard splits the egos also play, every setting but ``real:``: pools
-  generated with another seed and split with ``seal data split --n-train 0``, scenarios from traffic runs that
-  neither the training nor the fits saw; the report labels them ``normal@<pool>``).
+  ``heldout`` (pools whose eval / hard splits the egos also play, every setting but ``real:``: pools generated
+  with another seed and split with ``seal data split --n-train 0``, scenarios from traffic runs that neither the
+  training nor the fits saw; the report labels them ``normal@<pool>``): each a dataset folder, or
+  ``{name, generate, score, split}`` (options as in ``data``) for a pool the run builds into OUT/heldout/<name>.
 * ``report``: ``plots`` (default true), ``videos`` (per generator, default 0), ``video_format``, ``reps`` /
   ``poi_reps`` (bootstrap resamples of the intervals / probabilities of improvement, as ``seal compare``).
 * ``backend``: ``name`` (local | ray), ``workers``, ``address`` (Ray), ``train_workers`` (local: concurrent train
@@ -88,7 +90,7 @@ from seal.experiments.pipeline.references import (
     with_models,
 )
 from seal.experiments.pipeline.reuse import apply_reuse, describe, reuse_plan
-from seal.experiments.pipeline.steps import FIT_OUTPUTS, Steps, data_steps, fit_steps, run_steps
+from seal.experiments.pipeline.steps import FIT_OUTPUTS, Steps, data_steps, fit_steps, heldout_steps, run_steps
 from seal.experiments.pipeline.tasks import run_task
 
 logger = logging.getLogger(__name__)
@@ -261,7 +263,7 @@ def check_run(config_path: str | Path, out: str | Path, sets: Sequence[str] = ()
             "fits": fits_needed(config), "generators": generators_in_use(config),
             "reuse": describe(config, fits_needed(config)) if config.get("reuse") else None,
             "eval_settings": list(ev.get("settings") or ["normal", "hard"]), "eval_k": ev.get("k", DEFAULTS["k"]),
-            "eval_heldout": heldout_pools(config)}
+            "eval_heldout": heldout_pools(config, out)}
 
 
 def run_pipeline(
@@ -299,6 +301,8 @@ def run_pipeline(
     generators = {name: substitute(dict((config.get("generators") or {}).get(name) or {}), models)
                   for name in generators_in_use(config)}
     n_jobs, trained = _train_step(run, dataset, generators)
+    for step in heldout_steps(run.config, run.out):  # 4. the held-out pools first, like OUT/data
+        run.steps.run(step.name, step.params, partial(run.task, step.job))
     store = _eval_step(run, dataset, generators, trained)
     report = _report_step(run, store)
     summary = {
@@ -363,7 +367,7 @@ def _eval_step(run: _Run, dataset: str, generators: Mapping[str, Any], trained: 
     eval_config = resolve_eval_config(k=ev.get("k"), limit=ev.get("limit"), seed=ev.get("seed"), prior=ev.get("prior"),
                                       candidates=ev.get("candidates"), env=ev.get("env"))
     eval_config["generators"] = generators
-    settings = eval_settings(run.config, dataset)
+    settings = eval_settings(run.config, dataset, run.out)
     egos = eval_egos(run.config, trained)
     jobs = [{"name": Path(e).name, "store": store, "run": e, "settings": [vars(s) for s in settings],
              "config": eval_config, "progress": False} for e in egos]

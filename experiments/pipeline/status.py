@@ -26,10 +26,10 @@ from typing import Any
 import yaml
 
 from seal.core.dataset import MANIFEST
-from seal.experiments.pipeline.references import eval_egos, eval_settings, fits_needed, planned_runs
+from seal.experiments.pipeline.references import eval_egos, eval_settings, fits_needed, heldout_pools, planned_runs
 from seal.experiments.pipeline.reuse import describe
 from seal.experiments.pipeline.run import load_run_config
-from seal.experiments.pipeline.steps import StepJob, Steps, data_steps, fit_steps
+from seal.experiments.pipeline.steps import StepJob, Steps, data_steps, fit_steps, heldout_steps
 from seal.experiments.training.state import CHECKPOINTS, CONFIG, DONE, LATEST, read_done
 
 
@@ -44,7 +44,7 @@ def run_status(config_path: str | Path, out: str | Path, sets: Sequence[str] = (
     return {
         "preset": config["preset"], "out": str(out), "exists": out.is_dir(),
         "reuse": describe(config, fits_needed(config)) if config.get("reuse") else None,
-        "steps": [_step(markers, step) for step in [*data, *fits]],
+        "steps": [_step(markers, step) for step in [*data, *fits, *heldout_steps(config, out)]],
         "training": runs,
         "evaluation": _evaluation(out, config, dataset, runs["runs"]),
         "report": "done" if markers.marker("report") is not None else "pending",
@@ -126,8 +126,8 @@ def _evaluation(out: Path, config: Mapping[str, Any], dataset: str, runs: Sequen
     stored = 0
     complete_egos = None
     expected = None
-    if Path(dataset, MANIFEST).is_file():
-        settings = eval_settings(config, dataset)
+    if all(Path(pool, MANIFEST).is_file() for pool in [dataset, *heldout_pools(config, out)]):
+        settings = eval_settings(config, dataset, out)
         names = [s.name for s in settings]
         expected = expected_rows(egos, settings, ev.get("limit"))
         per_ego = expected // max(len(egos), 1)

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from seal.core.atomic import atomic_write_json
-from seal.experiments.pipeline.references import fit_dependencies, fit_kind, fits_needed, substitute
+from seal.experiments.pipeline.references import HELDOUT_DIR, fit_dependencies, fit_kind, fits_needed, substitute
 
 logger = logging.getLogger(__name__)
 
@@ -83,17 +83,34 @@ def data_steps(config: Mapping[str, Any], out: Path) -> tuple[str, dict[str, Any
     if data.get("path"):
         return str(Path(data["path"]).expanduser().resolve()), data_params, []
     dataset = str(out / "data")
+    return dataset, data_params, _pool_steps("", dataset, data)
+
+
+def heldout_steps(config: Mapping[str, Any], out: Path) -> list[StepJob]:
+    """The generate / score / split steps (``heldout-<name>-data`` ...) of every held-out pool the run builds
+    itself: the ``eval.heldout`` entries ``{name, generate, score, split}``, into OUT/heldout/<name>."""
+    steps: list[StepJob] = []
+    for entry in (config.get("eval") or {}).get("heldout") or []:
+        if isinstance(entry, Mapping):
+            name = str(entry["name"])
+            steps += _pool_steps(f"heldout-{name}-", str(out / HELDOUT_DIR / name), entry)
+    return steps
+
+
+def _pool_steps(prefix: str, dataset: str, data: Mapping[str, Any]) -> list[StepJob]:
+    """Generate, score and split ``dataset`` with the options of ``data`` (steps ``<prefix>data``, ``score``,
+    ``split``; a changed generate option makes the score and split run again)."""
     gen_opts = dict(data.get("generate") or {})
     score_opts = dict(data.get("score") or {})
     split_opts = dict(data.get("split") or {})
-    steps = [
-        StepJob("data", gen_opts, {"name": "data", "task": "generate", "dataset": dataset, "options": gen_opts}),
-        StepJob("score", [gen_opts, score_opts],
-                {"name": "score", "task": "score", "dataset": dataset, "options": score_opts}),
-        StepJob("split", [gen_opts, split_opts],
-                {"name": "split", "task": "split", "dataset": dataset, "options": split_opts}),
+    names = [f"{prefix}{step}" for step in ("data", "score", "split")]
+    return [
+        StepJob(names[0], gen_opts, {"name": names[0], "task": "generate", "dataset": dataset, "options": gen_opts}),
+        StepJob(names[1], [gen_opts, score_opts],
+                {"name": names[1], "task": "score", "dataset": dataset, "options": score_opts}),
+        StepJob(names[2], [gen_opts, split_opts],
+                {"name": names[2], "task": "split", "dataset": dataset, "options": split_opts}),
     ]
-    return dataset, data_params, steps
 
 
 def fit_steps(config: Mapping[str, Any], out: Path, dataset: str, data_params: Mapping[str, Any]

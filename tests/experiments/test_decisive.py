@@ -58,6 +58,11 @@ def test_decisive_plan_is_every_pipeline_times_two_algorithms_times_four_seeds(t
     settings = [s for s in ev["settings"] if not s.startswith("real:")]
     plan = check_run(PRESET, tmp_path / "out", [_settings_with(real_dataset, settings)])
     assert len(plan["runs"]) == 56 and "seal-rcg-reskill-s3" in plan["runs"] and "noadv-td3-s0" in plan["runs"]
+    # the precision pool: 600 Normal + 600 Hard scenarios of other traffic runs, built into OUT/heldout/seed1
+    assert plan["eval_heldout"] == [str((tmp_path / "out" / "heldout" / "seed1").resolve())]
+    (pool,) = ev["heldout"]
+    assert pool["generate"]["seed"] != config["data"]["generate"]["seed"]
+    assert (pool["split"]["n_train"], pool["split"]["n_eval"], pool["split"]["n_hard"]) == (0, 600, 600)
     assert not (tmp_path / "out").exists()
 
 

@@ -124,6 +124,42 @@ def test_heldout_pools_are_evaluated_beside_the_runs_own(tmp_path: Path) -> None
                          eval={"settings": ["normal"], "heldout": [str(pool)]}), tmp_path / "out2", commands)
 
 
+def test_a_heldout_pool_the_run_builds_is_made_before_the_eval_and_skipped_after(tmp_path: Path) -> None:
+    """``eval.heldout: [{name, generate, score, split}]``: generate / score / split into OUT/heldout/<name> (after
+    the training, before the eval), evaluated like a given pool, skipped on a re-run; a bad entry fails the plan."""
+    out, commands, seen = tmp_path / "out", FakeTasks(), []
+
+    def evaluate(job):
+        seen.append(sorted({Path(s["dataset"]).name for s in job["settings"]}))
+        return fake_eval(job)
+
+    pool = {"name": "seed7", "generate": {"n": 3, "seed": 7}, "split": {"n_train": 0, "n_eval": 2, "n_hard": 1}}
+    preset = write_preset(tmp_path, eval={"settings": ["normal", "hard"], "k": 2, "limit": 2, "heldout": [pool]})
+    summary = run(preset, out, commands, evaluate=evaluate)
+    built = str(out / "heldout" / "seed7")
+    assert [(c[0], c[3]) for c in commands.calls if c[1] == built] == [
+        ("generate", pool["generate"]), ("score", {}), ("split", pool["split"])]
+    assert summary["steps_ran"][-5:] == ["heldout-seed7-data", "heldout-seed7-score", "heldout-seed7-split", "eval",
+                                         "report"]
+    assert seen[0] == ["data", "seed7"] and Dataset.open(built).splits["hard"]
+    assert "normal@seed7" in (out / "report" / "report.md").read_text()
+    from seal.experiments.pipeline.status import run_status
+
+    states = {s["name"]: s["state"] for s in run_status(preset, out)["steps"]}
+    assert states["heldout-seed7-split"] == "done"
+    assert run(preset, out, commands, evaluate=evaluate)["steps_ran"] == []  # all done: nothing again
+    for entry, message in (({**pool, "generate": {"n": 3, "seed": 0}}, r"seed7\]\.generate\.seed: 0 is the run's"),
+                           ({**pool, "name": "../x"}, "needs a folder name"),
+                           ({**pool, "splits": {}}, r"unknown key\(s\) \['splits'\]"),
+                           ({**pool, "split": {"n_eval": "many"}}, r"eval.heldout\[seed7\].split.n_eval must be"),
+                           ({"name": "a", "generate": {"seed": 2}}, r"eval.heldout\[a\].generate.n: missing")):
+        with pytest.raises(ValueError, match=message):
+            run(write_preset(tmp_path, eval={"settings": ["normal"], "heldout": [entry]}), tmp_path / "o2", commands)
+    with pytest.raises(ValueError, match="share a name"):
+        run(write_preset(tmp_path, eval={"settings": ["normal"], "heldout": [pool, pool]}), tmp_path / "o2", commands)
+    assert not (tmp_path / "o2").exists()
+
+
 def test_failed_job_is_reported_and_retried(tmp_path: Path) -> None:
     out, commands = tmp_path / "out", FakeTasks()
     with pytest.raises(RuntimeError, match=r"(?s)1 job\(s\) failed.*cat-s13: RuntimeError: diverged"):
