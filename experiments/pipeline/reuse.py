@@ -4,7 +4,8 @@ of another run folder instead of making them again.
 The expensive part of a comparison is often not the training but what comes before it (the decisive preset: ~3 h of
 data and fits on this machine). A second comparison that changes only the egos (another ego algorithm, other
 hyperparameters, more seeds) should train on the *same* data and generator models, both to save those hours and so
-that the two comparisons differ only in what was changed. Each step of OTHER_OUT is taken only when its done-marker
+that the two comparisons differ only in what was changed (held-out pools the preset builds, ``eval.heldout``, too).
+Each step of OTHER_OUT is taken only when its done-marker
 holds the parameter hash this preset would give it *in that folder* (`seal.experiments.pipeline.steps`: the same
 options, the same dataset, the same models it depends on) and its output exists; a fit whose own options or whose
 dependencies differ is made again in the new run folder, on OTHER_OUT's dataset. So ``reuse`` never hands a model
@@ -18,7 +19,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from seal.experiments.pipeline.steps import Steps, data_steps, fit_steps
+from seal.experiments.pipeline.references import HELDOUT_DIR
+from seal.experiments.pipeline.steps import Steps, data_steps, fit_steps, heldout_steps
 
 
 @dataclass(frozen=True)
@@ -32,6 +34,9 @@ class Reuse:
     """Model name -> its path in OTHER_OUT, for every fit that matches (dependencies included)."""
     refit: list[str]
     """Fits this preset needs that OTHER_OUT does not have with these options: made in the new run folder."""
+    heldout: dict[str, str]
+    """Held-out pool name -> its folder in OTHER_OUT, for every ``eval.heldout`` pool to build that OTHER_OUT built
+    with the same options."""
 
 
 def reuse_plan(config: Mapping[str, Any], source: Path) -> Reuse:
@@ -52,7 +57,12 @@ def reuse_plan(config: Mapping[str, Any], source: Path) -> Reuse:
             reused[name] = models[name]
         else:
             refit.append(name)
-    return Reuse(source, dataset if data_done else None, reused, refit)
+    built: dict[str, list[Any]] = {}
+    for step in heldout_steps(config, source):
+        built.setdefault(str(Path(step.job["dataset"]).name), []).append(step)
+    heldout = {name: str(source / HELDOUT_DIR / name) for name, pool in built.items()
+               if all(steps.done(s.name, s.params) for s in pool) and (source / HELDOUT_DIR / name).is_dir()}
+    return Reuse(source, dataset if data_done else None, reused, refit, heldout)
 
 
 def apply_reuse(config: dict[str, Any], plan: Reuse) -> dict[str, Any]:
@@ -64,6 +74,11 @@ def apply_reuse(config: dict[str, Any], plan: Reuse) -> dict[str, Any]:
     for name, path in plan.models.items():
         fit[name] = {"path": path}
     out["fit"] = fit
+    ev = dict(out.get("eval") or {})
+    if plan.heldout and ev.get("heldout"):
+        ev["heldout"] = [plan.heldout.get(str(e.get("name")), e) if isinstance(e, Mapping) else e
+                         for e in ev["heldout"]]
+        out["eval"] = ev
     return out
 
 
@@ -76,5 +91,7 @@ def describe(config: Mapping[str, Any], needed: list[str]) -> str:
     taken = [name for name in needed if inside((fit.get(name) or {}).get("path"))]
     data = ["data"] if inside((config.get("data") or {}).get("path")) else []
     refit = [name for name in needed if name not in taken]
-    return (f"reusing from {source}: {', '.join(data + taken) or 'nothing'}"
+    pools = [f"heldout/{Path(p).name}" for p in (config.get("eval") or {}).get("heldout") or []
+             if isinstance(p, str) and inside(p)]
+    return (f"reusing from {source}: {', '.join(data + taken + pools) or 'nothing'}"
             + (f"; fitted here: {', '.join(refit)}" if refit else ""))

@@ -74,3 +74,18 @@ def test_a_missing_model_is_fitted_again_and_a_non_run_folder_is_refused(tmp_pat
     assert config["fit"]["objective"] == FIT["objective"]
     with pytest.raises(ValueError, match="reuse: .* is not a seal run folder"):
         load_run_config(write_preset(tmp_path, reuse=str(tmp_path)))
+
+
+def test_a_heldout_pool_built_with_the_same_options_is_taken_one_with_others_is_built(tmp_path: Path) -> None:
+    pool = {"name": "seed7", "generate": {"n": 3, "seed": 7}, "split": {"n_train": 0, "n_eval": 2, "n_hard": 1}}
+    first = tmp_path / "first"
+    run(write_preset(tmp_path, eval={"settings": ["normal"], "heldout": [pool]}), first, FakeTasks())
+    other = {**pool, "name": "seed8", "generate": {"n": 3, "seed": 8}}
+    commands, second = FakeTasks(), tmp_path / "second"
+    preset = write_preset(tmp_path, eval={"settings": ["normal"], "heldout": [pool, other]}, reuse=str(first))
+    plan = check_run(preset, second, train_config_fn=fake_train_config)
+    assert plan["reuse"] == f"reusing from {first.resolve()}: data, prior, heldout/seed7"
+    assert plan["eval_heldout"] == [str(first / "heldout" / "seed7"), str(second / "heldout" / "seed8")]
+    run(preset, second, commands)
+    assert {c[1] for c in commands.calls if c[0] in ("generate", "score", "split")} == {
+        str(second / "heldout" / "seed8")}
