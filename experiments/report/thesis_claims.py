@@ -21,7 +21,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from seal.experiments.report.generator_stats import generator_rows
+from seal.experiments.report.generator_stats import MATCHED_SPEED, generator_rows
 from seal.experiments.report.grouping import ALL_EGOS, algo_of, base_pipeline, groups_in, in_group
 from seal.experiments.report.stats import ALPHA, MIN_SEEDS_FOR_POI, ci_cell, enough_seeds, poi_verdict
 
@@ -53,7 +53,7 @@ def generator_claims(gen_ci: Sequence[Mapping[str, Any]], gen_diff: Sequence[Map
     """One row per generator claim: ``claim``, ``verdict``, the ``seal`` / best-other rows it rests on and, when
     ``gen_diff`` has the pair, ``diff``: SEAL minus the best other, paired (module docstring)."""
     gens = {r["setting"]: r for r in generator_rows(gen_ci)}
-    diffs = {r["reference"]: r for r in gen_diff if r["setting"] == "seal"}
+    diffs = diffs_of(gen_diff)
     out = []
     for key, claim in GENERATOR_CLAIMS:
         seal = gens.get("seal")
@@ -73,6 +73,26 @@ def generator_claims(gen_ci: Sequence[Mapping[str, Any]], gen_diff: Sequence[Map
         out.append({"claim": claim, "verdict": verdict, "seal": seal, "other": best, "key": key,
                     "diff": diffs[best["setting"]] if all_paired else None})
     return out
+
+
+def diffs_of(gen_diff: Sequence[Mapping[str, Any]]) -> dict[str, Mapping[str, Any]]:
+    """SEAL's paired difference rows by the other generator."""
+    return {r["reference"]: r for r in gen_diff if r["setting"] == "seal"}
+
+
+def _matched(claim: Mapping[str, Any], diffs: Mapping[str, Mapping[str, Any]]) -> str:
+    """The collision speed claim's second reading, not its verdict: SEAL minus each other generator on matched
+    contacts (`MATCHED_SPEED`), the other generators whose interval lies above or below 0 named."""
+    rows = [d for d in diffs.values() if math.isfinite(d.get(f"{MATCHED_SPEED}_low", math.nan))]
+    d = diffs.get(claim["other"]["setting"])
+    if d is None or not rows:
+        return ""
+    k = MATCHED_SPEED
+    above = [r["reference"] for r in rows if r[f"{k}_low"] > 0]
+    below = [r["reference"] for r in rows if r[f"{k}_high"] < 0]
+    return (f"; on matched contacts (same ego and scenario, both with a contact) {d[k]:+.3f} [{d[f'{k}_low']:+.3f} "
+            f"to {d[f'{k}_high']:+.3f}] over {d['matched_contacts']} episodes; matched, SEAL faster than "
+            f"{', '.join(above) or 'none'}, slower than {', '.join(below) or 'none'}")
 
 
 def claims_markdown(poi: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[str, Any]],
@@ -104,6 +124,8 @@ def claims_markdown(poi: Sequence[Mapping[str, Any]], gen_ci: Sequence[Mapping[s
         d = c.get("diff")
         paired = (f"; paired difference {d[key]:+.3f} [{d[f'{key}_low']:+.3f} to {d[f'{key}_high']:+.3f}] over "
                   f"{d['scenarios']} scenarios" if d else "")
+        if d and key == "collision_speed_mps" and MATCHED_SPEED in d:
+            paired += _matched(c, diffs_of(in_group(gen_diff, group)))
         md.append(f"| {c['claim']} | {group} | {c['verdict']} | seal {seal_cell}, best other {o['setting']} "
                   f"{other_cell}{paired} |")
     return "\n".join(md) + "\n"

@@ -138,7 +138,10 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
         *_per_group(gen_ci, groups, generator_ci_markdown, "(no generator settings evaluated)\n"),
         "Row minus column, paired: the scenarios both generators perturbed drawn with replacement, each with all its "
         "episodes in both [95 % interval]; an interval below 0 = the row is lower (more realistic, slower "
-        "collisions) on the same scenarios. All statistics: `generator_differences.csv`.\n",
+        "collisions) on the same scenarios. The matched collision speed holds the ego fixed too: the mean, over the "
+        "episodes where the same ego in the same scenario met a contact in both settings, of the row's collision "
+        "speed minus the column's (the plain difference also compares which scenarios end in a contact). All "
+        "statistics: `generator_differences.csv` (`matched_contacts`: the matched episodes).\n",
         *_per_group(gen_diff, groups, generator_difference_markdown, "(fewer than two generator settings)\n"),
     ]
     first_page = first_page_markdown(cis, poi, poi_setting, gen_ci, training_lines, gen_diff, agreement, differences,
