@@ -65,6 +65,15 @@ class Uncertainty:
     differences: list[dict[str, Any]] = field(default_factory=list)
 
 
+GENERATOR_DIFFERENCES_INTRO = (
+    "Row minus column, paired: the scenarios both generators perturbed drawn with replacement, each with all its "
+    "episodes in both [95 % interval]; an interval below 0 = the row is lower (more realistic, slower collisions) on "
+    "the same scenarios. The matched collision speed holds the ego fixed too: the mean, over the episodes where the "
+    "same ego in the same scenario met a contact in both settings, of the row's collision speed minus the column's "
+    "(the plain difference also compares which scenarios end in a contact). All statistics: "
+    "`generator_differences.csv` (`matched_contacts`: the matched episodes).\n")
+
+
 def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapping[str, Any]], out: Path,
                        plots: bool = True, n_boot: int = N_BOOT, n_boot_poi: int = N_BOOT_POI, seed: int = 0,
                        training_lines: Sequence[str] = ()) -> Uncertainty:
@@ -136,12 +145,7 @@ def uncertainty_report(ego_rows: Sequence[Mapping[str, Any]], t62: Sequence[Mapp
            "against the ego's own roll-outs, so its adversary depends on the ego)" if len(groups) > 1 else "")
         + ".\n",
         *_per_group(gen_ci, groups, generator_ci_markdown, "(no generator settings evaluated)\n"),
-        "Row minus column, paired: the scenarios both generators perturbed drawn with replacement, each with all its "
-        "episodes in both [95 % interval]; an interval below 0 = the row is lower (more realistic, slower "
-        "collisions) on the same scenarios. The matched collision speed holds the ego fixed too: the mean, over the "
-        "episodes where the same ego in the same scenario met a contact in both settings, of the row's collision "
-        "speed minus the column's (the plain difference also compares which scenarios end in a contact). All "
-        "statistics: `generator_differences.csv` (`matched_contacts`: the matched episodes).\n",
+        GENERATOR_DIFFERENCES_INTRO,
         *_per_group(gen_diff, groups, generator_difference_markdown, "(fewer than two generator settings)\n"),
     ]
     first_page = first_page_markdown(cis, poi, poi_setting, gen_ci, training_lines, gen_diff, agreement, differences,
