@@ -3,15 +3,15 @@
 Read top to bottom, the steps are:
 
 1. data     generate / score / split (as ``seal data generate | score | split``) into OUT/data (or use
-            ``data.path`` as is)
+            ``data.path`` as is), then the held-out pools the preset builds (``eval.heldout`` entries with
+            ``generate``) into OUT/heldout/<name>
 2. fit      the prior / goose / skills / objective (as ``seal fit NAME``) into OUT/models, only the models that the
             generators in use reference (``"${fit.NAME}"`` in ``generators``), or the file given as ``fit.NAME.path``
 3. train    one job per pipeline x seed (`seal.experiments.training.train.train_run`) into OUT/runs/<pipeline>-s<seed>
             (x algorithm with ``algos``: OUT/runs/<pipeline>-<algo>-s<seed>)
-4. eval     the held-out pools the preset builds (``eval.heldout`` entries with ``generate``: generate / score /
-            split into OUT/heldout/<name>), then one job per trained ego, plus the Replay ego
-            (`seal.experiments.evaluation.evaluate.evaluate_job`) into OUT/results.sqlite; the progress bar counts
-            the episodes in the store as the jobs write them (`seal.experiments.evaluation.store_progress`)
+4. eval     one job per trained ego, plus the Replay ego (`seal.experiments.evaluation.evaluate.evaluate_job`),
+            into OUT/results.sqlite; the progress bar counts the episodes in the store as the jobs write them
+            (`seal.experiments.evaluation.store_progress`)
 5. report   `seal.experiments.report.write.write_report` into OUT/report
 
 Each step leaves a marker ``OUT/steps/<step>.json`` holding a hash of its parameters; a step whose marker
@@ -62,6 +62,7 @@ The preset's sections (all but ``train`` belong to this module; ``train`` is pas
 from __future__ import annotations
 
 import logging
+import os
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields
@@ -246,7 +247,11 @@ class _Run:
         """One data / fit step through the step backend; a failure stops the pipeline."""
         (result,) = self.step_backend.map(self.task_fn, [job], desc=str(job["name"]))
         if not result.ok:
-            raise RuntimeError(f"step {job['name']} failed: {result.error}")
+            # The error's first line says what went wrong (a SplitError's advice, ...); the traceback tail under it
+            # is for debugging, printed with SEAL_DEBUG=1 as the other commands do.
+            error = str(result.error)
+            shown = error if os.environ.get("SEAL_DEBUG") else error.split("\n", 1)[0]
+            raise RuntimeError(f"step {job['name']} failed: {shown}")
 
 
 def check_run(config_path: str | Path, out: str | Path, sets: Sequence[str] = (),
@@ -301,8 +306,6 @@ def run_pipeline(
     generators = {name: substitute(dict((config.get("generators") or {}).get(name) or {}), models)
                   for name in generators_in_use(config)}
     n_jobs, trained = _train_step(run, dataset, generators)
-    for step in heldout_steps(run.config, run.out):  # 4. the held-out pools first, like OUT/data
-        run.steps.run(step.name, step.params, partial(run.task, step.job))
     store = _eval_step(run, dataset, generators, trained)
     report = _report_step(run, store)
     summary = {
@@ -317,10 +320,12 @@ def run_pipeline(
 
 
 def _data_steps(run: _Run) -> tuple[str, dict[str, Any]]:
-    """1. data: generate, score and split OUT/data (or take ``data.path``); returns the dataset folder and the
-    data parameters (the fits run again when they change)."""
+    """1. data: generate, score and split OUT/data (or take ``data.path``), then the held-out pools to build;
+    returns the dataset folder and the data parameters (the fits run again when they change)."""
     dataset, data_params, steps = data_steps(run.config, run.out)
-    for step in steps:
+    # The held-out pools the preset builds come next, not just before the evaluation: a pool that cannot be split as
+    # asked (too few Hard scenes) then fails in minutes, not after hours of training.
+    for step in [*steps, *heldout_steps(run.config, run.out)]:
         run.steps.run(step.name, step.params, partial(run.task, step.job))
     return dataset, data_params
 

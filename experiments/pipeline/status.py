@@ -44,7 +44,7 @@ def run_status(config_path: str | Path, out: str | Path, sets: Sequence[str] = (
     return {
         "preset": config["preset"], "out": str(out), "exists": out.is_dir(),
         "reuse": describe(config, fits_needed(config)) if config.get("reuse") else None,
-        "steps": [_step(markers, step) for step in [*data, *fits, *heldout_steps(config, out)]],
+        "steps": [_step(markers, step) for step in [*data, *heldout_steps(config, out), *fits]],
         "training": runs,
         "evaluation": _evaluation(out, config, dataset, runs["runs"]),
         "report": "done" if markers.marker("report") is not None else "pending",

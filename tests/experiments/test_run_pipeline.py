@@ -124,9 +124,10 @@ def test_heldout_pools_are_evaluated_beside_the_runs_own(tmp_path: Path) -> None
                          eval={"settings": ["normal"], "heldout": [str(pool)]}), tmp_path / "out2", commands)
 
 
-def test_a_heldout_pool_the_run_builds_is_made_before_the_eval_and_skipped_after(tmp_path: Path) -> None:
-    """``eval.heldout: [{name, generate, score, split}]``: generate / score / split into OUT/heldout/<name> (after
-    the training, before the eval), evaluated like a given pool, skipped on a re-run; a bad entry fails the plan."""
+def test_a_heldout_pool_the_run_builds_is_made_after_the_data_and_skipped_after(tmp_path: Path) -> None:
+    """``eval.heldout: [{name, generate, score, split}]``: generate / score / split into OUT/heldout/<name> (right
+    after the run's own data, so a pool that cannot be split fails before the training), evaluated like a given
+    pool, skipped on a re-run; a bad entry fails the plan."""
     out, commands, seen = tmp_path / "out", FakeTasks(), []
 
     def evaluate(job):
@@ -139,8 +140,8 @@ def test_a_heldout_pool_the_run_builds_is_made_before_the_eval_and_skipped_after
     built = str(out / "heldout" / "seed7")
     assert [(c[0], c[3]) for c in commands.calls if c[1] == built] == [
         ("generate", pool["generate"]), ("score", {}), ("split", pool["split"])]
-    assert summary["steps_ran"][-5:] == ["heldout-seed7-data", "heldout-seed7-score", "heldout-seed7-split", "eval",
-                                         "report"]
+    assert summary["steps_ran"][:6] == ["data", "score", "split", "heldout-seed7-data", "heldout-seed7-score",
+                                        "heldout-seed7-split"]
     assert seen[0] == ["data", "seed7"] and Dataset.open(built).splits["hard"]
     assert "normal@seed7" in (out / "report" / "report.md").read_text()
     from seal.experiments.pipeline.status import run_status
@@ -249,14 +250,21 @@ def test_fit_dependencies_come_first(tmp_path: Path) -> None:
                                                  generators={"seal": {"objective": "${fit.objective}"}})))
 
 
-def test_failed_step_stops_the_pipeline(tmp_path: Path) -> None:
+def test_failed_step_stops_the_pipeline(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     def failing(job) -> None:
         raise OSError("disk full")
 
-    with pytest.raises(RuntimeError, match="step data failed: OSError: disk full"):
+    def go() -> None:
         run_pipeline(write_preset(tmp_path), tmp_path / "out", backend=InlineBackend(), task_fn=failing,
                      train_fn=fake_train, eval_fn=fake_eval, train_config_fn=fake_train_config, progress=False)
+
+    with pytest.raises(RuntimeError) as error:
+        go()
+    assert str(error.value) == "step data failed: OSError: disk full"  # one line: what and why, no traceback
     assert not (tmp_path / "out" / "steps" / "data.json").exists()  # not marked done: runs again next time
+    monkeypatch.setenv("SEAL_DEBUG", "1")
+    with pytest.raises(RuntimeError, match=r"(?s)step data failed: OSError: disk full\n.*raise OSError"):
+        go()
 
 
 def test_tasks_check_their_options(tmp_path: Path) -> None:
