@@ -245,7 +245,7 @@ class _Run:
 
     def task(self, job: dict[str, Any]) -> None:
         """One data / fit step through the step backend; a failure stops the pipeline."""
-        (result,) = self.step_backend.map(self.task_fn, [job], desc=str(job["name"]))
+        (result,) = self.step_backend.map(self.task_fn, [job], desc=str(job["name"]), progress=self.progress)
         if not result.ok:
             # The error's first line says what went wrong (a SplitError's advice, ...); the traceback tail under it
             # is for debugging, printed with SEAL_DEBUG=1 as the other commands do.
@@ -358,7 +358,7 @@ def _train_step(run: _Run, dataset: str, generators: Mapping[str, Any]) -> tuple
                else run.backend)
     if jobs:
         logger.info(f"[seal run] train: {len(jobs)} job(s) on the {backend.name} backend")
-    run.errors += _failures("train", backend.map(run.train_fn, jobs, desc="train"))
+    run.errors += _failures("train", backend.map(run.train_fn, jobs, desc="train", progress=run.progress))
     return len(jobs), [str(d) for d in runs if (d / "done.json").is_file()]
 
 
