@@ -309,6 +309,13 @@ def plan_ego(store: ResultsStore, ego: EgoSpec, settings: Sequence[Setting], con
     return todo
 
 
+def written_key(setting: Setting, settings: Sequence[Setting]) -> str:
+    """The key of ``setting`` in the rows-written counts: its name, or ``name@dataset`` where another of
+    ``settings`` has the same name on another dataset (``seal run``'s held-out pools)."""
+    clash = any(o.name == setting.name and o.dataset != setting.dataset for o in settings)
+    return f"{setting.name}@{setting.dataset}" if clash else setting.name
+
+
 def play_items(
     store: ResultsStore, ego: EgoSpec, settings: Sequence[Setting], config: Mapping[str, Any],
     items: Sequence[WorkItem], on_scenario: Any = None,
@@ -325,8 +332,9 @@ def play_items(
     from seal.experiments.evaluation.worker_cache import cached_ego, cached_env, cached_generator, cached_split
 
     k, seed = int(config["k"]), int(config["seed"])
-    by_name = {s.name: s for s in settings}
-    written = {s.name: 0 for s in settings}
+    # A setting is its dataset and its name: `seal run`'s held-out pools repeat every name on another dataset.
+    by_key = {(s.dataset, s.name): s for s in settings}
+    written = {written_key(s, settings): 0 for s in settings}
     if not items:
         return written
     policy = cached_ego(ego.ego, ego.algo)
@@ -339,7 +347,7 @@ def play_items(
         reactive_normal: Any = None
         rows = []
         for name in missing:
-            s = by_name[name]
+            s = by_key[(dataset, name)]
             row = _base_row(ego, s, scenario.scenario_id, k if s.generator else 0)
             if s.reactive and reactive_normal is None:  # shared by normal-reactive and the -reactive settings
                 reactive_env = cached_env(dataset, split, config, reactive=True)
@@ -348,12 +356,12 @@ def play_items(
                 row.update(episode_metrics(scenario, reactive_normal if s.reactive else normal, (), logged))
             else:
                 # A generator of its own per setting: some keep per-scenario state across the K passes.
-                generator = cached_generator(ego.run, s.generator, config, setting=s.name)
+                generator = cached_generator(ego.run, s.generator, config, setting=f"{s.dataset}:{s.name}")
                 rollout, times = protocol.scored_pass(reactive_env if s.reactive else env, scenario, i, policy,
                                                       generator, k, seed, reactive_normal if s.reactive else normal)
                 row.update(episode_metrics(scenario, rollout, times, logged))
             rows.append(row)
-            written[name] += 1
+            written[written_key(s, settings)] += 1
         store.upsert_episodes(rows)
         if on_scenario is not None:
             on_scenario(len(rows))

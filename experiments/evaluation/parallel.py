@@ -35,6 +35,7 @@ from seal.experiments.evaluation.evaluate import (
     play_items,
     read_run,
     resolve_eval_config,
+    written_key,
 )
 from seal.experiments.evaluation.results_store import ResultsStore
 from seal.experiments.evaluation.worker_cache import use_session
@@ -123,7 +124,7 @@ def evaluate_parallel(
         raise SealError(f"{len(failed)} of {len(results)} evaluation jobs failed ({len(runs)} egos: "
                         f"{', '.join(runs[:3])}{', ...' if len(runs) > 3 else ''}); first error: {first}. Rows of "
                         "the jobs that finished are in the store; re-running adds only what is missing")
-    out: dict[str, dict[str, int]] = {e.run: {s.name: 0 for s in settings} for e in egos}
+    out: dict[str, dict[str, int]] = {e.run: {written_key(s, settings): 0 for s in settings} for e in egos}
     for r in results:
         for name, n in r.value["written"].items():
             out[r.value["run"]][name] += n

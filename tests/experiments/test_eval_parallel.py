@@ -156,3 +156,33 @@ def test_a_failing_ego_gives_one_line_naming_it_and_keeps_the_other_rows(tmp_pat
     assert "\n" not in message and message.startswith("2 of 4 evaluation jobs failed (1 egos: heuristic)")
     assert "first error: EgoError: cannot load this ego." in message
     assert {run for run, *_ in comparable_rows(store)} == {"replay"}  # the finished jobs' rows are kept
+
+
+def test_two_pools_with_the_same_scenario_ids_keep_their_own_rows(tmp_path: Path) -> None:
+    """`seal run`'s held-out pools repeat every setting name on another dataset, whose scenario ids may be the
+    run's own (two traffic runs number their windows alike): each pool's rows are those of evaluating it alone."""
+    import dataclasses
+
+    from seal.experiments.evaluation.evaluate import evaluate_job
+
+    own = _dataset(tmp_path / "own")
+    ids = [s.scenario_id for s in Dataset.open(own).load()]
+    other = [dataclasses.replace(sf.highway_scenario(10 + i), scenario_id=sid) for i, sid in enumerate(ids[:5])]
+    write_dataset(tmp_path / "pool", [*other, sf.lane_change_scenario()])
+    Dataset.open(tmp_path / "pool").update_manifest(splits={"train": [], "eval": ids[:4], "hard": ids[4:]})
+    config = {**resolve_eval_config(candidates="lanes", k=2), "generators": {}}
+    both = [*parse_settings("normal,hard,cat", own), *parse_settings("normal,hard,cat", tmp_path / "pool")]
+    job = {"store": str(tmp_path / "both.sqlite"), "run": "heuristic", "config": config,
+           "settings": [vars(s) for s in both]}
+    result = evaluate_job(job)
+    assert result["written"] == {f"{n}@{d}": c for d in (str(own), str(tmp_path / "pool"))
+                                 for n, c in (("normal", 4), ("hard", 2), ("cat", 4))}
+    rows = comparable_rows(tmp_path / "both.sqlite")
+    for root in (own, tmp_path / "pool"):
+        alone = tmp_path / f"{root.name}.sqlite"
+        evaluate_job({**job, "store": str(alone), "settings": [vars(s) for s in parse_settings("normal,hard,cat",
+                                                                                               root)]})
+        assert {k: v for k, v in rows.items() if k[1] == str(root)} == comparable_rows(alone)
+    # and the pools really differ: the same scenario id is another scene in the other pool
+    assert rows[("heuristic", str(own), "normal", ids[0])] != rows[("heuristic", str(tmp_path / "pool"), "normal",
+                                                                     ids[0])]
