@@ -5,11 +5,11 @@ The expensive part of a comparison is often not the training but what comes befo
 data and fits on this machine). A second comparison that changes only the egos (another ego algorithm, other
 hyperparameters, more seeds) should train on the *same* data and generator models, both to save those hours and so
 that the two comparisons differ only in what was changed (held-out pools the preset builds, ``eval.heldout``, too).
-Each step of OTHER_OUT is taken only when its done-marker
-holds the parameter hash this preset would give it *in that folder* (`seal.experiments.pipeline.steps`: the same
-options, the same dataset, the same models it depends on) and its output exists; a fit whose own options or whose
-dependencies differ is made again in the new run folder, on OTHER_OUT's dataset. So ``reuse`` never hands a model
-fitted with other options to a run that asks for different ones.
+Each step of OTHER_OUT is taken only when its done-marker holds the parameter hash this preset would give it *in
+that folder* (`seal.experiments.pipeline.steps`: the same options, the same dataset, the same models it depends on)
+and its output exists; a fit whose own options or whose dependencies differ is made again in the new run folder,
+on OTHER_OUT's dataset. So ``reuse`` never hands a model fitted with other options to a run that asks for different
+ones.
 """
 
 from __future__ import annotations
