@@ -68,7 +68,10 @@ def register(tree: CommandTree) -> None:
         "with `ray start --head`; address from --address, the preset's backend.address, RAY_ADDRESS or auto). "
         "--set reuse=OTHER_OUT takes the data and the fitted models of another run folder wherever they were made "
         "with this preset's options (e.g. a second comparison with other ego settings on the same models); the "
-        "rest is made here.",
+        "rest is made here. eval.heldout in the preset plays every setting but real: also on other pools' eval / "
+        "hard splits: dataset folders, or {name, generate, score, split} entries that the run builds into "
+        "OUT/heldout/<name> right after its own data (the decisive preset builds a 600 + 600 scenario pool of "
+        "other traffic runs, what a +/-5 point success interval needs).",
     )
     p.add_argument("config", help="preset YAML, e.g. experiments/configs/quick.yaml")
     p.add_argument("--out", default=None, help="output folder (default runs/<preset name>)")
