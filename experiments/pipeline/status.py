@@ -147,26 +147,27 @@ def format_status(status: Mapping[str, Any]) -> str:
                                                                           " (no such folder yet)")]
     if status.get("reuse"):
         lines.append(f"  {status['reuse']}")
+    w = max([18, *(len(step["name"]) for step in status["steps"])])  # held-out pool steps have long names
     for step in status["steps"]:
         took = f" ({step['seconds'] / 60:.1f} min)" if step.get("seconds") is not None else ""
-        lines.append(f"  {step['name']:<18} {step['state']}{took}")
+        lines.append(f"  {step['name']:<{w}} {step['state']}{took}")
     tr = status["training"]
     states = [r["state"] for r in tr["runs"]]
-    lines.append(f"  {'training':<18} {tr['done']} of {tr['planned']} runs done, {states.count('in progress')} in "
+    lines.append(f"  {'training':<{w}} {tr['done']} of {tr['planned']} runs done, {states.count('in progress')} in "
                  f"progress, {states.count('not started')} not started")
     for r in tr["runs"]:
         if r["state"] == "in progress":
             total = "?" if r["total"] is None else f"{r['total']:,}"
-            lines.append(f"  {'':<18}   {r['name']}: {r['steps']:,} of {total} steps")
+            lines.append(f"  {'':<{w}}   {r['name']}: {r['steps']:,} of {total} steps")
     if tr["mean_run_s"]:
         means = ", ".join(f"{algo} {s / 60:.1f} min" for algo, s in tr["mean_run_s"].items())
         left = tr["left_s_estimate"]
         at_a_time = "one at a time" if tr["concurrent_runs"] == 1 else f"{tr['concurrent_runs']} at a time"
-        lines.append(f"  {'':<18}   finished runs take {means} on average; the runs left ~{left / 3600:.1f} h at "
+        lines.append(f"  {'':<{w}}   finished runs take {means} on average; the runs left ~{left / 3600:.1f} h at "
                      f"that pace ({at_a_time}; algorithms without a finished run not counted)")
     ev = status["evaluation"]
     expected = "?" if ev["expected_rows"] is None else f"{ev['expected_rows']:,}"
     egos = "" if ev["complete_egos"] is None else f" ({ev['complete_egos']} of {ev['egos']} egos complete)"
-    lines.append(f"  {'evaluation':<18} {ev['rows']:,} of {expected} rows{egos}")
-    lines.append(f"  {'report':<18} {status['report']}")
+    lines.append(f"  {'evaluation':<{w}} {ev['rows']:,} of {expected} rows{egos}")
+    lines.append(f"  {'report':<{w}} {status['report']}")
     return "\n".join(lines)
