@@ -334,7 +334,8 @@ def play_items(
     k, seed = int(config["k"]), int(config["seed"])
     # A setting is its dataset and its name: `seal run`'s held-out pools repeat every name on another dataset.
     by_key = {(s.dataset, s.name): s for s in settings}
-    written = {written_key(s, settings): 0 for s in settings}
+    keys = {(s.dataset, s.name): written_key(s, settings) for s in settings}
+    written = dict.fromkeys(keys.values(), 0)
     if not items:
         return written
     policy = cached_ego(ego.ego, ego.algo)
@@ -361,7 +362,7 @@ def play_items(
                                                       generator, k, seed, reactive_normal if s.reactive else normal)
                 row.update(episode_metrics(scenario, rollout, times, logged))
             rows.append(row)
-            written[written_key(s, settings)] += 1
+            written[keys[(dataset, name)]] += 1
         store.upsert_episodes(rows)
         if on_scenario is not None:
             on_scenario(len(rows))

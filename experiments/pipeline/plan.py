@@ -16,7 +16,6 @@ from typing import Any
 
 from seal.adversaries.base import NO_ADVERSARY, available_generators
 from seal.experiments.pipeline.references import (
-    HELDOUT_DIR,
     fit_kind,
     fits_needed,
     generators_in_use,
@@ -211,7 +210,7 @@ def _check_heldout(config: Mapping[str, Any], dataset: str, out: Path) -> None:
     the run builds (``{name, generate, score, split}``); none generated from the same traffic runs (same generator
     seed) as the run's pool."""
     from seal.core.dataset import Dataset, DatasetError
-    from seal.experiments.pipeline.references import eval_settings, heldout_pools
+    from seal.experiments.pipeline.references import eval_settings, heldout_pool
 
     pools = (config.get("eval") or {}).get("heldout")
     if pools is None:
@@ -225,11 +224,10 @@ def _check_heldout(config: Mapping[str, Any], dataset: str, out: Path) -> None:
     built = [_check_heldout_build(entry, own) for entry in pools if isinstance(entry, Mapping)]
     if len(set(built)) < len(built):
         raise ValueError(f"eval.heldout: two pools to build share a name ({sorted(built)})")
-    for pool in heldout_pools(config, out):
+    settings = eval_settings(config, dataset, out)
+    for pool in dict.fromkeys(heldout_pool(e, out) for e in pools if isinstance(e, str)):  # the built ones: above
         if pool == str(Path(dataset).resolve()):
             raise ValueError(f"eval.heldout: {pool} is the run's own dataset")
-        if Path(pool).parent == out.resolve() / HELDOUT_DIR:
-            continue  # built by the run (its split options were checked above)
         try:
             ds = Dataset.open(pool)
         except DatasetError as exc:
@@ -238,7 +236,7 @@ def _check_heldout(config: Mapping[str, Any], dataset: str, out: Path) -> None:
         if prov.get("source") == own.get("source") == "highway-env" and prov.get("seed") == own.get("seed"):
             raise ValueError(f"eval.heldout: {pool} was generated with seed {own['seed']}, as the run's pool: the "
                              "same traffic runs, not held out (generate it with another --seed)")
-        needed = sorted({str(s.split) for s in eval_settings(config, dataset, out) if s.dataset == pool})
+        needed = sorted({str(s.split) for s in settings if s.dataset == pool})
         if missing := [sp for sp in needed if not ds.splits.get(sp)]:
             raise ValueError(f"eval.heldout: {pool} has no {' / '.join(missing)} split; run `seal data split "
                              f"{pool} --n-train 0 ...`")

@@ -162,16 +162,17 @@ HELDOUT_DIR = "heldout"
 """OUT/heldout/<name>: the held-out pools a run builds itself (``eval.heldout`` entries with ``generate``)."""
 
 
+def heldout_pool(entry: Any, out: Path) -> str:
+    """The folder of one ``eval.heldout`` entry: a folder given as a path (``~`` expanded, resolved), or
+    OUT/heldout/<name> for a pool the run builds (an entry ``{name, generate, score, split}``)."""
+    if isinstance(entry, Mapping):
+        return str(Path(out).resolve() / HELDOUT_DIR / str(entry.get("name")))
+    return str(Path(str(entry)).expanduser().resolve())
+
+
 def heldout_pools(config: Mapping[str, Any], out: Path) -> list[str]:
-    """The preset's ``eval.heldout`` dataset folders, each once: a folder given as a path (``~`` expanded,
-    resolved), and OUT/heldout/<name> for a pool the run builds (an entry ``{name, generate, score, split}``)."""
-    pools = []
-    for entry in (config.get("eval") or {}).get("heldout") or []:
-        if isinstance(entry, Mapping):
-            pools.append(str(Path(out).resolve() / HELDOUT_DIR / str(entry.get("name"))))
-        else:
-            pools.append(str(Path(str(entry)).expanduser().resolve()))
-    return list(dict.fromkeys(pools))
+    """The preset's ``eval.heldout`` dataset folders (`heldout_pool`), each once."""
+    return list(dict.fromkeys(heldout_pool(e, out) for e in (config.get("eval") or {}).get("heldout") or []))
 
 
 def eval_settings(config: Mapping[str, Any], dataset: str, out: Path) -> list[Any]:

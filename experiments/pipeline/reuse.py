@@ -19,8 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from seal.experiments.pipeline.references import HELDOUT_DIR
-from seal.experiments.pipeline.steps import Steps, data_steps, fit_steps, heldout_steps
+from seal.experiments.pipeline.steps import Steps, data_steps, fit_steps, heldout_pool_steps
 
 
 @dataclass(frozen=True)
@@ -57,11 +56,8 @@ def reuse_plan(config: Mapping[str, Any], source: Path) -> Reuse:
             reused[name] = models[name]
         else:
             refit.append(name)
-    built: dict[str, list[Any]] = {}
-    for step in heldout_steps(config, source):
-        built.setdefault(str(Path(step.job["dataset"]).name), []).append(step)
-    heldout = {name: str(source / HELDOUT_DIR / name) for name, pool in built.items()
-               if all(steps.done(s.name, s.params) for s in pool) and (source / HELDOUT_DIR / name).is_dir()}
+    heldout = {name: pool[0].job["dataset"] for name, pool in heldout_pool_steps(config, source).items()
+               if all(steps.done(s.name, s.params) for s in pool) and Path(pool[0].job["dataset"]).is_dir()}
     return Reuse(source, dataset if data_done else None, reused, refit, heldout)
 
 

@@ -86,15 +86,16 @@ def data_steps(config: Mapping[str, Any], out: Path) -> tuple[str, dict[str, Any
     return dataset, data_params, _pool_steps("", dataset, data)
 
 
+def heldout_pool_steps(config: Mapping[str, Any], out: Path) -> dict[str, list[StepJob]]:
+    """Pool name -> the generate / score / split steps (``heldout-<name>-data`` ...) of each held-out pool the run
+    builds itself: the ``eval.heldout`` entries ``{name, generate, score, split}``, into OUT/heldout/<name>."""
+    return {str(e["name"]): _pool_steps(f"heldout-{e['name']}-", str(out / HELDOUT_DIR / str(e["name"])), e)
+            for e in (config.get("eval") or {}).get("heldout") or [] if isinstance(e, Mapping)}
+
+
 def heldout_steps(config: Mapping[str, Any], out: Path) -> list[StepJob]:
-    """The generate / score / split steps (``heldout-<name>-data`` ...) of every held-out pool the run builds
-    itself: the ``eval.heldout`` entries ``{name, generate, score, split}``, into OUT/heldout/<name>."""
-    steps: list[StepJob] = []
-    for entry in (config.get("eval") or {}).get("heldout") or []:
-        if isinstance(entry, Mapping):
-            name = str(entry["name"])
-            steps += _pool_steps(f"heldout-{name}-", str(out / HELDOUT_DIR / name), entry)
-    return steps
+    """The steps of `heldout_pool_steps`, pool after pool."""
+    return [step for steps in heldout_pool_steps(config, out).values() for step in steps]
 
 
 def _pool_steps(prefix: str, dataset: str, data: Mapping[str, Any]) -> list[StepJob]:
