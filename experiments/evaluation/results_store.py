@@ -24,12 +24,13 @@ from __future__ import annotations
 import json
 import sqlite3
 import time
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 from seal.core.errors import SealError
+from seal.core.paths import rebase, rebase_tree
 
 SCHEMA_VERSION = 1
 BUSY_TIMEOUT_S = 120.0
@@ -120,6 +121,14 @@ def _create_sql() -> list[str]:
 def _kwargs_json(kwargs: Mapping[str, Any]) -> str:
     """A setting's constructor options as the settings table stores them (paths and other objects as text)."""
     return json.dumps(dict(kwargs), sort_keys=True, default=str)
+
+
+def _rebased_json(text: str, old: str, new: str, dump: Callable[[Any], str]) -> str:
+    """The JSON ``text`` with its paths in ``old`` moved to ``new`` (`seal.core.paths.rebase_tree`), written by
+    ``dump``; ``text`` itself when no path moves."""
+    value = json.loads(text)
+    moved = rebase_tree(value, old, new)
+    return text if moved == value else dump(moved)
 
 
 def _as_list(value: str | int | Iterable[Any] | None) -> list[Any] | None:
@@ -223,6 +232,41 @@ class ResultsStore:
                 (dataset, setting, kind, split, generator, _kwargs_json(kwargs),
                  int(k), int(seed), time.time()),
             )
+
+    def rebase_paths(self, old: str, new: str) -> int:
+        """Point every run and dataset key, run path and path in a run's config or a setting's options that lies in
+        folder ``old`` at folder ``new`` (a moved or copied run folder, `seal.experiments.pipeline.location`); a row
+        already stored under the new key is replaced by the moved one (the same ego on the same scenario). Returns
+        the number of rows changed."""
+        changed = 0
+        with self._write() as conn:
+            for column in ("run", "dataset"):
+                for (value,) in conn.execute(f"SELECT DISTINCT {column} FROM episodes").fetchall():
+                    moved = rebase(value, old, new)
+                    if moved != value:
+                        changed += conn.execute(
+                            f"UPDATE OR REPLACE episodes SET {column} = ? WHERE {column} = ?", (moved, value)).rowcount
+            for row in conn.execute("SELECT * FROM runs").fetchall():
+                moved_row = {**dict(row), "run": rebase(row["run"], old, new),
+                             "path": None if row["path"] is None else rebase(row["path"], old, new),
+                             "config": _rebased_json(row["config"], old, new, lambda v: json.dumps(v, sort_keys=True))}
+                changed += self._replace_row(conn, "runs", dict(row), moved_row, ("run",))
+            for row in conn.execute("SELECT * FROM settings").fetchall():
+                moved_row = {**dict(row), "dataset": rebase(row["dataset"], old, new),
+                             "kwargs": _rebased_json(row["kwargs"], old, new, _kwargs_json)}
+                changed += self._replace_row(conn, "settings", dict(row), moved_row, ("dataset", "setting"))
+        return changed
+
+    @staticmethod
+    def _replace_row(conn: sqlite3.Connection, table: str, row: dict[str, Any], moved: dict[str, Any],
+                     key: tuple[str, ...]) -> int:
+        """Replace ``row`` of ``table`` (primary ``key``) by ``moved``; 0 when they are the same."""
+        if moved == row:
+            return 0
+        conn.execute(f"DELETE FROM {table} WHERE {' AND '.join(f'{k} = ?' for k in key)}", [row[k] for k in key])
+        conn.execute(f"INSERT OR REPLACE INTO {table} ({', '.join(moved)}) VALUES ({', '.join('?' * len(moved))})",
+                     list(moved.values()))
+        return 1
 
     def setting_differences(
         self, dataset: str, setting: str, kind: str, split: str | None, generator: str | None,

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from seal.experiments.pipeline.location import recorded_roots
 from seal.experiments.pipeline.steps import Steps, data_steps, fit_steps, heldout_pool_steps
 
 
@@ -43,7 +44,7 @@ def reuse_plan(config: Mapping[str, Any], source: Path) -> Reuse:
     them there (module docstring). Raises ValueError when ``source`` is no ``seal run`` folder."""
     if not (source / "steps").is_dir():
         raise ValueError(f"reuse: {source} is not a seal run folder (no steps/ in it)")
-    steps = Steps(source)
+    steps = Steps(source, recorded_roots(source))  # a moved source folder's older markers count too
     dataset, data_params, data = data_steps(config, source)
     data_done = all(steps.done(s.name, s.params) for s in data) and Path(dataset).is_dir()
     models, fits = fit_steps(config, source, dataset, data_params)

@@ -75,6 +75,7 @@ import yaml
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
 from seal.core.config import apply_overrides, check_keys, safe_load_file
 from seal.experiments.backends import Backend, InlineBackend, Job, JobResult, LocalBackend, make_backend
+from seal.experiments.pipeline.location import relocate
 from seal.experiments.pipeline.plan import check_plan
 from seal.experiments.pipeline.references import (
     dotted,
@@ -290,6 +291,7 @@ def run_pipeline(
     if config.get("reuse"):
         logger.info(f"[seal run] {describe(config, fits_needed(config))}")
     out.mkdir(parents=True, exist_ok=True)
+    moved = relocate(out)  # a moved or copied run folder: its store and run configs point here before any step
     atomic_write_bytes(out / "config.yaml", yaml.safe_dump(config, sort_keys=False).encode())
     if backend is None:
         bcfg = config.get("backend") or {}
@@ -298,7 +300,7 @@ def run_pipeline(
     if step_backend is None:
         step_backend = InlineBackend() if isinstance(backend, InlineBackend) else LocalBackend(1)
     run = _Run(config_path, out, config, backend, step_backend, task_fn, train_fn, eval_fn or evaluate_job,
-               train_config_fn, progress, Steps(out))
+               train_config_fn, progress, Steps(out, [m.old for m in moved]))
     started = time.perf_counter()
     dataset, data_params = _data_steps(run)
     models = _fit_steps(run, dataset, data_params)

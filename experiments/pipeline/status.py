@@ -26,6 +26,8 @@ from typing import Any
 import yaml
 
 from seal.core.dataset import MANIFEST
+from seal.core.paths import rebase
+from seal.experiments.pipeline.location import recorded_roots, relocated
 from seal.experiments.pipeline.references import eval_egos, eval_settings, fits_needed, heldout_pools, planned_runs
 from seal.experiments.pipeline.reuse import describe
 from seal.experiments.pipeline.run import load_run_config
@@ -37,16 +39,18 @@ def run_status(config_path: str | Path, out: str | Path, sets: Sequence[str] = (
     """The state of every step of the preset ``config_path`` in the run folder ``out`` (module docstring)."""
     config = load_run_config(config_path, sets)
     out = Path(out).expanduser().resolve()
-    markers = Steps(out)
+    previous = recorded_roots(out) if out.is_dir() else []
+    moved_from = [] if not previous or relocated(out) else previous  # not yet pointed here by `seal run`
+    markers = Steps(out, previous)
     dataset, data_params, data = data_steps(config, out)
     _, fits = fit_steps(config, out, dataset, data_params)
     runs = _training(out, config)
     return {
-        "preset": config["preset"], "out": str(out), "exists": out.is_dir(),
+        "preset": config["preset"], "out": str(out), "exists": out.is_dir(), "moved_from": moved_from,
         "reuse": describe(config, fits_needed(config)) if config.get("reuse") else None,
         "steps": [_step(markers, step) for step in [*data, *heldout_steps(config, out), *fits]],
         "training": runs,
-        "evaluation": _evaluation(out, config, dataset, runs["runs"]),
+        "evaluation": _evaluation(out, config, dataset, runs["runs"], moved_from),
         "report": "done" if markers.marker("report") is not None else "pending",
     }
 
@@ -58,7 +62,7 @@ def _step(markers: Steps, step: StepJob) -> dict[str, Any]:
         output = step.job.get("out") or (step.job["dataset"] if step.job.get("task") == "generate" else None)
         started = output is not None and Path(output).exists()
         return {"name": step.name, "state": "started" if started else "pending"}
-    state = "done" if marker.get("params") == markers.digest(step.params) else "stale"
+    state = "done" if markers.matches(marker, step.params) else "stale"
     return {"name": step.name, "state": state, "seconds": marker.get("seconds")}
 
 
@@ -113,10 +117,11 @@ def _total_steps(folder: Path, config: Mapping[str, Any], algo: str | None) -> i
     return None if total is None else int(total)
 
 
-def _evaluation(out: Path, config: Mapping[str, Any], dataset: str, runs: Sequence[Mapping[str, Any]]
-                ) -> dict[str, Any]:
+def _evaluation(out: Path, config: Mapping[str, Any], dataset: str, runs: Sequence[Mapping[str, Any]],
+                moved_from: Sequence[str] = ()) -> dict[str, Any]:
     """Rows in the results store, and the rows a complete evaluation of the planned egos writes (None before the
-    data exist)."""
+    data exist); an ego's rows stored under an earlier path of the folder (``moved_from``) count as its own, as
+    they will once `seal run` relocates them."""
     from seal.experiments.evaluation.results_store import ResultsStore
     from seal.experiments.evaluation.store_progress import expected_rows
 
@@ -133,7 +138,8 @@ def _evaluation(out: Path, config: Mapping[str, Any], dataset: str, runs: Sequen
         per_ego = expected // max(len(egos), 1)
         if store.is_file():
             with ResultsStore(store) as s:
-                counts = [s.count(run=e, setting=names) for e in egos]
+                counts = [s.count(run=[e, *(rebase(e, str(out), old) for old in moved_from)], setting=names)
+                          for e in egos]
             stored, complete_egos = sum(counts), sum(c >= per_ego for c in counts)
     elif store.is_file():
         with ResultsStore(store) as s:
@@ -147,6 +153,9 @@ def format_status(status: Mapping[str, Any]) -> str:
                                                                           " (no such folder yet)")]
     if status.get("reuse"):
         lines.append(f"  {status['reuse']}")
+    if status.get("moved_from"):
+        lines.append(f"  run from {', '.join(status['moved_from'])} before: `seal run` points its store and run "
+                     "configs here first; what was done there counts as done")
     w = max([18, *(len(step["name"]) for step in status["steps"])])  # held-out pool steps have long names
     for step in status["steps"]:
         took = f" ({step['seconds'] / 60:.1f} min)" if step.get("seconds") is not None else ""

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from seal.core.atomic import atomic_write_json
+from seal.core.paths import portable_json
 from seal.experiments.pipeline.references import HELDOUT_DIR, fit_dependencies, fit_kind, fits_needed, substitute
 
 logger = logging.getLogger(__name__)
@@ -37,16 +38,34 @@ class StepJob:
 
 
 class Steps:
-    """Done-markers under OUT/steps: a step is done when its marker holds the same parameter hash."""
+    """Done-markers under OUT/steps: a step is done when its marker holds the same parameter hash.
 
-    def __init__(self, out: Path) -> None:
-        self.dir = out / "steps"
+    The hash does not depend on where OUT is (`seal.core.paths.portable_json`: paths inside OUT hash as
+    ``${OUT}/...``), so a moved or copied run folder keeps its steps done. Markers written before that hashed the
+    absolute paths: they count as done here when they match with OUT's path or with one of ``previous`` (the paths
+    the folder was run from before, `seal.experiments.pipeline.location.recorded_roots`), and `run` rewrites them
+    in the portable form."""
+
+    def __init__(self, out: Path, previous: Sequence[str] = ()) -> None:
+        self.out = Path(out)
+        self.dir = self.out / "steps"
+        self.previous = tuple(previous)
         self.ran: list[str] = []
         self.skipped: list[str] = []
 
-    @staticmethod
-    def digest(params: Any) -> str:
-        return hashlib.sha256(json.dumps(params, sort_keys=True, default=str).encode()).hexdigest()[:16]
+    def digest(self, params: Any) -> str:
+        """The marker hash of ``params`` (portable: the same wherever OUT is)."""
+        return _sha(portable_json(params, str(self.out)))
+
+    def matches(self, marker: Mapping[str, Any], params: Any) -> bool:
+        """Whether ``marker`` was written for ``params``: the portable hash, or the absolute-path hash of a marker
+        written before it, with OUT here or at one of the previous paths."""
+        found = marker.get("params")
+        if found == self.digest(params):
+            return True
+        text = json.dumps(params, sort_keys=True, default=str)
+        return found == _sha(text) or any(
+            found == _sha(portable_json(params, str(self.out), as_folder=root)) for root in self.previous)
 
     def marker(self, name: str) -> dict[str, Any] | None:
         """The marker of step ``name`` (``params`` hash, ``seconds``, ``finished``), None without one."""
@@ -55,12 +74,15 @@ class Steps:
 
     def done(self, name: str, params: Any) -> bool:
         marker = self.marker(name)
-        return marker is not None and marker.get("params") == self.digest(params)
+        return marker is not None and self.matches(marker, params)
 
     def run(self, name: str, params: Any, action: Callable[[], Any]) -> bool:
         """Run ``action`` unless ``name`` is done with these ``params``; returns True if it ran. The marker is
         written when ``action`` returns anything but False (False: partly failed, run it again next time)."""
-        if self.done(name, params):
+        marker = self.marker(name)
+        if marker is not None and self.matches(marker, params):
+            if marker.get("params") != self.digest(params):  # an absolute-path marker: now in the portable form
+                atomic_write_json(self.dir / f"{name}.json", {**marker, "params": self.digest(params)})
             logger.info(f"[seal run] {name}: done, skipped")
             self.skipped.append(name)
             return False
@@ -73,6 +95,10 @@ class Steps:
         })
         self.ran.append(name)
         return True
+
+
+def _sha(text: str) -> str:
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def data_steps(config: Mapping[str, Any], out: Path) -> tuple[str, dict[str, Any], list[StepJob]]:
