@@ -28,6 +28,9 @@ prior; smaller keeps to its likelier skills). 0.5 since session 26 (issue 16): a
 decisive run (4 TD3, 4 ReSkill; Normal eval, 300 scenarios, K = 5) it lowered the realism distance in 8 of 8
 (mean WD 0.151 -> 0.127) with close-call rates within 1.5 points; 0.25 and 0 gained little more (0.120-0.124
 against two TD3 egos) and raised the collision speed, so 0.5 is kept as the smallest step that does the work."""
+ADVERSARIAL_STEPS: int | None = None
+"""Default steps the SEAL adversary's adversarial skills drive after the switch before its benign skills take over
+(None: the adversarial prior to the end of the episode, as the thesis does)."""
 FOLLOW_MODES = ("replay", "track")
 
 
@@ -60,13 +63,16 @@ class SkillSwitchBehavior(AdversaryBehavior):
         follow: ``"replay"`` (placement on the track) or ``"track"`` (bicycle-model tracking) before the switch.
         seed: seed of the policy's noise each episode; None draws it from the env's rng at reset (so
             ``env.reset(seed=...)`` fixes the roll-out).
+        then, then_step: a second skill policy that acts from scenario step ``then_step`` on (e.g. the benign prior's
+            once the interaction is past); None: ``policy`` to the end.
     """
 
     needs_observation = True
 
     def __init__(
         self, policy: StepPolicy, track: np.ndarray | None = None, switch_step: int = CURRENT_STEP,
-        follow: str = "replay", seed: int | None = None,
+        follow: str = "replay", seed: int | None = None, then: StepPolicy | None = None,
+        then_step: int | None = None,
     ) -> None:
         if follow not in FOLLOW_MODES:
             raise ValueError(f"SkillSwitchBehavior: follow must be one of {FOLLOW_MODES}, got {follow!r}")
@@ -75,7 +81,11 @@ class SkillSwitchBehavior(AdversaryBehavior):
         given = None if track is None else np.asarray(track, dtype=np.float64)
         if given is not None and (given.ndim != 2 or given.shape[1] != 8 or given.shape[0] <= CURRENT_STEP + 1):
             raise ValueError(f"SkillSwitchBehavior: track must be [T > {CURRENT_STEP + 1}, 8], got {given.shape}")
+        if (then is None) != (then_step is None) or (then_step is not None and int(then_step) < int(switch_step)):
+            raise ValueError("SkillSwitchBehavior: give both then and then_step (>= switch_step), or neither")
         self.policy = policy
+        self.then = then
+        self.then_step = None if then_step is None else int(then_step)
         self.switch_step = int(switch_step)
         self.follow = follow
         self.seed = seed
@@ -96,6 +106,8 @@ class SkillSwitchBehavior(AdversaryBehavior):
         self._follower.reset(scenario, rng)
         self.episode_seed = int(rng.integers(2**63)) if self.seed is None else int(self.seed)
         self.policy.reset(self.episode_seed)
+        if self.then is not None:
+            self.then.reset((self.episode_seed + 1) % 2**63)
 
     def make_route(self, scenario: Scenario) -> Route:
         # Cached (a route is immutable): building one walks the track in Python, every episode otherwise. Keyed
@@ -120,7 +132,8 @@ class SkillSwitchBehavior(AdversaryBehavior):
         if t >= self.switch_step:
             if observation is None:
                 raise RuntimeError("SkillSwitchBehavior: the env passed no observation after the switch")
-            steering, acceleration = self.policy.act(observation).tolist()
+            policy = self.then if self.then_step is not None and t >= self.then_step else self.policy
+            steering, acceleration = policy.act(observation).tolist()
             return BehaviorOutput.act(steering, acceleration)
         assert self._follower is not None, "reset() first"
         return self._follower.step(t, state, observation)

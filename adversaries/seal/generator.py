@@ -40,7 +40,13 @@ from seal.adversaries.seal.objective import (
     make_objective,
 )
 from seal.envs.behaviors import AdversaryBehavior
-from seal.envs.skill_behavior import SKILL_NOISE_SCALE, SWITCH_OFFSET_STEPS, SkillSwitchBehavior, switch_step_for
+from seal.envs.skill_behavior import (
+    ADVERSARIAL_STEPS,
+    SKILL_NOISE_SCALE,
+    SWITCH_OFFSET_STEPS,
+    SkillSwitchBehavior,
+    switch_step_for,
+)
 
 
 class Switch(StrEnum):
@@ -93,7 +99,13 @@ class SEALGenerator(CandidateGenerator):
             default `seal.envs.skill_behavior.SKILL_NOISE_SCALE`).
         skill_horizon: steps per skill (a new skill is drawn every ``skill_horizon`` steps; None: the VAE's window,
             10 = 1 s).
+        adversarial_steps: steps the adversarial prior's skills drive after the switch, then the benign prior's (the
+            attack is the interaction; after it the adversary drives on as traffic does); None: the adversarial prior
+            to the end (the thesis). ``switch="adversarial"`` only; default
+            `seal.envs.skill_behavior.ADVERSARIAL_STEPS`.
         policy: a ready skill policy (``reset(seed)`` / ``act(obs)``) instead of loading ``skills``.
+        benign_policy: with ``policy``, the ready policy that drives after ``adversarial_steps`` (without it a ready
+            ``policy`` drives to the end).
         stride, decay, n_kept_modes: CAT's selection options (``objective="cat"`` only).
         steer, steer_vector, steer_alpha, project_road: latent steering of the prior's candidates and their
             projection on the road (`CandidateGenerator`).
@@ -121,6 +133,8 @@ class SEALGenerator(CandidateGenerator):
         steer_alpha: float | Sequence[float] | str = DEFAULT_STEER_ALPHA,
         project_road: bool | None = None,
         objective_heads: str = DEFAULT_HEADS,
+        adversarial_steps: int | None = ADVERSARIAL_STEPS,
+        benign_policy: Any = None,
     ) -> None:
         check_follow(self.name, follow)
         if switch not in SWITCH_MODES:
@@ -135,8 +149,17 @@ class SEALGenerator(CandidateGenerator):
                                         stride=stride, decay=decay, n_kept=n_kept_modes)
         self.switch = Switch(switch)
         self.switch_offset_steps = int(switch_offset_steps)
+        horizon = None if skill_horizon is None else int(skill_horizon)
         self.policy = policy if policy is not None or switch == Switch.NONE else load_skill_policy(
-            skills, switch, noise_scale, None if skill_horizon is None else int(skill_horizon))
+            skills, switch, noise_scale, horizon)
+        if adversarial_steps is not None and int(adversarial_steps) < 0:
+            raise ValueError(f"seal: adversarial_steps must be >= 0 (or null: to the end), got {adversarial_steps}")
+        # The hand-over to the benign prior: with switch=adversarial only; a ready `policy` needs its `benign_policy`.
+        hand_over = adversarial_steps is not None and self.switch == Switch.ADVERSARIAL and (
+            policy is None or benign_policy is not None)
+        self.adversarial_steps = int(adversarial_steps) if hand_over else None
+        self.benign_policy = None if not hand_over else benign_policy if benign_policy is not None else (
+            load_skill_policy(skills, Switch.BENIGN, noise_scale, horizon))
         super().__init__(candidate_source, prior, candidates, follow, steer, steer_vector, steer_alpha,
                          project_road)
 
@@ -163,8 +186,11 @@ class SEALGenerator(CandidateGenerator):
             skill_seed = int(rng.integers(2**63))
             policy = self.policy.clone() if hasattr(self.policy, "clone") else self.policy
             track = candidate_track(scenario, scenario.adv_index, cands.xy[chosen])
+            then = None if self.benign_policy is None else (
+                self.benign_policy.clone() if hasattr(self.benign_policy, "clone") else self.benign_policy)
+            then_step = None if then is None else switch_step + int(self.adversarial_steps or 0)
             behavior = SkillSwitchBehavior(policy, track=track, switch_step=switch_step, follow=self.follow,
-                                           seed=skill_seed)
+                                           seed=skill_seed, then=then, then_step=then_step)
         return Generation(
             behavior=behavior,
             chosen_candidate=chosen,
@@ -173,6 +199,7 @@ class SEALGenerator(CandidateGenerator):
                 "objective": self.objective.name,
                 "switch": str(self.switch),
                 "switch_step": None if self.switch == Switch.NONE else switch_step,
+                "benign_step": None if self.switch == Switch.NONE else getattr(behavior, "then_step", None),
                 "skill_seed": skill_seed,
                 "collision_predicted": contact.collided,
                 "score": float(ranking.scores[chosen]),

@@ -350,3 +350,37 @@ def test_the_generator_and_the_model_default_to_the_same_heads() -> None:
     from seal.adversaries.seal.objective import DEFAULT_HEADS
 
     assert DEFAULT_HEADS == objective.DEFAULT_RANK_HEADS and DEFAULT_HEADS in objective.RANK_HEADS
+
+
+def _benign_policy() -> SkillPolicy:
+    """Other skill weights than `_policy`'s: a hand-over to it changes the adversary's moves."""
+    torch.manual_seed(7)
+    return SkillPolicy(SkillVAE(VAEConfig()), ConditionalRealNVP(RealNVPConfig()))
+
+
+def test_adversarial_steps_hand_the_adversary_over_to_the_benign_skills(highway: list[Scenario]) -> None:
+    scenario = highway[0]
+    to_the_end = _generator(adversarial_steps=None)
+    handed = _generator(adversarial_steps=6, benign_policy=_benign_policy())
+    g1, a = _roll(scenario, to_the_end, rng_seed=3)
+    g2, b = _roll(scenario, handed, rng_seed=3)
+    switch = g2.extra["switch_step"]
+    assert g1.extra["benign_step"] is None and g2.extra["benign_step"] == switch + 6
+    assert g2.behavior.then_step == switch + 6 and g2.behavior.then is not handed.benign_policy  # a copy each
+    # The same adversary up to the hand-over (its move of step benign_step shows in the state after it), other
+    # moves after it.
+    k = switch + 6
+    np.testing.assert_allclose(a.adv_track[: k + 1, :2], b.adv_track[: k + 1, :2], atol=1e-9)
+    end = min(a.last_step, b.last_step) + 1
+    assert end > k + 5 and not np.allclose(a.adv_track[k + 2 : end, :2], b.adv_track[k + 2 : end, :2], atol=1e-3)
+
+
+def test_adversarial_steps_bounds_and_when_they_apply() -> None:
+    with pytest.raises(ValueError, match="adversarial_steps must be >= 0"):
+        _generator(adversarial_steps=-1)
+    assert _generator(adversarial_steps=0, benign_policy=_benign_policy()).adversarial_steps == 0
+    # A ready policy without its benign one drives to the end; the benign and trajectory-only ablations never hand
+    # over.
+    assert _generator(adversarial_steps=10).adversarial_steps is None
+    assert _generator(adversarial_steps=10, benign_policy=_benign_policy(), switch="benign").adversarial_steps is None
+    assert _generator(adversarial_steps=10, switch="none").benign_policy is None

@@ -210,3 +210,24 @@ def test_skill_adversary_route_is_built_once_per_scenario(highway) -> None:
     given = SkillSwitchBehavior(_policy(), track=b.track(b.adv_id))
     assert given.make_route(a) is given.make_route(b)
     np.testing.assert_array_equal(given.make_route(a).points, behavior.make_route(b).points)
+
+
+def test_a_second_policy_takes_over_at_its_step_with_its_own_seed(highway) -> None:
+    scenario = highway[0]
+    first, second = _Recorder(_policy()), _Recorder(_policy())
+    then_step = SWITCH + 12
+    behavior = SkillSwitchBehavior(first, switch_step=SWITCH, seed=3, then=second, then_step=then_step)
+    env = ScenarioEnv([scenario], config={"terminate_on_crash": False}, adversary=behavior)
+    roll = _episode(env, 0, scenario.scenario_id)
+    assert roll.last_step > then_step + 5
+    # The first policy decides the moves of steps SWITCH .. then_step - 1, the second every one after.
+    assert len(first.observations) == then_step - SWITCH
+    assert len(second.observations) == roll.last_step - then_step
+    # Each episode reseeds both, the second apart from the first (seed + 1): they draw different skills.
+    behavior.reset(scenario, np.random.default_rng(0))
+    assert first.policy.rng.standard_normal() == np.random.default_rng(3).standard_normal()
+    assert second.policy.rng.standard_normal() == np.random.default_rng(4).standard_normal()
+    with pytest.raises(ValueError, match="then_step"):
+        SkillSwitchBehavior(_policy(), switch_step=SWITCH, then=_policy())
+    with pytest.raises(ValueError, match="then_step"):
+        SkillSwitchBehavior(_policy(), switch_step=SWITCH, then=_policy(), then_step=SWITCH - 1)
