@@ -132,7 +132,8 @@ class SkillSwitchBehavior(AdversaryBehavior):
         if t >= self.switch_step:
             if observation is None:
                 raise RuntimeError("SkillSwitchBehavior: the env passed no observation after the switch")
-            policy = self.then if self.then_step is not None and t >= self.then_step else self.policy
+            policy = self.then if self.then is not None and self.then_step is not None and t >= self.then_step \
+                else self.policy
             steering, acceleration = policy.act(observation).tolist()
             return BehaviorOutput.act(steering, acceleration)
         assert self._follower is not None, "reset() first"

@@ -157,7 +157,7 @@ class SEALGenerator(CandidateGenerator):
         # The hand-over to the benign prior: with switch=adversarial only; a ready `policy` needs its `benign_policy`.
         hand_over = adversarial_steps is not None and self.switch == Switch.ADVERSARIAL and (
             policy is None or benign_policy is not None)
-        self.adversarial_steps = int(adversarial_steps) if hand_over else None
+        self.adversarial_steps = int(adversarial_steps) if hand_over and adversarial_steps is not None else None
         self.benign_policy = None if not hand_over else benign_policy if benign_policy is not None else (
             load_skill_policy(skills, Switch.BENIGN, noise_scale, horizon))
         super().__init__(candidate_source, prior, candidates, follow, steer, steer_vector, steer_alpha,
