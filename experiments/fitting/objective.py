@@ -43,7 +43,7 @@ import yaml
 
 from seal.core.atomic import atomic_write_bytes
 from seal.core.config import load_config, overrides_field, to_dict
-from seal.envs.skill_behavior import SKILL_NOISE_SCALE
+from seal.envs.skill_behavior import ADVERSARIAL_STEPS, SKILL_NOISE_SCALE
 from seal.experiments import presets
 from seal.experiments.fitting.objective_eval import evaluate, label_stats, rank_latency_ms
 from seal.experiments.fitting.objective_report import write_report
@@ -95,6 +95,9 @@ class ObjectiveFitConfig:
     """``seal`` behaviour: steps between the skill switch and the predicted contact (as the generator)."""
     noise_scale: float = SKILL_NOISE_SCALE
     """``seal`` behaviour: skill noise scale (as the generator, `seal.envs.skill_behavior.SKILL_NOISE_SCALE`)."""
+    adversarial_steps: int | None = ADVERSARIAL_STEPS
+    """``seal`` behaviour: steps of adversarial skills after the switch before the benign prior's (None: to the end;
+    as the generator, `seal.envs.skill_behavior.ADVERSARIAL_STEPS`)."""
     labels_from: Path | None = None
     """Reuse the label chunks in ``labels_from/<split>`` (and ``/<eval_split>``) as they are, e.g. an earlier run's
     ``OUT/labels``: nothing is simulated and the folder is only read (`load_label_folder`); None simulates (or
@@ -126,7 +129,8 @@ class ObjectiveFitConfig:
 
         return LabelBehavior(kind=self.behavior, skills=None if self.skills is None else str(self.skills),
                              switch_offset_steps=int(self.switch_offset_steps), noise_scale=float(self.noise_scale),
-                             seed=int(self.seed))
+                             seed=int(self.seed), adversarial_steps=None if self.adversarial_steps is None
+                             else int(self.adversarial_steps))
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (the prior path as a string), as recorded in ``config.yaml``."""

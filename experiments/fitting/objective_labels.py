@@ -4,7 +4,8 @@ Two label behaviours (`LabelBehavior`, issue 16): ``replay`` (below: the adversa
 does) and ``seal``: the adversary does what SEAL does with a chosen candidate (`seal.adversaries.seal.generator`):
 it follows the candidate and, ``switch_offset_steps`` before the contact predicted against the previous roll-out
 (the logged-adversary episode, `seal.adversaries.seal.contact.predict_contact`), hands over to the adversarial skill
-policy (`SkillSwitchBehavior`, noise seeded per scenario, ego and candidate). So the learned objective predicts the
+policy (`SkillSwitchBehavior`, noise seeded per scenario, ego and candidate) and ``adversarial_steps`` later to the
+benign prior's skills, as the generator does. So the learned objective predicts the
 outcome of the behaviour it selects. Every ego in ``egos`` (the heuristic driver and `seal train` checkpoints) gives
 its own row of the `LabelSet` (the scenario id repeated), so the labels cover egos that brake, stop or weave.
 
@@ -45,7 +46,7 @@ import numpy as np
 
 from seal.core.chunked import fingerprint, run_chunked
 from seal.core.scenario import CURRENT_STEP, HEADING, LENGTH, N_FUTURE, VALID, WIDTH, Scenario, X, Y
-from seal.envs.skill_behavior import SKILL_NOISE_SCALE
+from seal.envs.skill_behavior import ADVERSARIAL_STEPS, SKILL_NOISE_SCALE
 from seal.models.objective.labels import LabelSet
 
 logger = logging.getLogger(__name__)
@@ -116,6 +117,8 @@ class LabelBehavior:
         kind: ``replay`` or ``seal`` (`LABEL_BEHAVIORS`).
         skills: skills folder of the ``seal`` behaviour (`seal fit skills`).
         switch_offset_steps: steps between the switch to the skill policy and the predicted contact.
+        adversarial_steps: steps the adversarial skills drive after the switch before the benign prior's take over
+            (None: to the end), as the generator (`seal.envs.skill_behavior.ADVERSARIAL_STEPS`).
         noise_scale: skill noise scale of the ``seal`` behaviour.
         seed: base seed of the skill noise.
     """
@@ -125,8 +128,11 @@ class LabelBehavior:
     switch_offset_steps: int = 10
     noise_scale: float = SKILL_NOISE_SCALE
     seed: int = 0
+    adversarial_steps: int | None = ADVERSARIAL_STEPS
 
     def __post_init__(self) -> None:
+        if self.adversarial_steps is not None and int(self.adversarial_steps) < 0:
+            raise ValueError(f"objective labels: adversarial_steps must be >= 0 or null, got {self.adversarial_steps}")
         if self.kind not in LABEL_BEHAVIORS:
             raise ValueError(f"objective labels: behavior must be one of {LABEL_BEHAVIORS}, got {self.kind!r}")
         if self.kind == "seal" and not self.skills:
@@ -136,15 +142,15 @@ class LabelBehavior:
         return asdict(self)
 
 
-_POLICY_CACHE: dict[tuple[str, float], Any] = {}
+_POLICY_CACHE: dict[tuple[str, float, str], Any] = {}
 
 
-def _skill_policy(behavior: LabelBehavior) -> Any:
-    key = (str(behavior.skills), behavior.noise_scale)
+def _skill_policy(behavior: LabelBehavior, prior: str = "adversarial") -> Any:
+    key = (str(behavior.skills), behavior.noise_scale, prior)
     if key not in _POLICY_CACHE:
         from seal.adversaries.seal.generator import load_skill_policy
 
-        _POLICY_CACHE[key] = load_skill_policy(behavior.skills, "adversarial", behavior.noise_scale)
+        _POLICY_CACHE[key] = load_skill_policy(behavior.skills, prior, behavior.noise_scale)
     return _POLICY_CACHE[key]
 
 
@@ -161,6 +167,7 @@ def _candidate_behaviors(scenario: Scenario, cands: Any, cand_xy: np.ndarray, lo
     if behavior.kind == "replay":
         return [ReplayBehavior(t) for t in tracks]
     policy = _skill_policy(behavior)
+    benign = None if behavior.adversarial_steps is None else _skill_policy(behavior, "benign")
     ego = logged.ego_track.astype(np.float64)
     now = scenario.tracks[:, CURRENT_STEP]
     out = []
@@ -170,9 +177,11 @@ def _candidate_behaviors(scenario: Scenario, cands: Any, cand_xy: np.ndarray, lo
             ego[None, :, [X, Y]], ego[None, :, HEADING], ego[None, :, VALID] > 0.5,
             (float(now[scenario.ego_index, LENGTH]), float(now[scenario.ego_index, WIDTH])))
         seed = zlib.crc32(f"{scenario.scenario_id}/{ego_index}/{j}/{behavior.seed}".encode())
-        out.append(SkillSwitchBehavior(policy.clone(), track=track,
-                                       switch_step=switch_step_for(contact.step, behavior.switch_offset_steps),
-                                       seed=seed))
+        switch = switch_step_for(contact.step, behavior.switch_offset_steps)
+        then = None if benign is None else benign.clone()
+        then_step = None if then is None else switch + int(behavior.adversarial_steps or 0)
+        out.append(SkillSwitchBehavior(policy.clone(), track=track, switch_step=switch, seed=seed, then=then,
+                                       then_step=then_step))
     return out
 
 

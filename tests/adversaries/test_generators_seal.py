@@ -302,7 +302,8 @@ def test_switch_names_from_a_config_load_that_prior_at_noise_1(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, switch: str,
 ) -> None:
     """A config names the switch as text; the generator loads the skills folder with that prior and the default skill
-    noise (`SKILL_NOISE_SCALE`, 0.5); `load_skill_policy` alone defaults to the prior itself (noise 1)."""
+    noise (`SKILL_NOISE_SCALE`, 0.5), the adversarial one also the benign prior (`ADVERSARIAL_STEPS`);
+    `load_skill_policy` alone defaults to the prior itself (noise 1)."""
     from seal.adversaries.seal.generator import load_skill_policy
 
     loaded: list[dict] = []
@@ -310,7 +311,9 @@ def test_switch_names_from_a_config_load_that_prior_at_noise_1(
     generator = SEALGenerator(candidate_source=_candidates, objective="cat", skills=tmp_path, switch=switch)
     assert generator.switch == switch and generator.policy == "policy"
     assert load_skill_policy(tmp_path, switch) == "policy"
-    assert loaded == [{"prior": switch, "noise_scale": 0.5, "horizon": None},
+    # The adversarial switch also loads the benign prior its adversary drives with after `adversarial_steps`.
+    hand_over = [{"prior": "benign", "noise_scale": 0.5, "horizon": None}] if switch == "adversarial" else []
+    assert loaded == [{"prior": switch, "noise_scale": 0.5, "horizon": None}, *hand_over,
                       {"prior": switch, "noise_scale": 1.0, "horizon": None}]
 
 
