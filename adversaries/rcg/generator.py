@@ -30,7 +30,7 @@ from seal.adversaries.rcg.select import (
 from seal.adversaries.seal.contact import predict_contact
 from seal.adversaries.seal.generator import SEALGenerator, Switch
 from seal.adversaries.seal.objective import Ranking
-from seal.envs.skill_behavior import SKILL_NOISE_SCALE, SWITCH_OFFSET_STEPS
+from seal.envs.skill_behavior import ADVERSARIAL_STEPS, SKILL_NOISE_SCALE, SWITCH_OFFSET_STEPS
 
 
 def _objective(behavior: Any, n_knn: int, n_int: int, distance: str, prior_weight: float, generator: str
@@ -114,11 +114,13 @@ class SEALRCGGenerator(SEALGenerator):
         follow: str = Follow.REPLAY,
         noise_scale: float = SKILL_NOISE_SCALE,
         policy: Any = None,
+        adversarial_steps: int | None = ADVERSARIAL_STEPS,
+        benign_policy: Any = None,
     ) -> None:
         rcg = _objective(behavior, n_knn, n_int, distance, prior_weight, "seal-rcg")
         super().__init__(candidate_source, prior, candidates, objective=rcg, skills=skills, switch=switch,
                          switch_offset_steps=switch_offset_steps, follow=follow, noise_scale=noise_scale,
-                         policy=policy)
+                         policy=policy, adversarial_steps=adversarial_steps, benign_policy=benign_policy)
         self.rcg = rcg
 
     def _rank(self, context: CandidateContext) -> Ranking:
