@@ -1,7 +1,8 @@
 """`SkillSwitchBehavior`: the SEAL adversary (thesis 6.3.2; ARCHITECTURE.md, methods table): it follows a given
 track (the top-ranked candidate) and, from a switch step on - 10 steps (1 s) before the predicted collision / closest
 approach by default, see `switch_step_for` - is driven by a `SkillPolicy` that sees its own observation every
-step and so reacts to the ego.
+step and so reacts to the ego; optionally a second policy (``then``: the SEAL generator's benign skills after
+`ADVERSARIAL_STEPS`) takes over from a later step.
 
 Before the switch the adversary is placed on the track (``follow="replay"``, as CAT replays its candidate) or
 tracks it with the bicycle model (``follow="track"``); the env builds no observation for it then
@@ -35,8 +36,9 @@ default switch offset the adversarial skill drives from 1 s before the predicted
 adversary drives on as the logged traffic does. Against decisive5's TD3 egos (seeds 1-2 of 7 pipelines, 14 egos) on
 the held-out pool (300 Normal eval scenarios, K = 5) it lowered the realism distance in 14 of 14 (mean 0.214 ->
 0.202) and the acceleration WD in 14 of 14 (0.590 -> 0.554), close calls and adversary collisions within 0.3 points,
-collision speed 7.04 -> 7.00 m/s; against the heuristic and a ReSkill ego on decisive5's pool it changed realism by
-+0.003 / -0.002. 20 (the skill after the contact adversarial too) was within 0.01 of None everywhere."""
+collision speed 7.04 -> 7.00 m/s; against 6 ReSkill egos there realism -0.003 (lower for 5), acc WD lower for 6 of 6,
+collision speed 4.59 -> 4.55 m/s, and against the heuristic ego 0.207 -> 0.204. 20 (the skill after the contact
+adversarial too) was within 0.01 of None on decisive5's pool (6 egos). README, "The attack ends at the contact"."""
 FOLLOW_MODES = ("replay", "track")
 
 

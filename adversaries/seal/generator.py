@@ -8,7 +8,9 @@
    model, ``follow="track"``) and, ``switch_offset_steps`` (10 = 1 s) before the candidate's predicted collision /
    closest-approach step (`seal.adversaries.seal.contact.predict_contact`), hands over to the skill policy
    (`seal.envs.skill_behavior.SkillSwitchBehavior`): every 10 steps noise through the adversarial prior given its own
-   observation, actions decoded closed-loop each step, so it reacts to the ego.
+   observation, actions decoded closed-loop each step, so it reacts to the ego; ``adversarial_steps`` after the
+   switch (10: at the predicted contact) the benign prior's skills take over (None: adversarial to the end, the
+   thesis; README "The attack ends at the contact").
 
 Ablations (thesis Fig. 6.5): ``switch="benign"`` samples skills from the benign prior, ``switch="none"`` follows
 the candidate to the end (trajectory only, no skills); ``objective="cat"`` replaces the learned objective.
