@@ -12,6 +12,7 @@ pointing along the chosen candidate after the switch (the thesis derives the adv
 
 from __future__ import annotations
 
+import sys
 from typing import Protocol
 
 import numpy as np
@@ -94,6 +95,9 @@ class SkillSwitchBehavior(AdversaryBehavior):
         self.policy = policy
         self.then = then
         self.then_step = None if then_step is None else int(then_step)
+        # What `step` reads: the policy of the steps from `_then_from` on (``policy`` itself without a second one).
+        self._then: StepPolicy = then if then is not None else policy
+        self._then_from = self.then_step if self.then_step is not None else sys.maxsize
         self.switch_step = int(switch_step)
         self.follow = follow
         self.seed = seed
@@ -140,8 +144,7 @@ class SkillSwitchBehavior(AdversaryBehavior):
         if t >= self.switch_step:
             if observation is None:
                 raise RuntimeError("SkillSwitchBehavior: the env passed no observation after the switch")
-            policy = self.then if self.then is not None and self.then_step is not None and t >= self.then_step \
-                else self.policy
+            policy = self._then if t >= self._then_from else self.policy
             steering, acceleration = policy.act(observation).tolist()
             return BehaviorOutput.act(steering, acceleration)
         assert self._follower is not None, "reset() first"

@@ -80,6 +80,11 @@ def load_skill_policy(skills: str | Path | None, switch: str, noise_scale: float
     return SkillPolicy.load(skills, prior=switch, noise_scale=noise_scale, horizon=horizon)
 
 
+def _own_copy(policy: Any) -> Any:
+    """A behaviour's own copy of a ready skill policy (`SkillPolicy.clone`: its episode state, shared weights)."""
+    return policy.clone() if hasattr(policy, "clone") else policy
+
+
 @register("seal")
 class SEALGenerator(CandidateGenerator):
     """SEAL (see the module docstring).
@@ -181,18 +186,16 @@ class SEALGenerator(CandidateGenerator):
                                   context.ego_size_m)
         switch_step = switch_step_for(contact.step, self.switch_offset_steps)
         behavior: AdversaryBehavior
-        skill_seed = None
+        skill_seed = then_step = None
         if self.switch == Switch.NONE:
             behavior = self.follow_behavior(scenario, cands.xy[chosen])
         else:
             skill_seed = int(rng.integers(2**63))
-            policy = self.policy.clone() if hasattr(self.policy, "clone") else self.policy
             track = candidate_track(scenario, scenario.adv_index, cands.xy[chosen])
-            then = None if self.benign_policy is None else (
-                self.benign_policy.clone() if hasattr(self.benign_policy, "clone") else self.benign_policy)
+            then = None if self.benign_policy is None else _own_copy(self.benign_policy)
             then_step = None if then is None else switch_step + int(self.adversarial_steps or 0)
-            behavior = SkillSwitchBehavior(policy, track=track, switch_step=switch_step, follow=self.follow,
-                                           seed=skill_seed, then=then, then_step=then_step)
+            behavior = SkillSwitchBehavior(_own_copy(self.policy), track=track, switch_step=switch_step,
+                                           follow=self.follow, seed=skill_seed, then=then, then_step=then_step)
         return Generation(
             behavior=behavior,
             chosen_candidate=chosen,
@@ -201,7 +204,7 @@ class SEALGenerator(CandidateGenerator):
                 "objective": self.objective.name,
                 "switch": str(self.switch),
                 "switch_step": None if self.switch == Switch.NONE else switch_step,
-                "benign_step": None if self.switch == Switch.NONE else getattr(behavior, "then_step", None),
+                "benign_step": then_step,
                 "skill_seed": skill_seed,
                 "collision_predicted": contact.collided,
                 "score": float(ranking.scores[chosen]),

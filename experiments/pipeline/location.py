@@ -84,7 +84,7 @@ def _store_roots(out: Path) -> list[str]:
     store = out / STORE
     if not store.is_file():
         return []
-    try:
+    try:  # read-only sqlite: a `ResultsStore` would create its schema in a file that is not a store
         conn = sqlite3.connect(f"file:{store}?mode=ro", uri=True)
         try:
             paths = [row[0] for row in conn.execute(  # an ego's key is its run folder's path
@@ -104,9 +104,12 @@ def _store_roots(out: Path) -> list[str]:
 def relocate(out: Path) -> list[Relocation]:
     """Point the records of run folder ``out`` that name an earlier path of it (`recorded_roots`) at ``out`` (the
     store's keys, run paths, configs and setting options; every run's config.yaml) and record ``out`` as its path.
-    Nothing is changed for a folder that has not moved; running it again changes nothing more."""
+    Nothing is changed for a folder that has not moved, nor once it has been relocated here (a `Relocation` of
+    nothing per earlier path then)."""
     out = Path(out)
     roots = recorded_roots(out)
+    if relocated(out):  # done by an earlier run here: the earlier paths only matter to older step markers now
+        return [Relocation(old, 0, 0) for old in roots]
     done = []
     for old in roots:
         rows = 0

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from seal.core.atomic import atomic_write_json
-from seal.core.paths import portable_json
+from seal.core.paths import portable_json, swap_folder
 from seal.experiments.pipeline.references import HELDOUT_DIR, fit_dependencies, fit_kind, fits_needed, substitute
 
 logger = logging.getLogger(__name__)
@@ -61,11 +61,10 @@ class Steps:
         """Whether ``marker`` was written for ``params``: the portable hash, or the absolute-path hash of a marker
         written before it, with OUT here or at one of the previous paths."""
         found = marker.get("params")
-        if found == self.digest(params):
-            return True
         text = json.dumps(params, sort_keys=True, default=str)
-        return found == _sha(text) or any(
-            found == _sha(portable_json(params, str(self.out), as_folder=root)) for root in self.previous)
+        here = str(self.out)
+        return found in (_sha(swap_folder(text, here)), _sha(text)) or any(
+            found == _sha(swap_folder(text, here, root)) for root in self.previous)
 
     def marker(self, name: str) -> dict[str, Any] | None:
         """The marker of step ``name`` (``params`` hash, ``seconds``, ``finished``), None without one."""

@@ -40,7 +40,11 @@ def rebase_tree(value: Any, old: str, new: str) -> Any:
 def portable_json(value: Any, folder: str, as_folder: str = FOLDER_PLACEHOLDER) -> str:
     """``json.dumps(value, sort_keys=True, default=str)`` with ``folder`` written as ``as_folder`` wherever a string
     is ``folder`` or starts with ``folder/`` (a prefix of a longer name, ``folder2``, is kept)."""
-    text = json.dumps(value, sort_keys=True, default=str)
+    return swap_folder(json.dumps(value, sort_keys=True, default=str), folder, as_folder)
+
+
+def swap_folder(text: str, folder: str, as_folder: str = FOLDER_PLACEHOLDER) -> str:
+    """JSON ``text`` with ``folder`` written as ``as_folder`` in its strings, as `portable_json` does."""
     escaped = json.dumps(folder.rstrip("/"))[1:-1]  # as the folder appears inside a JSON string
     target = json.dumps(as_folder)[1:-1].replace("\\", "\\\\")
     # Inside a JSON string the folder is followed by "/" (a path below it) or by the string's closing quote.
