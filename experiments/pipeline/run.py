@@ -75,6 +75,7 @@ import yaml
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
 from seal.core.config import apply_overrides, check_keys, safe_load_file
 from seal.experiments.backends import Backend, InlineBackend, Job, JobResult, LocalBackend, make_backend
+from seal.experiments.pipeline.drift import describe_drift, fit_drift
 from seal.experiments.pipeline.location import relocate
 from seal.experiments.pipeline.plan import check_plan
 from seal.experiments.pipeline.references import (
@@ -339,6 +340,10 @@ def _fit_steps(run: _Run, dataset: str, data_params: Mapping[str, Any]) -> dict[
         (run.out / "models").mkdir(exist_ok=True)
     # Fits are single processes, most of them one thread: backend.fit_workers runs independent ones side by side.
     fit_workers = int((run.config.get("backend") or {}).get("fit_workers") or 1)
+    for step in steps:
+        if run.steps.done(step.name, step.params) and (drift := fit_drift(step)):
+            logger.warning(f"[seal run] {step.name}: done with settings the code now resolves otherwise, kept as "
+                           f"fitted (a fresh folder or a --set of the fit refits it): {describe_drift(drift)}")
     run_steps(steps, lambda step: run.steps.run(step.name, step.params, partial(run.task, step.job)), fit_workers)
     return models
 

@@ -27,6 +27,7 @@ import yaml
 
 from seal.core.dataset import MANIFEST
 from seal.core.paths import rebase
+from seal.experiments.pipeline.drift import describe_drift, fit_drift
 from seal.experiments.pipeline.location import recorded_roots, relocated
 from seal.experiments.pipeline.references import eval_egos, eval_settings, fits_needed, heldout_pools, planned_runs
 from seal.experiments.pipeline.reuse import describe
@@ -62,8 +63,9 @@ def _step(markers: Steps, step: StepJob) -> dict[str, Any]:
         output = step.job.get("out") or (step.job["dataset"] if step.job.get("task") == "generate" else None)
         started = output is not None and Path(output).exists()
         return {"name": step.name, "state": "started" if started else "pending"}
-    state = "done" if markers.matches(marker, step.params) else "stale"
-    return {"name": step.name, "state": state, "seconds": marker.get("seconds")}
+    if not markers.matches(marker, step.params):
+        return {"name": step.name, "state": "stale", "seconds": marker.get("seconds")}
+    return {"name": step.name, "state": "done", "seconds": marker.get("seconds"), "drift": fit_drift(step)}
 
 
 def _training(out: Path, config: Mapping[str, Any]) -> dict[str, Any]:
@@ -160,6 +162,9 @@ def format_status(status: Mapping[str, Any]) -> str:
     for step in status["steps"]:
         took = f" ({step['seconds'] / 60:.1f} min)" if step.get("seconds") is not None else ""
         lines.append(f"  {step['name']:<{w}} {step['state']}{took}")
+        if step.get("drift"):
+            lines.append(f"  {'':<{w}}   fitted with settings the code now resolves otherwise (kept; refit with a "
+                         f"fresh folder or a --set of the fit): {describe_drift(step['drift'])}")
     tr = status["training"]
     states = [r["state"] for r in tr["runs"]]
     lines.append(f"  {'training':<{w}} {tr['done']} of {tr['planned']} runs done, {states.count('in progress')} in "
