@@ -19,7 +19,10 @@ from seal.experiments.pipeline.references import (
     fit_kind,
     fits_needed,
     generators_in_use,
+    late_fits,
+    late_runs,
     planned_runs,
+    run_refs,
     substitute,
     with_algo,
     with_models,
@@ -43,6 +46,7 @@ def check_plan(
     _check_pipelines(config)
     models = {name: str(out / "models" / fit_outputs.get(name, name)) for name in fits_needed(config)}
     _check_fits(config.get("fit") or {}, models)
+    _check_late_fits(config)
     generators = {name: substitute(dict((config.get("generators") or {}).get(name) or {}), models)
                   for name in generators_in_use(config)}
     _check_eval(config.get("eval") or {}, dataset)
@@ -171,6 +175,21 @@ def _check_fits(fit: Mapping[str, Any], models: Mapping[str, str]) -> None:
             raise ValueError(f"fit.{name}.config: {config_file} does not exist")
         if options.get("set") is not None:
             _check_fit_sets(name, kind, options)
+
+
+def _check_late_fits(config: Mapping[str, Any]) -> None:
+    """A fit that references training runs (``"${runs.NAME}"``) names runs of this plan that do not themselves need
+    its model (they train before it)."""
+    runs, late = planned_runs(config), set(late_runs(config))
+    fit = config.get("fit") or {}
+    for name in late_fits(config):
+        for run in run_refs(dict(fit[name] or {})):
+            if run not in runs:
+                raise ValueError(f"fit.{name}: ${{runs.{run}}} is not a training run of this plan (its runs: "
+                                 f"{', '.join(runs) or 'none'})")
+            if run in late:
+                raise ValueError(f"fit.{name}: ${{runs.{run}}} trains with a model that waits for this fit (a circle); "
+                                 f"label against a run of a pipeline that does not use fit.{name}, e.g. noadv")
 
 
 def _check_fit_sets(name: str, kind: str, options: Mapping[str, Any]) -> None:

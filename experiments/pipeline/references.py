@@ -15,6 +15,10 @@ from seal.adversaries.base import NO_ADVERSARY
 
 REF = re.compile(r"^\$\{fit\.(\w+)\}(.*)$")
 """``"${fit.NAME}"`` or ``"${fit.NAME}/file inside it"`` in generator kwargs: a fitted model's path."""
+RUN_REF = re.compile(r"^\$\{runs\.([\w.-]+)\}$")
+"""``"${runs.NAME}"`` in a fit's options: the folder of this plan's training run NAME, e.g. pi_score labelled against
+a trained ego as well (``egos: [heuristic, "${runs.noadv-td3-s0}"]``). Such a fit runs after the training runs that
+do not need it (`late_fits`), and the runs whose generator uses its model train after it (`late_runs`)."""
 
 
 VARIANT_KEYS = ("generator", "kwargs", "train")
@@ -73,6 +77,53 @@ def _refs(value: Any) -> list[str]:
     return [m.group(1)] if m else []
 
 
+def run_refs(value: Any) -> list[str]:
+    """Names of the training runs referenced (``"${runs.NAME}"``) anywhere in ``value``."""
+    if isinstance(value, dict):
+        return [r for v in value.values() for r in run_refs(v)]
+    if isinstance(value, list):
+        return [r for v in value for r in run_refs(v)]
+    m = RUN_REF.match(value) if isinstance(value, str) else None
+    return [m.group(1)] if m else []
+
+
+def late_fits(config: Mapping[str, Any]) -> list[str]:
+    """The fits in use that wait for training runs: those whose options reference a run (``"${runs.NAME}"``) and
+    those that use such a fit's model; in `fits_needed` order."""
+    fit = config.get("fit") or {}
+    late: list[str] = []
+    for name in fits_needed(config):
+        spec = dict(fit[name] or {})
+        if not spec.get("path") and (run_refs(spec) or any(dep in late for dep in fit_dependencies(spec))):
+            late.append(name)
+    return late
+
+
+def late_runs(config: Mapping[str, Any]) -> list[str]:
+    """The training runs that need a late fit's model (their generator's kwargs, their variant's or the train
+    section reference it, directly or through another fit): they train after the late fits."""
+    late = set(late_fits(config))
+    if not late:
+        return []
+    fit, gens = config.get("fit") or {}, config.get("generators") or {}
+
+    def uses_late(refs: list[str]) -> bool:
+        seen: set[str] = set()
+        while refs:
+            name = refs.pop()
+            if name in late:
+                return True
+            if name not in seen and name in fit:
+                seen.add(name)
+                refs.extend(fit_dependencies(fit[name]))
+        return False
+
+    shared = _refs(config.get("train") or {})
+    return [run for run, (pipeline, _, _) in planned_runs(config).items()
+            if uses_late([*shared, *_refs(variant_of(config, pipeline)),
+                          *_refs(gens.get(generator_of(pipeline, config)) or {})])]
+
+
 def fit_kind(name: str, spec: Mapping[str, Any] | None) -> tuple[str, dict[str, Any]]:
     """Which ``seal fit`` command a ``fit.NAME`` entry runs and with which options: its ``model:`` option (taken
     out of the options), else the name itself. ``model`` lets a preset fit one kind twice with different options,
@@ -116,13 +167,18 @@ def fits_needed(config: Mapping[str, Any]) -> list[str]:
     return order
 
 
-def substitute(value: Any, models: Mapping[str, str]) -> Any:
-    """Replace ``"${fit.NAME}"`` strings (at any depth) by the fitted model paths."""
+def substitute(value: Any, models: Mapping[str, str], runs: Mapping[str, str] | None = None) -> Any:
+    """Replace ``"${fit.NAME}"`` strings (at any depth) by the fitted model paths and, with ``runs`` (run name ->
+    folder), ``"${runs.NAME}"`` strings by the training run folders."""
     if isinstance(value, dict):
-        return {k: substitute(v, models) for k, v in value.items()}
+        return {k: substitute(v, models, runs) for k, v in value.items()}
     if isinstance(value, list):
-        return [substitute(v, models) for v in value]
-    m = REF.match(value) if isinstance(value, str) else None
+        return [substitute(v, models, runs) for v in value]
+    if not isinstance(value, str):
+        return value
+    if runs is not None and (r := RUN_REF.match(value)):
+        return runs[r.group(1)]
+    m = REF.match(value)
     return models[m.group(1)] + m.group(2) if m else value
 
 

@@ -30,7 +30,10 @@ The preset's sections (all but ``train`` belong to this module; ``train`` is pas
 * ``fit``: per model (``prior``, ``goose``, ``skills``, ``objective``, ``behavior``, ``probes``) either
   ``{path: FILE}`` or command options (``{preset: quick, max_minutes: 1}``; ``"${fit.prior}"`` in them = another
   fitted model, fitted first). Any other name with ``model: KIND`` is a second fit of that kind under its own
-  name (``ego_skills: {model: skills, preset: ego}`` -> OUT/models/ego_skills).
+  name (``ego_skills: {model: skills, preset: ego}`` -> OUT/models/ego_skills). ``"${runs.NAME}"`` in a fit's
+  options is this plan's training run NAME (e.g. ``objective: {egos: [heuristic, "${runs.noadv-td3-s0}"]}``): that
+  fit waits for the runs that do not need it, and the runs that need its model train after it (steps 2-3 then
+  alternate: fits, runs without the late models, the late fits, the other runs).
 * ``generators``: generator name -> constructor kwargs for training and evaluation; a value ``"${fit.prior}"``
   becomes the fitted model's path.
 * ``train``: `seal.experiments.training.config.EgoTrainConfig` keys; ``"${fit.NAME}"`` in it = a fitted model
@@ -64,7 +67,7 @@ from __future__ import annotations
 import logging
 import os
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from functools import partial
 from pathlib import Path
@@ -86,7 +89,10 @@ from seal.experiments.pipeline.references import (
     generator_of,
     generators_in_use,
     heldout_pools,
+    late_fits,
+    late_runs,
     planned_runs,
+    run_refs,
     substitute,
     variant_of,
     with_algo,
@@ -304,11 +310,17 @@ def run_pipeline(
                train_config_fn, progress, Steps(out, [m.old for m in moved]))
     started = time.perf_counter()
     dataset, data_params = _data_steps(run)
-    models = _fit_steps(run, dataset, data_params)
+    late = late_fits(config)  # fits that label against trained egos ("${runs.NAME}"): after the runs they name
+    models = _fit_steps(run, dataset, data_params, skip=late)
     run.config = with_models(config, models)  # the train section's "${fit.NAME}" (the ReSkill ego's skills)
     generators = {name: substitute(dict((config.get("generators") or {}).get(name) or {}), models)
                   for name in generators_in_use(config)}
-    n_jobs, trained = _train_step(run, dataset, generators)
+    waiting = late_runs(config)
+    n_jobs, trained = _train_step(run, dataset, generators, skip=waiting)
+    if late and _late_fits_can_run(run, late):
+        _fit_steps(run, dataset, data_params, only=late)
+        n_late, trained = _train_step(run, dataset, generators, only=waiting)
+        n_jobs += n_late
     store = _eval_step(run, dataset, generators, trained)
     report = _report_step(run, store)
     summary = {
@@ -333,9 +345,12 @@ def _data_steps(run: _Run) -> tuple[str, dict[str, Any]]:
     return dataset, data_params
 
 
-def _fit_steps(run: _Run, dataset: str, data_params: Mapping[str, Any]) -> dict[str, str]:
-    """2. fit the models the generators in use need, dependencies first; returns model name -> path."""
+def _fit_steps(run: _Run, dataset: str, data_params: Mapping[str, Any], skip: Collection[str] = (),
+               only: Collection[str] | None = None) -> dict[str, str]:
+    """2. fit the models the generators in use need, dependencies first (those named in ``skip`` not, with ``only``
+    those named there alone); returns model name -> path (of every model, fitted now or not)."""
     models, steps = fit_steps(run.config, run.out, dataset, data_params)
+    steps = [s for s in steps if s.name[len("fit-"):] not in skip and (only is None or s.name[len("fit-"):] in only)]
     if steps:
         (run.out / "models").mkdir(exist_ok=True)
     # Fits are single processes, most of them one thread: backend.fit_workers runs independent ones side by side.
@@ -348,12 +363,27 @@ def _fit_steps(run: _Run, dataset: str, data_params: Mapping[str, Any]) -> dict[
     return models
 
 
-def _train_step(run: _Run, dataset: str, generators: Mapping[str, Any]) -> tuple[int, list[str]]:
-    """3. train one ego per pipeline x seed (finished run folders skipped); returns the number of train jobs and
-    this preset's finished run folders."""
+def _late_fits_can_run(run: _Run, late: Sequence[str]) -> bool:
+    """Whether every training run the ``late`` fits label against has finished; else the failure is recorded and
+    those fits and the runs that need them wait for the next ``seal run``."""
+    fit = run.config.get("fit") or {}
+    missing = sorted({r for name in late for r in run_refs(dict(fit[name] or {}))
+                      if not (run.out / "runs" / r / "done.json").is_file()})
+    if missing:
+        run.errors.append(f"fit {', '.join(late)}: training run(s) {', '.join(missing)} did not finish, so the fit and "
+                          "the runs that use its model wait (run `seal run` again)")
+    return not missing
+
+
+def _train_step(run: _Run, dataset: str, generators: Mapping[str, Any], skip: Collection[str] = (),
+                only: Collection[str] | None = None) -> tuple[int, list[str]]:
+    """3. train one ego per pipeline x seed (finished run folders skipped; runs named in ``skip`` not, with
+    ``only`` those alone); returns the number of train jobs and this preset's finished run folders."""
     jobs = []
     runs = {run.out / "runs" / name: spec for name, spec in planned_runs(run.config).items()}
     for run_dir, (pipeline, seed, algo) in runs.items():
+        if run_dir.name in skip or (only is not None and run_dir.name not in only):
+            continue
         if (run_dir / "done.json").is_file():
             logger.info(f"[seal run] train {run_dir.name}: done, skipped")
             continue

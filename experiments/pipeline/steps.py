@@ -17,7 +17,14 @@ from typing import Any
 
 from seal.core.atomic import atomic_write_json
 from seal.core.paths import portable_json, swap_folder
-from seal.experiments.pipeline.references import HELDOUT_DIR, fit_dependencies, fit_kind, fits_needed, substitute
+from seal.experiments.pipeline.references import (
+    HELDOUT_DIR,
+    fit_dependencies,
+    fit_kind,
+    fits_needed,
+    planned_runs,
+    substitute,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -145,6 +152,7 @@ def fit_steps(config: Mapping[str, Any], out: Path, dataset: str, data_params: M
     those not given as ``fit.NAME.path``."""
     models: dict[str, str] = {}
     steps: list[StepJob] = []
+    runs = {name: str(out / "runs" / name) for name in planned_runs(config)}  # a late fit's "${runs.NAME}"
     for name in fits_needed(config):
         spec = dict((config.get("fit") or {})[name] or {})
         if spec.get("path"):
@@ -153,7 +161,7 @@ def fit_steps(config: Mapping[str, Any], out: Path, dataset: str, data_params: M
         kind, spec = fit_kind(name, spec)
         models[name] = str(out / "models" / FIT_OUTPUTS.get(name, name))
         job = {"name": f"fit-{name}", "task": "fit", "model": kind, "dataset": dataset, "out": models[name],
-               "options": substitute(spec, models)}  # e.g. the objective's candidates: "${fit.prior}"
+               "options": substitute(spec, models, runs)}  # e.g. the objective's candidates: "${fit.prior}"
         after = tuple(f"fit-{dep}" for dep in fit_dependencies(spec))
         steps.append(StepJob(f"fit-{name}", [data_params, job], job, after))
     return models, steps
