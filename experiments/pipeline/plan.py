@@ -185,8 +185,10 @@ def _check_late_fits(config: Mapping[str, Any]) -> None:
     for name in late_fits(config):
         for run in run_refs(dict(fit[name] or {})):
             if run not in runs:
+                names = list(runs)
+                listed = ", ".join(names[:8]) + (f", ... ({len(names)} in all)" if len(names) > 8 else "")
                 raise ValueError(f"fit.{name}: ${{runs.{run}}} is not a training run of this plan (its runs: "
-                                 f"{', '.join(runs) or 'none'})")
+                                 f"{listed or 'none'}); name one of them, or drop it from the fit's options")
             if run in late:
                 raise ValueError(f"fit.{name}: ${{runs.{run}}} trains with a model that waits for this fit (a circle); "
                                  f"label against a run of a pipeline that does not use fit.{name}, e.g. noadv")
