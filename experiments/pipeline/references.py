@@ -67,24 +67,19 @@ def generators_in_use(config: Mapping[str, Any]) -> list[str]:
     return [n for n in dict.fromkeys(names) if n]
 
 
-def _refs(value: Any) -> list[str]:
-    """Names of the fitted models referenced (``"${fit.NAME}"``) anywhere in ``value``."""
+def _refs(value: Any, pattern: re.Pattern[str] = REF) -> list[str]:
+    """Names referenced anywhere in ``value``: fitted models (``"${fit.NAME}"``), or what ``pattern`` matches."""
     if isinstance(value, dict):
-        return [r for v in value.values() for r in _refs(v)]
+        return [r for v in value.values() for r in _refs(v, pattern)]
     if isinstance(value, list):
-        return [r for v in value for r in _refs(v)]
-    m = REF.match(value) if isinstance(value, str) else None
+        return [r for v in value for r in _refs(v, pattern)]
+    m = pattern.match(value) if isinstance(value, str) else None
     return [m.group(1)] if m else []
 
 
 def run_refs(value: Any) -> list[str]:
     """Names of the training runs referenced (``"${runs.NAME}"``) anywhere in ``value``."""
-    if isinstance(value, dict):
-        return [r for v in value.values() for r in run_refs(v)]
-    if isinstance(value, list):
-        return [r for v in value for r in run_refs(v)]
-    m = RUN_REF.match(value) if isinstance(value, str) else None
-    return [m.group(1)] if m else []
+    return _refs(value, RUN_REF)
 
 
 def late_fits(config: Mapping[str, Any]) -> list[str]:
