@@ -63,11 +63,19 @@ def check_follow(generator: str, follow: str) -> Follow:
 def stack_ego_rollouts(history: Sequence[Rollout]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Ego ``xy [K, T, 2]``, ``heading [K, T]``, ``valid [K, T]`` of roll-outs of possibly different lengths
     (shorter ones padded as invalid); row ``t`` is scenario step ``t``."""
-    n_steps = max(r.tracks.shape[1] for r in history)
-    out = np.zeros((len(history), n_steps, 8), dtype=np.float64)
-    for i, r in enumerate(history):
-        ego = r.ego_track
-        out[i, : ego.shape[0]] = ego
+    return _stack([r.ego_track for r in history])
+
+
+def stack_adv_rollouts(history: Sequence[Rollout]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The same as `stack_ego_rollouts` of each roll-out's adversary (what it drove in that episode)."""
+    return _stack([r.adv_track for r in history])
+
+
+def _stack(tracks: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    n_steps = max(t.shape[0] for t in tracks)
+    out = np.zeros((len(tracks), n_steps, 8), dtype=np.float64)
+    for i, track in enumerate(tracks):
+        out[i, : track.shape[0]] = track
     return out[..., [X, Y]], out[..., HEADING], out[..., VALID] > 0.5
 
 
@@ -83,6 +91,8 @@ class CandidateContext:
         ego_xy: ``[K, T, 2]`` past ego roll-outs (`stack_ego_rollouts`).
         ego_heading: ``[K, T]`` (rad).
         ego_valid: ``[K, T]`` bool.
+        adv_xy: ``[K, T, 2]`` the adversary of each past roll-out (`stack_adv_rollouts`).
+        adv_valid: ``[K, T]`` bool.
         start: `time.perf_counter` when the generation began (s).
         candidate_time_s: seconds spent getting the candidates.
     """
@@ -94,6 +104,8 @@ class CandidateContext:
     ego_xy: np.ndarray
     ego_heading: np.ndarray
     ego_valid: np.ndarray
+    adv_xy: np.ndarray
+    adv_valid: np.ndarray
     start: float
     candidate_time_s: float
 
@@ -163,10 +175,11 @@ class CandidateGenerator(AdversaryGenerator):
         cands = adversary_candidates(self.candidate_source, scenario, self.name)
         candidate_s = time.perf_counter() - start
         ego_xy, ego_heading, ego_valid = stack_ego_rollouts(history)
+        adv_xy, _, adv_valid = stack_adv_rollouts(history)
         context = CandidateContext(
             scenario=scenario, cands=cands, adv_size_m=_size_m(scenario, scenario.adv_index),
             ego_size_m=_size_m(scenario, scenario.ego_index), ego_xy=ego_xy, ego_heading=ego_heading,
-            ego_valid=ego_valid, start=start, candidate_time_s=candidate_s,
+            ego_valid=ego_valid, adv_xy=adv_xy, adv_valid=adv_valid, start=start, candidate_time_s=candidate_s,
         )
         return self._choose(context, rng)
 

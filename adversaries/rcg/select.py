@@ -209,9 +209,11 @@ class RCGObjective:
 
     def __call__(
         self, cands: Candidates, adv_size_m: tuple[float, float], ego_xy: np.ndarray, ego_heading: np.ndarray,
-        ego_valid: np.ndarray, ego_size_m: tuple[float, float], scenario: Scenario | None = None,
+        ego_valid: np.ndarray, ego_size_m: tuple[float, float],
+        prev_adv: tuple[np.ndarray, np.ndarray] | None = None, scenario: Scenario | None = None,
     ) -> Ranking:
-        """`Ranking` of the candidates: the kept ones scored ``-d`` (higher = chosen), the others below them."""
+        """`Ranking` of the candidates: the kept ones scored ``-d`` (higher = chosen), the others below them
+        (``prev_adv`` is not used)."""
         if scenario is None:
             raise ValueError("rcg: ranking needs the base scenario (the perturbed scenes are built from it)")
         sel = self.select(scenario, cands, ego_xy, ego_heading, ego_valid)

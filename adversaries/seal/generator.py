@@ -174,7 +174,7 @@ class SEALGenerator(CandidateGenerator):
         """The objective's ranking of the candidates against the past ego roll-outs (a subclass whose objective
         also needs the scenario, e.g. ``seal-rcg``, overrides this)."""
         return self.objective(context.cands, context.adv_size_m, context.ego_xy, context.ego_heading,
-                              context.ego_valid, context.ego_size_m)
+                              context.ego_valid, context.ego_size_m, prev_adv=(context.adv_xy, context.adv_valid))
 
     def _choose(self, context: CandidateContext, rng: np.random.Generator) -> Generation:
         cands, scenario = context.cands, context.scenario

@@ -57,13 +57,15 @@ class Ranking:
 
 class Objective(Protocol):
     """Ranks the candidates against past ego roll-outs (arrays as from
-    `seal.adversaries.candidate_generator.stack_ego_rollouts`)."""
+    `seal.adversaries.candidate_generator.stack_ego_rollouts`); ``prev_adv``: ``(xy [K, T, 2], valid [K, T])`` of
+    what the adversary drove in each of those roll-outs (`stack_adv_rollouts`), for objectives that use it."""
 
     name: str
 
     def __call__(
         self, cands: Candidates, adv_size_m: tuple[float, float], ego_xy: np.ndarray, ego_heading: np.ndarray,
         ego_valid: np.ndarray, ego_size_m: tuple[float, float],
+        prev_adv: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> Ranking: ...
 
 
@@ -78,6 +80,7 @@ class HeuristicObjective:
     def __call__(
         self, cands: Candidates, adv_size_m: tuple[float, float], ego_xy: np.ndarray, ego_heading: np.ndarray,
         ego_valid: np.ndarray, ego_size_m: tuple[float, float],
+        prev_adv: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> Ranking:
         sel = cat_select(
             cands.xy, cands.heading, cands.probs, adv_size_m=adv_size_m, ego_xy=ego_xy, ego_heading=ego_heading,
@@ -121,6 +124,7 @@ class LearnedObjective:
     def __call__(
         self, cands: Candidates, adv_size_m: tuple[float, float], ego_xy: np.ndarray, ego_heading: np.ndarray,
         ego_valid: np.ndarray, ego_size_m: tuple[float, float],
+        prev_adv: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> Ranking:
         from seal.models.objective import align_ego_rollouts
 
@@ -129,8 +133,15 @@ class LearnedObjective:
             raise ValueError(f"seal: the objective model scores {n}-step futures, the candidates have "
                              f"{cands.xy.shape[1]} steps (use a candidate source with {n} future steps)")
         xy, heading, valid = align_ego_rollouts(ego_xy, ego_heading, ego_valid, n_steps=n)
+        adv: dict[str, np.ndarray] = {}
+        if self.model.config.prev_adversary:
+            if prev_adv is None:
+                raise ValueError(f"seal: objective {self.name} ranks with the previous roll-outs' adversary; call it "
+                                 "with prev_adv=(xy, valid) (seal.adversaries.candidate_generator.stack_adv_rollouts)")
+            adv_xy, _, adv_valid = align_ego_rollouts(prev_adv[0], np.zeros(prev_adv[1].shape), prev_adv[1], n_steps=n)
+            adv = {"adv_xy": adv_xy, "adv_valid": adv_valid}
         learned = np.asarray(self.model.rank(cands.xy[:, :n], cands.heading[:, :n], xy, heading, valid,
-                                             heads=self.heads), dtype=np.float64)
+                                             heads=self.heads, **adv), dtype=np.float64)
         if self.prior_weight == 0.0:
             return Ranking(int(np.argmax(learned)), learned, {})
         scores = learned + self.prior_weight * log_prior(cands.probs)

@@ -218,7 +218,8 @@ def test_oracle_bounds_by_hand() -> None:
         ego_xy=np.zeros((1, 4, t, 2), np.float32), ego_heading=np.zeros((1, 4, t), np.float32),
         ego_valid=np.ones((1, 4, t), dtype=bool), f_coll=np.array([[0.1, 0.5, 1.0]], np.float32),
         f_diff=np.array([[[0.9, 0.0, 0.0]] * 4], np.float32), crashed=np.array([[False, False, True]]),
-        cat_score=np.zeros((1, 3), np.float32),
+        cat_score=np.zeros((1, 3), np.float32), adv_xy=np.zeros((1, 4, t, 2), np.float32),
+        adv_valid=np.zeros((1, 4, t), dtype=bool),
     )
     out = oracle_bounds(np.array([[0.1, 0.5, 0.9]]), labels)
     # Crashes first keeps closeness's order 0 < 1 < 2, uncorrelated with the target's ranks (1.5, 0, 1.5): 0.

@@ -88,6 +88,46 @@ def pair_features(
     return out
 
 
+PREV_ADV_FEATURE_NAMES = ("prev_adv_x_in_cand", "prev_adv_y_in_cand", "prev_adv_to_cand_distance",
+                          "prev_adv_x_in_ego", "prev_adv_y_in_ego", "prev_adv_closeness")
+N_PREV_ADV_FEATURES = len(PREV_ADV_FEATURE_NAMES)
+
+
+def prev_adversary_features(
+    cand_xy: torch.Tensor, cand_heading: torch.Tensor, ego_xy: torch.Tensor, ego_heading: torch.Tensor,
+    ego_valid: torch.Tensor, adv_xy: torch.Tensor, adv_valid: torch.Tensor,
+) -> torch.Tensor:
+    """Features ``[..., T, N_PREV_ADV_FEATURES]`` (order: `PREV_ADV_FEATURE_NAMES`) of the adversary of the previous
+    roll-out: where it was relative to the candidate (the candidate's frame, and their distance) and relative to the
+    previous ego (the ego's frame, and the closeness ``exp(-d / 8)``).
+
+    Why: f_diff compares the ego's next roll-out with the previous one, and the previous one is the ego's answer to
+    the previous adversary. A candidate that drives like the previous adversary leaves the ego's path as it was
+    (f_diff near 0) even when it comes close, and one that stays away from an ego the previous adversary pressed
+    moves the ego's path; neither is visible from the ego's roll-out alone.
+
+    Args:
+        cand_xy, cand_heading, ego_xy, ego_heading, ego_valid: as in `pair_features`.
+        adv_xy: ``[..., T, 2]`` the previous roll-out's adversary positions (m), same steps.
+        adv_valid: ``[..., T]`` bool, False where that adversary was not on the road.
+
+    Steps where the previous ego or its adversary is invalid have every feature zeroed.
+    """
+    valid = (ego_valid & adv_valid).to(cand_xy.dtype)
+    ego_xy = _hold_last(ego_xy, ego_valid)
+    adv_xy = _hold_last(adv_xy, adv_valid)
+    cx, cy = to_frame(adv_xy[..., 0] - cand_xy[..., 0], adv_xy[..., 1] - cand_xy[..., 1], cand_heading)
+    cand_dist = torch.sqrt(cx * cx + cy * cy + 1e-12)
+    dx, dy = adv_xy[..., 0] - ego_xy[..., 0], adv_xy[..., 1] - ego_xy[..., 1]
+    ex, ey = to_frame(dx, dy, ego_heading)
+    ego_dist = torch.sqrt(dx * dx + dy * dy + 1e-12)
+    feats = [(cx / POS_SCALE_M).clamp(-POS_CLIP, POS_CLIP), (cy / POS_SCALE_M).clamp(-POS_CLIP, POS_CLIP),
+             (cand_dist / POS_SCALE_M).clamp(max=POS_CLIP), (ex / POS_SCALE_M).clamp(-POS_CLIP, POS_CLIP),
+             (ey / POS_SCALE_M).clamp(-POS_CLIP, POS_CLIP), torch.exp(-ego_dist / CLOSE_SCALE_M)]
+    shape = torch.broadcast_shapes(*(f.shape for f in feats), valid.shape)
+    return torch.stack([f.expand(shape) * valid.expand(shape) for f in feats], dim=-1)
+
+
 EGO_FEATURE_NAMES = ("x_in_start", "y_in_start", "cos_heading_change", "sin_heading_change", "speed", "accel",
                      "valid", "time")
 N_EGO_FEATURES = len(EGO_FEATURE_NAMES)

@@ -46,6 +46,11 @@ class LabelSet:
         crashed: ``[S, N]`` bool: the ego hit the adversary in candidate j's episode.
         cat_score: ``[S, N]`` float32 CAT's heuristic score of candidate j against the logged-adversary
             roll-out (the baseline of the report).
+        adv_xy: ``[S, M, T, 2]`` float32 executed adversary positions of each roll-out (m; row 0 the logged
+            adversary, 1 + j what the adversary drove for candidate j: the candidate, then the skills after SEAL's
+            switch): the previous roll-out's adversary, an input of pi_score (`seal.models.objective.features.
+            prev_adversary_features`).
+        adv_valid: ``[S, M, T]`` bool, False where the adversary was not on the road.
     """
 
     scenario_ids: np.ndarray
@@ -59,6 +64,8 @@ class LabelSet:
     f_diff: np.ndarray
     crashed: np.ndarray
     cat_score: np.ndarray
+    adv_xy: np.ndarray
+    adv_valid: np.ndarray
 
     def __post_init__(self) -> None:
         s, n, t, _ = np.shape(self.cand_xy)
@@ -67,6 +74,7 @@ class LabelSet:
             "scenario_ids": (s,), "cand_xy": (s, n, t, 2), "cand_heading": (s, n, t), "probs": (s, n),
             "ego_xy": (s, m, t, 2), "ego_heading": (s, m, t), "ego_valid": (s, m, t), "f_coll": (s, n),
             "f_diff": (s, m, n), "crashed": (s, n), "cat_score": (s, n),
+            "adv_xy": (s, m, t, 2), "adv_valid": (s, m, t),
         }
         for name, shape in expected.items():
             if np.shape(getattr(self, name)) != shape:

@@ -63,7 +63,7 @@ class ObjectiveModel:
 
     # ------------------------------------------------------------------------------------------------ inference
     def _check(self, cand_xy: np.ndarray, cand_heading: np.ndarray, ego_xy: np.ndarray, ego_heading: np.ndarray,
-               ego_valid: np.ndarray) -> None:
+               ego_valid: np.ndarray, adv_xy: np.ndarray | None, adv_valid: np.ndarray | None) -> None:
         n, t = cand_heading.shape[:2] if cand_heading.ndim == 2 else (-1, -1)
         k = ego_valid.shape[0] if ego_valid.ndim == 2 else -1
         ok = (
@@ -76,6 +76,12 @@ class ObjectiveModel:
                 f"ego_valid [K, T]; got {cand_xy.shape}, {cand_heading.shape}, {ego_xy.shape}, {ego_heading.shape}, "
                 f"{ego_valid.shape}"
             )
+        if self.config.prev_adversary and (adv_xy is None or adv_valid is None):
+            raise ValueError("objective: this model ranks with the previous roll-outs' adversary (prev_adversary); "
+                             "pass adv_xy [K, T, 2] and adv_valid [K, T]")
+        if adv_xy is not None and (adv_xy.shape != (k, t, 2) or adv_valid is None or adv_valid.shape != (k, t)):
+            raise ValueError(f"objective: expected adv_xy [K, T, 2] and adv_valid [K, T] like the ego's "
+                             f"{ego_xy.shape}; got {adv_xy.shape}, {None if adv_valid is None else adv_valid.shape}")
         if t != self.config.n_steps:
             raise ValueError(
                 f"objective: tracks have {t} steps, the model was trained on {self.config.n_steps} (candidate row j = "
@@ -83,7 +89,8 @@ class ObjectiveModel:
             )
 
     def predict(self, cand_xy: np.ndarray, cand_heading: np.ndarray, ego_xy: np.ndarray, ego_heading: np.ndarray,
-                ego_valid: np.ndarray) -> np.ndarray:
+                ego_valid: np.ndarray, adv_xy: np.ndarray | None = None, adv_valid: np.ndarray | None = None
+                ) -> np.ndarray:
         """Predicted ``[K, N, 2]`` (f_coll, f_diff), each in [0, 1].
 
         Args:
@@ -92,25 +99,33 @@ class ObjectiveModel:
             ego_xy: ``[K, T, 2]`` previous ego roll-outs (m); row ``t`` = the candidates' row ``t`` (same step).
             ego_heading: ``[K, T]`` ego headings (rad).
             ego_valid: ``[K, T]`` bool, False after a roll-out ended.
+            adv_xy: ``[K, T, 2]`` the adversary of each previous roll-out (m), same steps; needed by a model
+                trained with ``prev_adversary`` (`ObjectiveConfig`), ignored by others.
+            adv_valid: ``[K, T]`` bool, False where that adversary was not on the road.
         """
         arrays = [np.asarray(a) for a in (cand_xy, cand_heading, ego_xy, ego_heading, ego_valid)]
-        self._check(*arrays)
+        adv = None if adv_xy is None else np.asarray(adv_xy)
+        adv_v = None if adv_valid is None else np.asarray(adv_valid)
+        self._check(arrays[0], arrays[1], arrays[2], arrays[3], arrays[4], adv, adv_v)
         cx, ch, ex, eh, ev = arrays
         with torch.inference_mode():
             out = self.net.score_pairs(
                 _tensor(cx)[None], _tensor(ch)[None], _tensor(ex)[:, None], _tensor(eh)[:, None],
                 _tensor(ev, torch.bool)[:, None],
+                adv_xy=None if adv is None else _tensor(adv)[:, None],
+                adv_valid=None if adv_v is None else _tensor(adv_v, torch.bool)[:, None],
             )
         return out.numpy().astype(np.float64)
 
     def rank(self, cand_xy: np.ndarray, cand_heading: np.ndarray, ego_xy: np.ndarray, ego_heading: np.ndarray,
-             ego_valid: np.ndarray, heads: str = DEFAULT_RANK_HEADS) -> np.ndarray:
+             ego_valid: np.ndarray, heads: str = DEFAULT_RANK_HEADS, adv_xy: np.ndarray | None = None,
+             adv_valid: np.ndarray | None = None) -> np.ndarray:
         """SEAL's selection score ``[N]``: mean over the K roll-outs of predicted ``f_coll + f_diff`` (in [0, 2];
         higher = more critical), or of one head alone (``heads``, a key of `RANK_HEADS`). Other arguments as in
         `predict`."""
         if heads not in RANK_HEADS:
             raise ValueError(f"objective heads must be one of {', '.join(RANK_HEADS)}, got {heads!r}")
-        pred = self.predict(cand_xy, cand_heading, ego_xy, ego_heading, ego_valid)
+        pred = self.predict(cand_xy, cand_heading, ego_xy, ego_heading, ego_valid, adv_xy, adv_valid)
         return pred[..., list(RANK_HEADS[heads])].sum(axis=-1).mean(axis=0)
 
     # ------------------------------------------------------------------------------------------------------ I/O

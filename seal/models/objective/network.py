@@ -25,8 +25,10 @@ from seal.models.objective.features import (
     FEATURE_NAMES,
     N_EGO_FEATURES,
     N_FEATURES,
+    N_PREV_ADV_FEATURES,
     ego_features,
     pair_features,
+    prev_adversary_features,
 )
 
 N_OUTPUTS = 2
@@ -55,6 +57,8 @@ class ObjectiveConfig:
         ego_branch: add a per-roll-out logit offset from the previous ego roll-out alone (`EgoBranch`): the level
             of f_diff / f_coll of a scenario, which does not depend on the candidate and so leaves the ranking of
             one roll-out's candidates to the pair network.
+        prev_adversary: the per-step features also describe the previous roll-out's adversary
+            (`seal.models.objective.features.prev_adversary_features`): inference then needs its track.
     """
 
     n_steps: int = N_FUTURE
@@ -65,6 +69,12 @@ class ObjectiveConfig:
     diff_on_closeness: bool = True
     zero_init: bool = False
     ego_branch: bool = False
+    prev_adversary: bool = False
+
+    @property
+    def n_inputs(self) -> int:
+        """Per-step input features of the pair network."""
+        return N_FEATURES + (N_PREV_ADV_FEATURES if self.prev_adversary else 0)
 
     def __post_init__(self) -> None:
         for name in ("n_steps", "stride", "hidden", "kernel"):
@@ -147,19 +157,19 @@ class EgoBranch(nn.Module):
 
 
 class ObjectiveNet(nn.Module):
-    """Pairs' per-step features ``[B, T, N_FEATURES]`` + validity ``[B, T]`` + features at the closest approach
-    ``[B, N_FEATURES]`` -> logits ``[B, 2]`` (both relative to the logit of the largest closeness feature)."""
+    """Pairs' per-step features ``[B, T, F]`` + validity ``[B, T]`` + features at the closest approach ``[B, F]``
+    (``F = config.n_inputs``) -> logits ``[B, 2]`` (both relative to the logit of the largest closeness feature)."""
 
     def __init__(self, config: ObjectiveConfig) -> None:
         super().__init__()
         self.config = config
-        h = config.hidden
-        self.step = nn.Sequential(nn.Linear(N_FEATURES, h), nn.ReLU(), nn.Linear(h, h), nn.ReLU())
+        h, n_in = config.hidden, config.n_inputs
+        self.step = nn.Sequential(nn.Linear(n_in, h), nn.ReLU(), nn.Linear(h, h), nn.ReLU())
         self.conv = nn.Conv1d(h, h, config.kernel, padding=config.kernel // 2)
         self.mix = nn.Sequential(nn.Linear(2 * h, h), nn.ReLU())
         # The head also sees the per-pair maxima of the raw features (e.g. the largest closeness = the closest
         # approach): a direct path for what f_coll is made of, which the deep path then corrects.
-        self.head = nn.Sequential(nn.Dropout(config.dropout), nn.Linear(2 * h + 2 * N_FEATURES, h), nn.ReLU(),
+        self.head = nn.Sequential(nn.Dropout(config.dropout), nn.Linear(2 * h + 2 * n_in, h), nn.ReLU(),
                                   nn.Dropout(config.dropout), nn.Linear(h, N_OUTPUTS))
         if config.zero_init:
             last = self.head[-1]
@@ -193,23 +203,34 @@ class ObjectiveNet(nn.Module):
     @overload
     def score_pairs(
         self, cand_xy: torch.Tensor, cand_heading: torch.Tensor, ego_xy: torch.Tensor, ego_heading: torch.Tensor,
-        ego_valid: torch.Tensor, with_correction: Literal[False] = False,
+        ego_valid: torch.Tensor, with_correction: Literal[False] = False, adv_xy: torch.Tensor | None = None,
+        adv_valid: torch.Tensor | None = None,
     ) -> torch.Tensor: ...
 
     @overload
     def score_pairs(
         self, cand_xy: torch.Tensor, cand_heading: torch.Tensor, ego_xy: torch.Tensor, ego_heading: torch.Tensor,
-        ego_valid: torch.Tensor, with_correction: Literal[True],
+        ego_valid: torch.Tensor, with_correction: Literal[True], adv_xy: torch.Tensor | None = None,
+        adv_valid: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]: ...
 
     def score_pairs(
         self, cand_xy: torch.Tensor, cand_heading: torch.Tensor, ego_xy: torch.Tensor, ego_heading: torch.Tensor,
-        ego_valid: torch.Tensor, with_correction: bool = False,
+        ego_valid: torch.Tensor, with_correction: bool = False, adv_xy: torch.Tensor | None = None,
+        adv_valid: torch.Tensor | None = None,
     ) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
         """Predicted ``[f_coll, f_diff]`` ``[..., 2]`` for pairs given as tracks (shapes as in
         `seal.models.objective.features.pair_features`; leading axes broadcast); with ``with_correction`` also the
-        learned logit corrections ``[..., 2]`` (for training's penalty on them)."""
+        learned logit corrections ``[..., 2]`` (for training's penalty on them). ``adv_xy [..., T, 2]`` /
+        ``adv_valid [..., T]``: the previous roll-outs' adversary (shaped like the ego's), needed by a network with
+        ``config.prev_adversary`` and ignored by one without."""
         feats = pair_features(cand_xy, cand_heading, ego_xy, ego_heading, ego_valid)
+        if self.config.prev_adversary:
+            if adv_xy is None or adv_valid is None:
+                raise ValueError("objective: this model was trained with prev_adversary and needs the previous "
+                                 "roll-outs' adversary tracks (adv_xy, adv_valid)")
+            extra = prev_adversary_features(cand_xy, cand_heading, ego_xy, ego_heading, ego_valid, adv_xy, adv_valid)
+            feats = torch.cat([feats, extra.expand(*feats.shape[:-1], extra.shape[-1])], dim=-1)
         lead = feats.shape[:-2]
         feats = feats.reshape(-1, *feats.shape[-2:])
         closest = closest_step(feats)

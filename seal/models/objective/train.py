@@ -146,6 +146,8 @@ class PairTensors:
         self.ego_xy = torch.as_tensor(labels.ego_xy, dtype=torch.float32)
         self.ego_heading = torch.as_tensor(labels.ego_heading, dtype=torch.float32)
         self.ego_valid = torch.as_tensor(labels.ego_valid, dtype=torch.bool)
+        self.adv_xy = torch.as_tensor(labels.adv_xy, dtype=torch.float32)
+        self.adv_valid = torch.as_tensor(labels.adv_valid, dtype=torch.bool)
         self.f_coll = torch.as_tensor(labels.f_coll, dtype=torch.float32)
         self.f_diff = torch.as_tensor(labels.f_diff, dtype=torch.float32)
         self.n_prev = labels.ego_xy.shape[1]
@@ -176,13 +178,14 @@ class PairTensors:
         mirrored across the x axis first."""
         s, i, j = (torch.as_tensor(idx[:, c]) for c in range(3))
         cand_xy, cand_h = self.cand_xy[s, j], self.cand_heading[s, j]
-        ego_xy, ego_h = self.ego_xy[s, i], self.ego_heading[s, i]
+        ego_xy, ego_h, adv_xy = self.ego_xy[s, i], self.ego_heading[s, i], self.adv_xy[s, i]
         if flip is not None:
             sign = torch.where(torch.as_tensor(flip), -1.0, 1.0)
             mirror = torch.stack([torch.ones_like(sign), sign], dim=-1)[:, None]
-            cand_xy, ego_xy = cand_xy * mirror, ego_xy * mirror
+            cand_xy, ego_xy, adv_xy = cand_xy * mirror, ego_xy * mirror, adv_xy * mirror
             cand_h, ego_h = cand_h * sign[:, None], ego_h * sign[:, None]
-        pred, correction = net.score_pairs(cand_xy, cand_h, ego_xy, ego_h, self.ego_valid[s, i], with_correction=True)
+        pred, correction = net.score_pairs(cand_xy, cand_h, ego_xy, ego_h, self.ego_valid[s, i], with_correction=True,
+                                           adv_xy=adv_xy, adv_valid=self.adv_valid[s, i])
         target = torch.stack([self.f_coll[s, j], self.f_diff[s, i, j]], dim=-1)
         self.last_correction = correction
         return pred, target
