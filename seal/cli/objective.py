@@ -82,8 +82,9 @@ def register(tree: CommandTree) -> None:
         help="train SEAL's learned objective pi_score (predicted f_coll, f_diff of candidate adversary futures)",
         description="Roll every trajectory-prior candidate of the adversary (and the logged adversary) out against "
         "the heuristic reactive ego for each scenario of the training split and of the held-out split (resumable "
-        "label chunks in OUT/labels/, in parallel), train pi_score (ego roll-out in the candidate's frame per step -> "
-        "polyline encoder -> MLP -> sigmoid [f_coll, f_diff] as logit "
+        "label chunks in OUT/labels/, in parallel), train pi_score (ego roll-out in the candidate's frame per step, "
+        "and with model.prev_adversary the previous roll-out's adversary -> polyline encoder -> MLP -> sigmoid "
+        "[f_coll, f_diff] as logit "
         "corrections of closeness, MSE, model selection on validation Spearman) and report on the held-out "
         "scenarios: MSE per head, Spearman correlation of the ranking with the simulated f_coll + f_diff, "
         "top-1-in-top-3 rate, against "

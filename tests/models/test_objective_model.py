@@ -355,3 +355,20 @@ def test_the_training_budget_can_be_switched_off_but_not_set_to_nothing() -> Non
     assert ObjectiveTrainConfig(max_minutes=None).max_minutes is None
     with pytest.raises(ValueError, match="max_minutes"):
         ObjectiveTrainConfig(max_minutes=0.0)
+
+
+def test_epoch_groups_draw_the_logged_share_from_the_logged_roll_out() -> None:
+    from seal.models.objective.train import _epoch_groups
+
+    groups = np.stack([np.repeat(np.arange(10), 5), np.tile(np.arange(5), 10)], axis=1)  # 10 scenarios x M = 5
+    rng = np.random.default_rng(0)
+    plain = _epoch_groups(groups, 20, None, rng)
+    assert len(set(plain.tolist())) == 20  # a sample without repeats
+    pick = _epoch_groups(groups, 20, 0.5, rng)
+    assert len(pick) == 20 and (groups[pick, 1] == 0).sum() == 10
+    # More logged groups asked for than there are (10): drawn again; the others without repeats.
+    pick = _epoch_groups(groups, 40, 0.75, rng)
+    assert (groups[pick, 1] == 0).sum() == 30 and len(set(pick[groups[pick, 1] != 0].tolist())) == 10
+    assert (groups[_epoch_groups(groups, 8, 0.0, rng), 1] != 0).all()
+    with pytest.raises(ValueError, match="logged_share"):
+        ObjectiveTrainConfig(logged_share=1.5)

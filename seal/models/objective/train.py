@@ -73,6 +73,9 @@ class ObjectiveTrainConfig:
         correction_l2: weight of a penalty on the squared logit corrections of closeness (keeps the outputs
             near closeness unless the labels say otherwise).
         select: validation metric of early stopping (`SELECT_MODES`).
+        logged_share: share of each epoch's training groups whose previous roll-out is the logged-adversary
+            episode (None: as drawn, 1 in M = N + 1). SEAL's first generation of a scenario ranks against that
+            episode alone, and it is the one roll-out whose adversary is not one of the candidates.
         seed: random seed.
     """
 
@@ -91,6 +94,7 @@ class ObjectiveTrainConfig:
     mirror: bool = False
     correction_l2: float = 0.0
     select: str = "spearman"
+    logged_share: float | None = None
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -108,6 +112,8 @@ class ObjectiveTrainConfig:
             raise ValueError(f"objective training: select must be one of {SELECT_MODES}, got {self.select!r}")
         if not (self.rank_weight >= 0 and self.rank_temperature > 0):
             raise ValueError("objective training: rank_weight must be >= 0 and rank_temperature > 0")
+        if self.logged_share is not None and not 0.0 <= self.logged_share <= 1.0:
+            raise ValueError(f"objective training: logged_share must be in [0, 1] or null, got {self.logged_share}")
         if self.rank_loss not in RANK_LOSSES:
             raise ValueError(f"objective training: rank_loss must be one of {RANK_LOSSES}, got {self.rank_loss!r}")
 
@@ -367,6 +373,20 @@ def _batch_loss(net: ObjectiveNet, tensors: PairTensors, groups: np.ndarray, cfg
     return loss, len(idx)
 
 
+def _epoch_groups(groups: np.ndarray, n: int, logged_share: float | None, rng: np.random.Generator) -> np.ndarray:
+    """Indices of the ``n`` training groups of one epoch, in random order: a random sample of ``groups [G, 2]``, or
+    with ``logged_share`` that share of them from the logged-adversary groups (drawn again when there are fewer)
+    and the rest from the others."""
+    if logged_share is None:
+        return rng.permutation(len(groups))[:n]
+    logged = np.flatnonzero(groups[:, 1] == LOGGED_ROW)
+    other = np.flatnonzero(groups[:, 1] != LOGGED_ROW)
+    n_logged = n if other.size == 0 else 0 if logged.size == 0 else round(logged_share * n)
+    pick = np.concatenate([rng.choice(logged, n_logged, replace=n_logged > logged.size),
+                           rng.choice(other, min(n - n_logged, other.size), replace=False)])
+    return pick[rng.permutation(len(pick))]
+
+
 def _train_epoch(
     net: ObjectiveNet, opt: torch.optim.Optimizer, sched: torch.optim.lr_scheduler.LRScheduler, data: _FitData,
     cfg: ObjectiveTrainConfig, schedule: _Schedule, rng: np.random.Generator, epoch: int,
@@ -375,7 +395,7 @@ def _train_epoch(
     """One epoch over ``schedule.n_per_epoch`` random training groups; returns the mean pair loss and whether the
     time budget ran out (the epoch then ends early)."""
     net.train()
-    pick = rng.permutation(len(data.train_groups))[: schedule.n_per_epoch]
+    pick = _epoch_groups(data.train_groups, schedule.n_per_epoch, cfg.logged_share, rng)
     total, seen = 0.0, 0
     steps, per_batch = schedule.steps_per_epoch, schedule.groups_per_batch
     for step in range(steps):
