@@ -232,6 +232,36 @@ def test_learned_objective_ranks_with_the_model(highway: list[Scenario], tmp_pat
     assert gen.predicted_step == contact.step
 
 
+def test_a_prev_adversary_objective_ranks_with_what_the_adversary_drove(highway: list[Scenario], tmp_path) -> None:
+    objective = pytest.importorskip("seal.models.objective", reason="seal.models.objective (learned "
+        "objective) not available yet")
+    from seal.adversaries.candidate_generator import stack_adv_rollouts, stack_ego_rollouts
+    from seal.adversaries.seal.objective import LearnedObjective
+
+    torch.manual_seed(0)
+    path = tmp_path / "objective.pt"
+    objective.ObjectiveModel(objective.ObjectiveConfig(hidden=8, prev_adversary=True)).save(path)
+    scenario = highway[0]
+    history = RolloutHistory().queue(scenario)
+    gen = _generator(objective=path, prior_weight=0.0).generate(scenario, history, np.random.default_rng(0))
+    ego = objective.align_ego_rollouts(*stack_ego_rollouts(history))
+    adv_xy, _, adv_valid = objective.align_ego_rollouts(*stack_adv_rollouts(history))
+    # The history's one roll-out is the logged episode: its adversary is the logged track.
+    logged = scenario.tracks[scenario.adv_index, CURRENT_STEP + 1 : CURRENT_STEP + 1 + adv_xy.shape[1]]
+    ok = logged[:, VALID] > 0.5
+    assert ok.any() and (adv_valid[0, : len(logged)] == ok).all()
+    np.testing.assert_allclose(adv_xy[0, : len(logged)][ok], logged[ok][:, [X, Y]], atol=1e-3)
+    cands = _candidates(scenario)
+    model = objective.ObjectiveModel.load(path)
+    expected = model.rank(cands.xy, cands.heading, *ego, adv_xy=adv_xy, adv_valid=adv_valid)
+    np.testing.assert_allclose(gen.extra["scores"], expected, atol=1e-5)
+    elsewhere = model.rank(cands.xy, cands.heading, *ego, adv_xy=adv_xy + 30.0, adv_valid=adv_valid)
+    assert not np.allclose(elsewhere, expected)
+    ranker = LearnedObjective(path)
+    with pytest.raises(ValueError, match="prev_adv"):
+        ranker(cands, (4.5, 2.0), *stack_ego_rollouts(history), (4.5, 2.0))
+
+
 @pytest.fixture
 def untrained_objective(tmp_path) -> Path:
     """An untrained pi_score file (seed 0): its two heads score the candidates differently."""

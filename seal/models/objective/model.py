@@ -106,8 +106,8 @@ class ObjectiveModel:
         arrays = [np.asarray(a) for a in (cand_xy, cand_heading, ego_xy, ego_heading, ego_valid)]
         adv = None if adv_xy is None else np.asarray(adv_xy)
         adv_v = None if adv_valid is None else np.asarray(adv_valid)
-        self._check(arrays[0], arrays[1], arrays[2], arrays[3], arrays[4], adv, adv_v)
         cx, ch, ex, eh, ev = arrays
+        self._check(cx, ch, ex, eh, ev, adv, adv_v)
         with torch.inference_mode():
             out = self.net.score_pairs(
                 _tensor(cx)[None], _tensor(ch)[None], _tensor(ex)[:, None], _tensor(eh)[:, None],
