@@ -257,7 +257,7 @@ def test_closest_step_takes_the_features_at_the_smallest_valid_distance() -> Non
 
 
 def test_listnet_loss_is_zero_for_the_right_order_and_larger_for_the_wrong_one() -> None:
-    from seal.models.objective.train import listnet_loss
+    from seal.models.objective.losses import listnet_loss
 
     target = torch.tensor([[0.1, 0.0], [0.9, 0.5], [0.4, 0.0], [0.2, 1.0]])  # sums 0.1, 1.4, 0.4, 1.2
     assert float(listnet_loss(target, target, 4, 0.1)) == pytest.approx(0.0, abs=1e-6)

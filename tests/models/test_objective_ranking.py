@@ -13,8 +13,8 @@ import torch
 from seal.core.scenario import DT_S
 from seal.models.objective import LabelSet, ObjectiveConfig, ObjectiveModel, ObjectiveTrainConfig
 from seal.models.objective.features import EGO_FEATURE_NAMES, ego_features
+from seal.models.objective.losses import group_ranks, pairwise_loss, pearson_rank_loss
 from seal.models.objective.metrics import average_ranks, spearman
-from seal.models.objective.train import group_ranks, pairwise_loss, pearson_rank_loss
 
 E = {name: i for i, name in enumerate(EGO_FEATURE_NAMES)}
 
