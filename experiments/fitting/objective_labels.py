@@ -243,7 +243,7 @@ def label_scenario(scenario: Scenario, source: Callable[[Scenario], Any], n_cand
         ego_xy=ego_xy[None].astype(np.float32), ego_heading=ego_h[None].astype(np.float32), ego_valid=ego_v[None],
         f_coll=coll[None].astype(np.float32), f_diff=diff[None].astype(np.float32), crashed=crashed[None, 1:],
         cat_score=np.asarray(sel.scores, dtype=np.float32)[None],
-        adv_xy=hold_last(adv_xy, adv_v)[None].astype(np.float32), adv_valid=adv_v[None],
+        adv_xy=adv_xy[None].astype(np.float32), adv_valid=adv_v[None],
     )
 
 

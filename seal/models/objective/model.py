@@ -76,9 +76,6 @@ class ObjectiveModel:
                 f"ego_valid [K, T]; got {cand_xy.shape}, {cand_heading.shape}, {ego_xy.shape}, {ego_heading.shape}, "
                 f"{ego_valid.shape}"
             )
-        if self.config.prev_adversary and (adv_xy is None or adv_valid is None):
-            raise ValueError("objective: this model ranks with the previous roll-outs' adversary (prev_adversary); "
-                             "pass adv_xy [K, T, 2] and adv_valid [K, T]")
         if adv_xy is not None and (adv_xy.shape != (k, t, 2) or adv_valid is None or adv_valid.shape != (k, t)):
             raise ValueError(f"objective: expected adv_xy [K, T, 2] and adv_valid [K, T] like the ego's "
                              f"{ego_xy.shape}; got {adv_xy.shape}, {None if adv_valid is None else adv_valid.shape}")

@@ -227,8 +227,8 @@ class ObjectiveNet(nn.Module):
         feats = pair_features(cand_xy, cand_heading, ego_xy, ego_heading, ego_valid)
         if self.config.prev_adversary:
             if adv_xy is None or adv_valid is None:
-                raise ValueError("objective: this model was trained with prev_adversary and needs the previous "
-                                 "roll-outs' adversary tracks (adv_xy, adv_valid)")
+                raise ValueError("objective: this model ranks with the previous roll-outs' adversary (prev_adversary); "
+                                 "pass adv_xy [K, T, 2] and adv_valid [K, T]")
             extra = prev_adversary_features(cand_xy, cand_heading, ego_xy, ego_heading, ego_valid, adv_xy, adv_valid)
             feats = torch.cat([feats, extra.expand(*feats.shape[:-1], extra.shape[-1])], dim=-1)
         lead = feats.shape[:-2]
