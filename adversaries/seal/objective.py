@@ -141,7 +141,7 @@ class LearnedObjective:
             adv_xy, _, adv_valid = align_ego_rollouts(prev_adv[0], np.zeros(prev_adv[1].shape), prev_adv[1], n_steps=n)
             adv = {"adv_xy": adv_xy, "adv_valid": adv_valid}
         learned = np.asarray(self.model.rank(cands.xy[:, :n], cands.heading[:, :n], xy, heading, valid,
-                                             heads=self.heads, **adv), dtype=np.float64)
+                                             heads=self.heads, cand_probs=cands.probs, **adv), dtype=np.float64)
         if self.prior_weight == 0.0:
             return Ranking(int(np.argmax(learned)), learned, {})
         scores = learned + self.prior_weight * log_prior(cands.probs)

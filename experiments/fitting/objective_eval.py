@@ -190,7 +190,8 @@ def rank_latency_ms(model: Any, n_calls: int = LATENCY_CALLS, seed: int = 0) -> 
         cand_h = np.arctan2(cand_xy[..., 1], cand_xy[..., 0])
         ego_xy = np.cumsum(np.ones((K_PREV, t, 2)), axis=1)
         ego_h, ego_v = np.zeros((K_PREV, t)), np.ones((K_PREV, t), dtype=bool)
-        adv = {"adv_xy": ego_xy + np.array([10.0, 0.0]), "adv_valid": ego_v}  # the previous adversary 10 m ahead
+        adv = {"adv_xy": ego_xy + np.array([10.0, 0.0]), "adv_valid": ego_v,  # the previous adversary 10 m ahead
+               "cand_probs": rng.dirichlet(np.ones(32))}
         for _ in range(10):
             model.rank(cand_xy, cand_h, ego_xy, ego_h, ego_v, **adv)
         times = []

@@ -128,6 +128,30 @@ def prev_adversary_features(
     return torch.stack([f.expand(shape) * valid.expand(shape) for f in feats], dim=-1)
 
 
+CAND_PRIOR_FEATURE_NAMES = ("log_prob_below_best", "prob_rank")
+N_CAND_PRIOR_FEATURES = len(CAND_PRIOR_FEATURE_NAMES)
+LOG_PROB_SCALE = 10.0
+"""Log-probability gaps are divided by this (nats) and clipped at -`POS_CLIP` (50 nats below the best)."""
+
+
+def candidate_prior_features(probs: torch.Tensor) -> torch.Tensor:
+    """Per-candidate features ``[..., N, N_CAND_PRIOR_FEATURES]`` (order: `CAND_PRIOR_FEATURE_NAMES`) of the
+    trajectory prior's probabilities ``probs [..., N]`` of one scenario's N candidates: how far the candidate's log
+    probability lies below the best one's, and its rank among them (0 = the most probable, 1 = the least; ties share
+    the better rank).
+
+    Why: what the adversary can really drive depends on how plausible the candidate is (a low-probability mode is
+    often one the adversary's controller cannot follow, or one the skill switch leaves at once), and CAT's score,
+    which ranks the logged previous roll-out's candidates better than closeness, weighs hits by exactly this. Both
+    features are relative to the scenario's own candidates, so they do not depend on how sharp the prior is.
+    """
+    logp = torch.log(probs.clamp(min=1e-30))
+    gap = ((logp - logp.max(dim=-1, keepdim=True).values) / LOG_PROB_SCALE).clamp(min=-POS_CLIP)
+    n = probs.shape[-1]
+    better = (logp[..., None, :] > logp[..., :, None]).sum(dim=-1).to(probs.dtype)
+    return torch.stack([gap, better / max(n - 1, 1)], dim=-1)
+
+
 EGO_FEATURE_NAMES = ("x_in_start", "y_in_start", "cos_heading_change", "sin_heading_change", "speed", "accel",
                      "valid", "time")
 N_EGO_FEATURES = len(EGO_FEATURE_NAMES)

@@ -26,6 +26,7 @@ import torch
 
 from seal.core.atomic import atomic_write_bytes, atomic_write_json
 from seal.core.weights_file import check_header, read_weights_file
+from seal.models.objective.features import candidate_prior_features
 from seal.models.objective.network import ObjectiveConfig, ObjectiveNet
 
 RANK_HEADS = {"coll+diff": (0, 1), "coll": (0,), "diff": (1,)}
@@ -86,8 +87,8 @@ class ObjectiveModel:
             )
 
     def predict(self, cand_xy: np.ndarray, cand_heading: np.ndarray, ego_xy: np.ndarray, ego_heading: np.ndarray,
-                ego_valid: np.ndarray, adv_xy: np.ndarray | None = None, adv_valid: np.ndarray | None = None
-                ) -> np.ndarray:
+                ego_valid: np.ndarray, adv_xy: np.ndarray | None = None, adv_valid: np.ndarray | None = None,
+                cand_probs: np.ndarray | None = None) -> np.ndarray:
         """Predicted ``[K, N, 2]`` (f_coll, f_diff), each in [0, 1].
 
         Args:
@@ -99,30 +100,38 @@ class ObjectiveModel:
             adv_xy: ``[K, T, 2]`` the adversary of each previous roll-out (m), same steps; needed by a model
                 trained with ``prev_adversary`` (`ObjectiveConfig`), ignored by others.
             adv_valid: ``[K, T]`` bool, False where that adversary was not on the road.
+            cand_probs: ``[N]`` the candidates' prior probabilities; needed by a model trained with
+                ``candidate_prior``, ignored by others.
         """
         arrays = [np.asarray(a) for a in (cand_xy, cand_heading, ego_xy, ego_heading, ego_valid)]
         adv = None if adv_xy is None else np.asarray(adv_xy)
         adv_v = None if adv_valid is None else np.asarray(adv_valid)
         cx, ch, ex, eh, ev = arrays
         self._check(cx, ch, ex, eh, ev, adv, adv_v)
+        prior = None
+        if cand_probs is not None:
+            probs = np.asarray(cand_probs, dtype=np.float64)
+            if probs.shape != (cx.shape[0],):
+                raise ValueError(f"objective: expected cand_probs [N] = [{cx.shape[0]}], got {probs.shape}")
+            prior = candidate_prior_features(_tensor(probs))[None]
         with torch.inference_mode():
             out = self.net.score_pairs(
                 _tensor(cx)[None], _tensor(ch)[None], _tensor(ex)[:, None], _tensor(eh)[:, None],
                 _tensor(ev, torch.bool)[:, None],
                 adv_xy=None if adv is None else _tensor(adv)[:, None],
-                adv_valid=None if adv_v is None else _tensor(adv_v, torch.bool)[:, None],
+                adv_valid=None if adv_v is None else _tensor(adv_v, torch.bool)[:, None], cand_prior=prior,
             )
         return out.numpy().astype(np.float64)
 
     def rank(self, cand_xy: np.ndarray, cand_heading: np.ndarray, ego_xy: np.ndarray, ego_heading: np.ndarray,
              ego_valid: np.ndarray, heads: str = DEFAULT_RANK_HEADS, adv_xy: np.ndarray | None = None,
-             adv_valid: np.ndarray | None = None) -> np.ndarray:
+             adv_valid: np.ndarray | None = None, cand_probs: np.ndarray | None = None) -> np.ndarray:
         """SEAL's selection score ``[N]``: mean over the K roll-outs of predicted ``f_coll + f_diff`` (in [0, 2];
         higher = more critical), or of one head alone (``heads``, a key of `RANK_HEADS`). Other arguments as in
         `predict`."""
         if heads not in RANK_HEADS:
             raise ValueError(f"objective heads must be one of {', '.join(RANK_HEADS)}, got {heads!r}")
-        pred = self.predict(cand_xy, cand_heading, ego_xy, ego_heading, ego_valid, adv_xy, adv_valid)
+        pred = self.predict(cand_xy, cand_heading, ego_xy, ego_heading, ego_valid, adv_xy, adv_valid, cand_probs)
         return pred[..., list(RANK_HEADS[heads])].sum(axis=-1).mean(axis=0)
 
     # ------------------------------------------------------------------------------------------------------ I/O

@@ -4,7 +4,8 @@ A small polyline encoder in the spirit of VectorNet's sub-graph: a per-step MLP,
 time (local motion context: braking, closing in), a second per-step layer that sees the max-pooled polyline
 feature next to its own, then masked max + mean pooling over the valid steps and an MLP head with a sigmoid. The
 head also sees explicit per-pair scalars: the maxima of the raw features over the valid steps and the raw
-features at the step of closest approach (its time, relative position and velocity there).
+features at the step of closest approach (its time, relative position and velocity there), and with
+``candidate_prior`` the candidate's prior probability relative to the scenario's other candidates.
 Both outputs are corrections in logit space of closeness ``exp(-min_t d / 8)`` (see `ObjectiveNet.forward`).
 No normalisation layer couples the pairs of a batch, so a pair's output does not depend on its batch-mates.
 """
@@ -23,6 +24,7 @@ from seal.core.scenario import N_FUTURE
 from seal.models.objective.features import (
     EGO_FEATURE_NAMES,
     FEATURE_NAMES,
+    N_CAND_PRIOR_FEATURES,
     N_EGO_FEATURES,
     N_FEATURES,
     N_PREV_ADV_FEATURES,
@@ -59,6 +61,9 @@ class ObjectiveConfig:
             one roll-out's candidates to the pair network.
         prev_adversary: the per-step features also describe the previous roll-out's adversary
             (`seal.models.objective.features.prev_adversary_features`): inference then needs its track.
+        candidate_prior: the head also sees the candidate's prior probability relative to the scenario's other
+            candidates (`seal.models.objective.features.candidate_prior_features`): inference then needs the
+            candidates' probabilities.
     """
 
     n_steps: int = N_FUTURE
@@ -70,11 +75,17 @@ class ObjectiveConfig:
     zero_init: bool = False
     ego_branch: bool = False
     prev_adversary: bool = False
+    candidate_prior: bool = False
 
     @property
     def n_inputs(self) -> int:
         """Per-step input features of the pair network."""
         return N_FEATURES + (N_PREV_ADV_FEATURES if self.prev_adversary else 0)
+
+    @property
+    def n_pair_scalars(self) -> int:
+        """Per-pair scalar inputs of the head besides the pooled features (the candidate's prior features)."""
+        return N_CAND_PRIOR_FEATURES if self.candidate_prior else 0
 
     def __post_init__(self) -> None:
         for name in ("n_steps", "stride", "hidden", "kernel"):
@@ -169,7 +180,8 @@ class ObjectiveNet(nn.Module):
         self.mix = nn.Sequential(nn.Linear(2 * h, h), nn.ReLU())
         # The head also sees the per-pair maxima of the raw features (e.g. the largest closeness = the closest
         # approach): a direct path for what f_coll is made of, which the deep path then corrects.
-        self.head = nn.Sequential(nn.Dropout(config.dropout), nn.Linear(2 * h + 2 * n_in, h), nn.ReLU(),
+        n_head_in = 2 * h + 2 * n_in + config.n_pair_scalars
+        self.head = nn.Sequential(nn.Dropout(config.dropout), nn.Linear(n_head_in, h), nn.ReLU(),
                                   nn.Dropout(config.dropout), nn.Linear(h, N_OUTPUTS))
         if config.zero_init:
             last = self.head[-1]
@@ -180,20 +192,23 @@ class ObjectiveNet(nn.Module):
         # Learned weight of the closeness logit in each output (starts at 1 = "no reaction" for f_coll).
         self.close_gain = nn.Parameter(torch.tensor([1.0, 1.0 if config.diff_on_closeness else 0.0]))
 
-    def forward(self, feats: torch.Tensor, valid: torch.Tensor, closest: torch.Tensor) -> torch.Tensor:
-        correction, prior = self.parts(feats, valid, closest)
+    def forward(self, feats: torch.Tensor, valid: torch.Tensor, closest: torch.Tensor,
+                scalars: torch.Tensor | None = None) -> torch.Tensor:
+        correction, prior = self.parts(feats, valid, closest, scalars)
         return correction + prior
 
-    def parts(self, feats: torch.Tensor, valid: torch.Tensor, closest: torch.Tensor
-              ) -> tuple[torch.Tensor, torch.Tensor]:
-        """The logits ``[B, 2]`` split into the learned correction and the weighted closeness logit."""
+    def parts(self, feats: torch.Tensor, valid: torch.Tensor, closest: torch.Tensor,
+              scalars: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """The logits ``[B, 2]`` split into the learned correction and the weighted closeness logit; ``scalars
+        [B, config.n_pair_scalars]``: the per-pair scalar inputs (None when the config has none)."""
         h = self.step(feats)
         h = h + torch.relu(self.conv(h.transpose(1, 2)).transpose(1, 2))
         g, _ = _masked_pool(h, valid)
         h = self.mix(torch.cat([h, g[:, None].expand_as(h)], dim=-1))
         mx, mean = _masked_pool(h, valid)
         raw, _ = _masked_pool(feats, valid)
-        out = self.head(torch.cat([mx, mean, raw, closest], dim=-1))
+        head_in = [mx, mean, raw, closest] + ([] if scalars is None else [scalars])
+        out = self.head(torch.cat(head_in, dim=-1))
         # Both heads are corrections (in logit space) of the closest approach to the previous roll-out,
         # exp(-min_t d / 8): exactly f_coll when the ego does not react, which most candidates do not provoke; and
         # a candidate that passes close is the one that makes the ego change its behaviour (f_diff).
@@ -204,26 +219,28 @@ class ObjectiveNet(nn.Module):
     def score_pairs(
         self, cand_xy: torch.Tensor, cand_heading: torch.Tensor, ego_xy: torch.Tensor, ego_heading: torch.Tensor,
         ego_valid: torch.Tensor, with_correction: Literal[False] = False, adv_xy: torch.Tensor | None = None,
-        adv_valid: torch.Tensor | None = None,
+        adv_valid: torch.Tensor | None = None, cand_prior: torch.Tensor | None = None,
     ) -> torch.Tensor: ...
 
     @overload
     def score_pairs(
         self, cand_xy: torch.Tensor, cand_heading: torch.Tensor, ego_xy: torch.Tensor, ego_heading: torch.Tensor,
         ego_valid: torch.Tensor, with_correction: Literal[True], adv_xy: torch.Tensor | None = None,
-        adv_valid: torch.Tensor | None = None,
+        adv_valid: torch.Tensor | None = None, cand_prior: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]: ...
 
     def score_pairs(
         self, cand_xy: torch.Tensor, cand_heading: torch.Tensor, ego_xy: torch.Tensor, ego_heading: torch.Tensor,
         ego_valid: torch.Tensor, with_correction: bool = False, adv_xy: torch.Tensor | None = None,
-        adv_valid: torch.Tensor | None = None,
+        adv_valid: torch.Tensor | None = None, cand_prior: torch.Tensor | None = None,
     ) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
         """Predicted ``[f_coll, f_diff]`` ``[..., 2]`` for pairs given as tracks (shapes as in
         `seal.models.objective.features.pair_features`; leading axes broadcast); with ``with_correction`` also the
         learned logit corrections ``[..., 2]`` (for training's penalty on them). ``adv_xy [..., T, 2]`` /
         ``adv_valid [..., T]``: the previous roll-outs' adversary (shaped like the ego's), needed by a network with
-        ``config.prev_adversary`` and ignored by one without."""
+        ``config.prev_adversary`` and ignored by one without. ``cand_prior [..., N_CAND_PRIOR_FEATURES]``: the
+        candidates' `seal.models.objective.features.candidate_prior_features` (leading axes broadcast like the
+        tracks'), needed by a network with ``config.candidate_prior`` and ignored by one without."""
         feats = pair_features(cand_xy, cand_heading, ego_xy, ego_heading, ego_valid)
         if self.config.prev_adversary:
             if adv_xy is None or adv_valid is None:
@@ -236,7 +253,13 @@ class ObjectiveNet(nn.Module):
         closest = closest_step(feats)
         feats = stride_pool(feats, self.config.stride)
         valid = feats[..., VALID_FEATURE] > 0.5
-        correction, prior = self.parts(feats, valid, closest)
+        scalars = None
+        if self.config.candidate_prior:
+            if cand_prior is None:
+                raise ValueError("objective: this model ranks with the candidates' prior probabilities "
+                                 "(candidate_prior); pass their probabilities")
+            scalars = cand_prior.expand(*lead, cand_prior.shape[-1]).reshape(-1, cand_prior.shape[-1])
+        correction, prior = self.parts(feats, valid, closest, scalars)
         correction = correction.reshape(*lead, N_OUTPUTS)
         if self.ego_branch is not None:
             correction = correction + self._ego_offset(ego_xy, ego_heading, ego_valid).expand_as(correction)

@@ -32,6 +32,7 @@ import numpy as np
 import torch
 
 from seal.core.config import check_keys
+from seal.models.objective.features import candidate_prior_features
 from seal.models.objective.labels import LOGGED_ROW, LabelSet
 from seal.models.objective.losses import listnet_loss, pairwise_loss, pearson_rank_loss
 from seal.models.objective.metrics import spearman
@@ -155,6 +156,7 @@ class PairTensors:
         self.ego_valid = torch.as_tensor(labels.ego_valid, dtype=torch.bool)
         self.adv_xy = torch.as_tensor(labels.adv_xy, dtype=torch.float32)
         self.adv_valid = torch.as_tensor(labels.adv_valid, dtype=torch.bool)
+        self.cand_prior = candidate_prior_features(torch.as_tensor(labels.probs, dtype=torch.float64)).float()
         self.f_coll = torch.as_tensor(labels.f_coll, dtype=torch.float32)
         self.f_diff = torch.as_tensor(labels.f_diff, dtype=torch.float32)
         self.n_prev = labels.ego_xy.shape[1]
@@ -192,7 +194,8 @@ class PairTensors:
             cand_xy, ego_xy, adv_xy = cand_xy * mirror, ego_xy * mirror, adv_xy * mirror
             cand_h, ego_h = cand_h * sign[:, None], ego_h * sign[:, None]
         pred, correction = net.score_pairs(cand_xy, cand_h, ego_xy, ego_h, self.ego_valid[s, i], with_correction=True,
-                                           adv_xy=adv_xy, adv_valid=self.adv_valid[s, i])
+                                           adv_xy=adv_xy, adv_valid=self.adv_valid[s, i],
+                                           cand_prior=self.cand_prior[s, j])
         target = torch.stack([self.f_coll[s, j], self.f_diff[s, i, j]], dim=-1)
         self.last_correction = correction
         return pred, target
