@@ -10,6 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from seal.adversaries.cat.select import cat_select
+from seal.core.scenario import CURRENT_STEP
 from seal.experiments.fitting.objective_report import K_PREV
 from seal.models.objective.labels import LOGGED_ROW, LabelSet
 from seal.models.objective.metrics import near_tie_share, ranking_report, spearman
@@ -47,6 +49,23 @@ def closeness(labels: LabelSet, prev: np.ndarray) -> np.ndarray:
     ego = labels.ego_xy[s, prev][:, :, None]  # [S, P, 1, T, 2]
     valid = labels.ego_valid[s, prev][:, :, None]
     return f_coll(ego, labels.cand_xy[:, None], valid=valid)
+
+
+def cat_scores(labels: LabelSet, prev: np.ndarray) -> np.ndarray:
+    """``[S, N]`` CAT's score of every candidate (`seal.adversaries.cat.select.cat_select`: prior-weighted first
+    box hit, summed over roll-outs) against the previous roll-out rows ``prev [S, P]`` of each scenario, with the
+    stored vehicle sizes; ``prev`` = the logged row alone gives the labels' own ``cat_score``."""
+    out = np.zeros((labels.n_scenarios, labels.n_candidates))
+    pad = CURRENT_STEP + 1  # cat_select indexes ego roll-outs by scenario step; the labels start after the present
+    for s, rows in enumerate(np.asarray(prev)):
+        k = len(rows)
+        ego_xy = np.concatenate([np.zeros((k, pad, 2)), labels.ego_xy[s, rows]], axis=1)
+        ego_h = np.concatenate([np.zeros((k, pad)), labels.ego_heading[s, rows]], axis=1)
+        ego_v = np.concatenate([np.zeros((k, pad), dtype=bool), labels.ego_valid[s, rows]], axis=1)
+        (ego_l, ego_w), (adv_l, adv_w) = labels.sizes_m[s].astype(np.float64)
+        out[s] = cat_select(labels.cand_xy[s], labels.cand_heading[s], labels.probs[s], adv_size_m=(adv_l, adv_w),
+                            ego_xy=ego_xy, ego_heading=ego_h, ego_valid=ego_v, ego_size_m=(ego_l, ego_w)).scores
+    return out
 
 
 def _prev_rows(labels: LabelSet, seed: int) -> np.ndarray:
@@ -160,6 +179,8 @@ def evaluate(model: Any, labels: LabelSet, seed: int = 0, retest: LabelSet | Non
     scores_k = {
         "pi_score": pred_grid[rows, prev].sum(axis=-1).mean(axis=1),
         "closeness": closeness(labels, prev).mean(axis=1),
+        # CAT's ties among candidates that hit no roll-out are broken by closeness, as for the logged previous one.
+        "cat": cat_scores(labels, prev) + 1e-6 * closeness(labels, prev).mean(axis=1),
         "prior_probability": labels.probs.astype(np.float64),
     }
     report = {

@@ -53,7 +53,7 @@ logger = logging.getLogger(__name__)
 
 N_CANDIDATES = 32
 """Candidates per scenario (pi_gen's mode count)."""
-LABEL_FORMAT = 3
+LABEL_FORMAT = 4
 """Bumped when the label definition changes (invalidates finished chunks)."""
 
 _SOURCE_CACHE: dict[str, Any] = {}
@@ -244,6 +244,8 @@ def label_scenario(scenario: Scenario, source: Callable[[Scenario], Any], n_cand
         f_coll=coll[None].astype(np.float32), f_diff=diff[None].astype(np.float32), crashed=crashed[None, 1:],
         cat_score=np.asarray(sel.scores, dtype=np.float32)[None],
         adv_xy=adv_xy[None].astype(np.float32), adv_valid=adv_v[None],
+        sizes_m=np.array([[[now[scenario.ego_index, LENGTH], now[scenario.ego_index, WIDTH]],
+                           [now[adv, LENGTH], now[adv, WIDTH]]]], dtype=np.float32),
     )
 
 

@@ -92,9 +92,13 @@ def format_summary(r: dict[str, Any]) -> str:
             f"held-out MSE (logged prev): f_coll {r['mse']['logged_prev']['f_coll']:.5f}, f_diff "
             f"{r['mse']['logged_prev']['f_diff']:.5f}; all prev: f_coll {r['mse']['all_prev']['f_coll']:.5f}, f_diff "
             f"{r['mse']['all_prev']['f_diff']:.5f}\n"
-            f"Spearman mean {p['spearman_mean']:.3f} (closeness baseline {c['spearman_mean']:.3f}), top-1 in top-3 "
+            f"Spearman mean {p['spearman_mean']:.3f} (closeness baseline {c['spearman_mean']:.3f}"
+            + (f", CAT {m['cat']['spearman_mean']:.3f}" if "cat" in m else "") + f"), top-1 in top-3 "
             f"{p['top1_in_top3']:.2f} (baseline {c['top1_in_top3']:.2f}); K={K_PREV}: Spearman "
-            f"{r['ranking_k5_prev']['pi_score']['spearman_mean']:.3f}\n"
+            f"{r['ranking_k5_prev']['pi_score']['spearman_mean']:.3f} (closeness "
+            f"{r['ranking_k5_prev']['closeness']['spearman_mean']:.3f}"
+            + (f", CAT {r['ranking_k5_prev']['cat']['spearman_mean']:.3f}" if "cat" in r["ranking_k5_prev"] else "")
+            + ")\n"
             f"rank() {r['rank_latency']['median_ms']} ms median; timings {r['timings']}\n"
             + (f"fit: {r['fit']['diagnosis']}\n" if "diagnosis" in r.get("fit", {}) else "") +
             f"full report: {Path(r['out']) / 'report.md'}")

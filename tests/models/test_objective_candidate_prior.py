@@ -54,6 +54,7 @@ def _labels(rng: np.random.Generator, n_scenarios: int, n_cand: int = 8) -> Labe
         ego_valid=np.ones((n_scenarios, m, T), bool), f_coll=f_coll, f_diff=z((n_scenarios, m, n_cand), np.float32),
         crashed=z((n_scenarios, n_cand), bool), cat_score=z((n_scenarios, n_cand), np.float32),
         adv_xy=ego_xy.astype(np.float32), adv_valid=np.ones((n_scenarios, m, T), bool),
+        sizes_m=np.ones((n_scenarios, 2, 2), np.float32),
     )
 
 

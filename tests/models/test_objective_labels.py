@@ -140,6 +140,27 @@ def test_evaluate_reports_metrics_and_baselines(built) -> None:
     assert set(report["ranking_per_head"]) == {"f_coll", "f_diff"}
 
 
+def test_cat_scores_against_any_previous_rollouts(built) -> None:
+    from seal.experiments.fitting.objective_eval import cat_scores
+
+    labels, _ = built
+    logged = np.full((labels.n_scenarios, 1), LOGGED_ROW)
+    # Against the logged row it is the score stored when the labels were built (from the full logged track).
+    np.testing.assert_allclose(cat_scores(labels, logged), labels.cat_score, rtol=1e-5, atol=1e-7)
+    # Roll-out 1's ego moved 30 m to the side, candidate 0 driven exactly where that ego drove: the candidate hits
+    # that roll-out's ego box from the first sample on and scores only when that roll-out is among the previous ones.
+    ego_xy = labels.ego_xy.copy()
+    ego_xy[0, 1, :, 1] += 30.0
+    cand_xy = labels.cand_xy.copy()
+    cand_xy[0, 0] = ego_xy[0, 1]
+    cand_h = labels.cand_heading.copy()
+    cand_h[0, 0] = labels.ego_heading[0, 1]
+    moved = replace(labels, cand_xy=cand_xy, cand_heading=cand_h, ego_xy=ego_xy)
+    with_row1 = cat_scores(moved, np.array([[LOGGED_ROW, 1]] * labels.n_scenarios))
+    assert with_row1[0, 0] > 0.0
+    assert cat_scores(moved, logged)[0, 0] == 0.0
+
+
 def test_per_head_ranking_scores_each_head_against_its_own_label(built) -> None:
     from seal.experiments.fitting.objective_eval import per_head_ranking
 
@@ -219,7 +240,7 @@ def test_oracle_bounds_by_hand() -> None:
         ego_valid=np.ones((1, 4, t), dtype=bool), f_coll=np.array([[0.1, 0.5, 1.0]], np.float32),
         f_diff=np.array([[[0.9, 0.0, 0.0]] * 4], np.float32), crashed=np.array([[False, False, True]]),
         cat_score=np.zeros((1, 3), np.float32), adv_xy=np.zeros((1, 4, t, 2), np.float32),
-        adv_valid=np.zeros((1, 4, t), dtype=bool),
+        adv_valid=np.zeros((1, 4, t), dtype=bool), sizes_m=np.ones((1, 2, 2), np.float32),
     )
     out = oracle_bounds(np.array([[0.1, 0.5, 0.9]]), labels)
     # Crashes first keeps closeness's order 0 < 1 < 2, uncorrelated with the target's ranks (1.5, 0, 1.5): 0.

@@ -212,6 +212,7 @@ def _synthetic_labels(rng: np.random.Generator, n_scenarios: int, n_cand: int = 
         f_diff=diff.astype(np.float32), crashed=np.zeros((n_scenarios, n_cand), dtype=bool),
         cat_score=np.zeros((n_scenarios, n_cand), np.float32),
         adv_xy=np.zeros((n_scenarios, m, T, 2), np.float32), adv_valid=np.zeros((n_scenarios, m, T), dtype=bool),
+        sizes_m=np.tile(np.float32([[5.0, 2.0]]), (n_scenarios, 2, 1)),
     )
 
 

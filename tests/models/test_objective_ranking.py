@@ -150,7 +150,8 @@ def _labels(ids: list[str]) -> LabelSet:
                     ego_heading=z((s, n + 1, t), np.float32), ego_valid=np.ones((s, n + 1, t), bool),
                     f_coll=np.arange(s * n, dtype=np.float32).reshape(s, n), f_diff=z((s, n + 1, n), np.float32),
                     crashed=z((s, n), bool), cat_score=z((s, n), np.float32),
-                    adv_xy=z((s, n + 1, t, 2), np.float32), adv_valid=z((s, n + 1, t), bool))
+                    adv_xy=z((s, n + 1, t, 2), np.float32), adv_valid=z((s, n + 1, t), bool),
+                    sizes_m=np.ones((s, 2, 2), np.float32))
 
 
 def test_load_label_folder_reads_chunks_as_they_are_and_checks_the_scenarios(tmp_path) -> None:
@@ -183,7 +184,8 @@ def _draw(f_coll: list[list[float]], f_diff_logged: list[list[float]], ids: tupl
                     ego_xy=z((s, n + 1, t, 2), np.float32), ego_heading=z((s, n + 1, t), np.float32),
                     ego_valid=np.ones((s, n + 1, t), bool), f_coll=np.array(f_coll, np.float32), f_diff=f_diff,
                     crashed=z((s, n), bool), cat_score=z((s, n), np.float32),
-                    adv_xy=z((s, n + 1, t, 2), np.float32), adv_valid=z((s, n + 1, t), bool))
+                    adv_xy=z((s, n + 1, t, 2), np.float32), adv_valid=z((s, n + 1, t), bool),
+                    sizes_m=np.ones((s, 2, 2), np.float32))
 
 
 def test_label_retest_compares_two_draws_of_the_labels_and_ranks_the_scores_against_the_second() -> None:

@@ -51,6 +51,8 @@ class LabelSet:
             switch): the previous roll-out's adversary, an input of pi_score (`seal.models.objective.features.
             prev_adversary_features`).
         adv_valid: ``[S, M, T]`` bool, False where the adversary was not on the road.
+        sizes_m: ``[S, 2, 2]`` float32 (length, width) of the ego (row 0) and the adversary (row 1) (m): what CAT's
+            box test needs to score candidates against other previous roll-outs than the logged one.
     """
 
     scenario_ids: np.ndarray
@@ -66,6 +68,7 @@ class LabelSet:
     cat_score: np.ndarray
     adv_xy: np.ndarray
     adv_valid: np.ndarray
+    sizes_m: np.ndarray
 
     def __post_init__(self) -> None:
         s, n, t, _ = np.shape(self.cand_xy)
@@ -74,7 +77,7 @@ class LabelSet:
             "scenario_ids": (s,), "cand_xy": (s, n, t, 2), "cand_heading": (s, n, t), "probs": (s, n),
             "ego_xy": (s, m, t, 2), "ego_heading": (s, m, t), "ego_valid": (s, m, t), "f_coll": (s, n),
             "f_diff": (s, m, n), "crashed": (s, n), "cat_score": (s, n),
-            "adv_xy": (s, m, t, 2), "adv_valid": (s, m, t),
+            "adv_xy": (s, m, t, 2), "adv_valid": (s, m, t), "sizes_m": (s, 2, 2),
         }
         for name, shape in expected.items():
             if np.shape(getattr(self, name)) != shape:
