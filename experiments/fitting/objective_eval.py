@@ -176,11 +176,12 @@ def evaluate(model: Any, labels: LabelSet, seed: int = 0, retest: LabelSet | Non
     prev = _prev_rows(labels, seed)
     rows = np.arange(n_s)[:, None]
     sim_k = labels.f_coll + labels.f_diff[rows, prev].mean(axis=1)
+    close_k = closeness(labels, prev).mean(axis=1)
     scores_k = {
         "pi_score": pred_grid[rows, prev].sum(axis=-1).mean(axis=1),
-        "closeness": closeness(labels, prev).mean(axis=1),
+        "closeness": close_k,
         # CAT's ties among candidates that hit no roll-out are broken by closeness, as for the logged previous one.
-        "cat": cat_scores(labels, prev) + 1e-6 * closeness(labels, prev).mean(axis=1),
+        "cat": cat_scores(labels, prev) + 1e-6 * close_k,
         "prior_probability": labels.probs.astype(np.float64),
     }
     report = {

@@ -229,11 +229,12 @@ def label_scenario(scenario: Scenario, source: Callable[[Scenario], Any], n_cand
     # CAT's score of each candidate against the logged-adversary roll-out (scenario-step indexed ego arrays).
     logged = rollouts[0].ego_track.astype(np.float64)
     now = scenario.tracks[:, CURRENT_STEP]
+    sizes_m = now[[scenario.ego_index, adv]][:, [LENGTH, WIDTH]].astype(np.float64)  # rows: ego, adversary
     sel = cat_select(
         cand_xy, cands.heading[:n_candidates, :n_steps], cands.probs[:n_candidates],
-        adv_size_m=(float(now[adv, LENGTH]), float(now[adv, WIDTH])),
+        adv_size_m=(float(sizes_m[1, 0]), float(sizes_m[1, 1])),
         ego_xy=logged[None, :, [X, Y]], ego_heading=logged[None, :, HEADING], ego_valid=logged[None, :, VALID] > 0.5,
-        ego_size_m=(float(now[scenario.ego_index, LENGTH]), float(now[scenario.ego_index, WIDTH])),
+        ego_size_m=(float(sizes_m[0, 0]), float(sizes_m[0, 1])),
     )
     return LabelSet(
         scenario_ids=np.array([scenario.scenario_id]),
@@ -244,8 +245,7 @@ def label_scenario(scenario: Scenario, source: Callable[[Scenario], Any], n_cand
         f_coll=coll[None].astype(np.float32), f_diff=diff[None].astype(np.float32), crashed=crashed[None, 1:],
         cat_score=np.asarray(sel.scores, dtype=np.float32)[None],
         adv_xy=adv_xy[None].astype(np.float32), adv_valid=adv_v[None],
-        sizes_m=np.array([[[now[scenario.ego_index, LENGTH], now[scenario.ego_index, WIDTH]],
-                           [now[adv, LENGTH], now[adv, WIDTH]]]], dtype=np.float32),
+        sizes_m=sizes_m[None].astype(np.float32),
     )
 
 

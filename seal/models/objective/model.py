@@ -113,7 +113,8 @@ class ObjectiveModel:
             probs = np.asarray(cand_probs, dtype=np.float64)
             if probs.shape != (cx.shape[0],):
                 raise ValueError(f"objective: expected cand_probs [N] = [{cx.shape[0]}], got {probs.shape}")
-            prior = candidate_prior_features(_tensor(probs))[None]
+            if self.config.candidate_prior:  # other models ignore them: no work on SEAL's ranking path
+                prior = candidate_prior_features(_tensor(probs))[None]
         with torch.inference_mode():
             out = self.net.score_pairs(
                 _tensor(cx)[None], _tensor(ch)[None], _tensor(ex)[:, None], _tensor(eh)[:, None],
