@@ -85,14 +85,32 @@ def _reuse(path: Path, params: dict[str, Any], ids: list[str]) -> Demonstrations
     if demos.params == params and list(dict.fromkeys(demos.scenario_ids.tolist())) == ids:
         logger.info(f"demonstrations: reusing {path} ({demos.n_segments} segments, {demos.n_rows} steps)")
         return demos
-    logger.info(f"demonstrations: {path} was built from other scenarios or settings; rebuilding")
+    logger.info(f"demonstrations: {path} was built from other scenarios or settings")
     return None
 
 
-def get_demonstrations(dataset: str | Path, config: Any, folder: Path, progress: bool
+def _find(name: str, params: dict[str, Any], ids: list[str], folder: Path, own: Path | None
+          ) -> tuple[Path, Demonstrations | None]:
+    """A reusable demonstrations file ``name`` in ``folder`` (or else in ``own``), or the path to build it at: in
+    ``folder``, unless a file there was built with other settings for another fit (``own``, the fit's output
+    folder, differs from ``folder``): that file is left as it is and this fit builds its own in ``own``."""
+    path = folder / name
+    demos = _reuse(path, params, ids)
+    if demos is not None or own is None or own.resolve() == folder.resolve() or not path.exists():
+        return path, demos
+    mine = own / name
+    demos = _reuse(mine, params, ids)
+    if demos is None:
+        logger.info(f"demonstrations: {path} is left as it is (another fit's); building {mine}")
+    return mine, demos
+
+
+def get_demonstrations(dataset: str | Path, config: Any, folder: Path, progress: bool, own: Path | None = None
                        ) -> tuple[Demonstrations, list[str]]:
     """All configured sources' demonstrations of ``config.split`` (a `SkillsFitConfig`), merged, and the names of
-    the files reused from ``folder`` (module docstring)."""
+    the files reused (module docstring). Files are reused from or built in ``folder``; a file there that another
+    fit built with other settings is not overwritten when the fit's own folder ``own`` is given: this fit's
+    version is built (or reused) there (`_find`)."""
     from seal.core.dataset import load_split
     from seal.experiments.fitting.skill_rollouts import _params, build_ego_demonstrations
     from seal.models.skills.demonstrations import build_demonstrations
@@ -106,9 +124,7 @@ def get_demonstrations(dataset: str | Path, config: Any, folder: Path, progress:
         if source not in DEMO_SOURCES:
             raise ValueError(f"config key 'sources': unknown source {source!r}; choose from {DEMO_SOURCES}")
         cfg = DemoConfig.from_dict({"seed": config.seed, **config.demos, "source": source}, "config key 'demos'")
-        path = folder / f"demos_{source}.npz"
-        ids = [s.scenario_id for s in scenarios]
-        demos = _reuse(path, cfg.to_dict(), ids)
+        path, demos = _find(f"demos_{source}.npz", cfg.to_dict(), [s.scenario_id for s in scenarios], folder, own)
         if demos is None:
             logger.info(f"demonstrations ({source}): simulating {len(scenarios)} scenarios with {config.workers} "
                         "processes")
@@ -122,9 +138,8 @@ def get_demonstrations(dataset: str | Path, config: Any, folder: Path, progress:
         chosen = scenarios[: ego_cfg.limit] if ego_cfg.limit else scenarios
         cfg = DemoConfig.from_dict({"seed": config.seed, **config.demos, "source": "heuristic"}, "config key 'demos'")
         spec = ego_cfg.source_spec()
-        path = folder / "demos_ego.npz"
         params = _params(ego_cfg.egos, cfg, ego_cfg.adversary, spec, ego_cfg.passes)
-        demos = _reuse(path, params, [s.scenario_id for s in chosen])
+        path, demos = _find("demos_ego.npz", params, [s.scenario_id for s in chosen], folder, own)
         if demos is None:
             logger.info(f"demonstrations (ego roll-outs): {len(chosen)} scenarios x {len(ego_cfg.egos)} egos")
             demos = build_ego_demonstrations(chosen, ego_cfg.egos, path, cfg, ego_cfg.adversary, spec,

@@ -274,7 +274,7 @@ def fit_skills(dataset: str | Path, out: str | Path, config: SkillsFitConfig, de
     reused: list[str] = []
 
     t = time.perf_counter()
-    demos, demos_reused = get_demonstrations(dataset, config, demos_dir, progress)
+    demos, demos_reused = get_demonstrations(dataset, config, demos_dir, progress, own=out)
     timings["demonstrations_s"] = round(time.perf_counter() - t, 1)
     reused += demos_reused
     spec = WindowSpec(**config.windows)

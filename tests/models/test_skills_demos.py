@@ -290,12 +290,17 @@ def test_expert_source_records_clean_actions_while_applying_noisy_ones(highway) 
     assert everyone.n_segments == scenario.n_agents
 
 
-def test_expert_settings_do_not_change_the_identity_of_other_sources() -> None:
-    """Files built before the expert source existed stay reusable: the ``expert_*`` settings are not part of the
-    other sources' parameters."""
-    log = DemoConfig(source="log", expert_share=0.9).to_dict()
+def test_a_source_identity_holds_only_the_settings_it_uses() -> None:
+    """A fit that changes the noisy drivers' settings reuses the log's and the expert's files (and the ``expert_*``
+    settings are not part of the other sources' parameters)."""
+    log = DemoConfig(source="log", expert_share=0.9, distraction_rate_hz=0.0, noise_tau_s=2.0).to_dict()
     assert not any(k.startswith("expert_") for k in log)
+    assert log == DemoConfig(source="log").to_dict() and "distraction_rate_hz" not in log
     assert DemoConfig.from_dict(log) == DemoConfig(source="log")
     assert DemoConfig(source="expert", expert_share=0.9).to_dict()["expert_share"] == 0.9
+    expert = DemoConfig(source="expert", impaired_share=0.0, noise_tau_s=2.0).to_dict()
+    assert "impaired_share" not in expert and expert["noise_tau_s"] == 2.0
+    heuristic = DemoConfig(source="heuristic", distraction_rate_hz=0.0, expert_share=0.9).to_dict()
+    assert heuristic["distraction_rate_hz"] == 0.0 and "expert_share" not in heuristic
     with pytest.raises(ValueError, match="expert_share"):
         DemoConfig(source="expert", expert_share=1.5)

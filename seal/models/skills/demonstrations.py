@@ -136,12 +136,14 @@ class DemoConfig:
                          offroad_tolerance_m=self.offroad_tolerance_m)
 
     def to_dict(self) -> dict[str, Any]:
-        """The settings as plain values; the ``expert_*`` settings only for the ``expert`` source, so the identity
-        of the other sources' files (what `seal.experiments.fitting.skill_data` reuses) does not change with them."""
+        """The settings as plain values, only those the source uses (the ``expert_*`` settings for ``expert``, the
+        noisy drivers' for ``heuristic``): the identity of a source's file (what `seal.experiments.fitting.skill_data`
+        reuses) does not change with settings it ignores."""
         d = asdict(self)
-        if self.source != "expert":
-            for name in _EXPERT_FIELDS:
-                d.pop(name)
+        unused = {"log": (*_EXPERT_FIELDS, *_NOISE_FIELDS, "noise_tau_s"), "expert": _NOISE_FIELDS,
+                  "heuristic": _EXPERT_FIELDS}[self.source]
+        for name in unused:
+            d.pop(name)
         return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
 
     @classmethod
@@ -152,6 +154,9 @@ class DemoConfig:
 
 
 _EXPERT_FIELDS = ("expert_share", "expert_steer_noise", "expert_accel_noise")
+_NOISE_FIELDS = ("steer_noise", "accel_noise", "headway_range_s", "min_gap_range_m", "impaired_share",
+                 "impaired_noise_scale", "reaction_delay_steps", "distraction_rate_hz", "distraction_s")
+"""The noisy heuristic drivers' settings: only the ``heuristic`` source uses them."""
 
 
 def scenario_seed(base_seed: int, scenario_id: str) -> np.random.SeedSequence:
