@@ -65,6 +65,27 @@ def test_decoder_sees_the_previous_action_unless_told_to_ignore_it() -> None:
     assert not torch.allclose(vae.decode(obs, z), vae.decode(changed, z))
 
 
+def test_closed_loop_training_feeds_the_decoder_its_own_previous_action() -> None:
+    torch.manual_seed(0)
+    vae = SkillVAE(VAEConfig(closed_loop_training=True))
+    _randomise(vae, 3, std=0.1)
+    obs, act = torch.randn(3, 10, 100), torch.rand(3, 10, 2) * 2 - 1
+    mu, _ = vae.encode(obs, act)
+    recon = vae.decode_closed_loop(obs, mu)
+    assert torch.equal(recon[:, 0], vae.decode(obs[:, 0], mu))  # the first step sees the logged previous action
+    for t in (1, 5, 9):
+        own = obs[:, t].clone()
+        own[:, 32], own[:, 33], own[:, 34] = recon[:, t - 1, 0], recon[:, t - 1, 0], recon[:, t - 1, 1]
+        assert torch.allclose(recon[:, t], vae.decode(own, mu), atol=1e-6)
+    assert not torch.allclose(recon, vae.decode(obs, mu))  # teacher forcing differs
+    out, mu2, _ = vae(obs, act, sample=False)  # forward (the training loss) decodes closed-loop
+    assert torch.equal(out, recon) and torch.equal(mu2, mu)
+    loss, _ = vae.loss(obs, act)
+    loss.backward()  # through the fed-back actions as well
+    assert all(p.grad is not None for p in vae.decoder.parameters())
+    assert VAEConfig.from_dict({"closed_loop_training": True}).closed_loop_training
+
+
 def test_tiny_vae_reconstructs_a_handful_of_windows() -> None:
     # 12 windows: the action is a per-window constant the observation does not reveal, so only the latent can
     # carry it; a working VAE must bring the error far below predicting the mean.

@@ -18,8 +18,12 @@ import torch
 from torch import nn
 
 from seal.core.config import check_keys
+from seal.envs import observation as ob
 
 _MIN_STD = 1e-3
+OWN_ACTION_SLOTS = ((ob.STEERING, 0), (ob.LAST_ACTION.start, 0), (ob.LAST_ACTION.start + 1, 1))
+"""(observation slot, action index) pairs that hold the agent's own previous action: the applied steering and the
+last action (steering, acceleration) of `seal.envs.observation`."""
 
 
 @dataclass(frozen=True)
@@ -43,6 +47,12 @@ class VAEConfig:
             actions, and the first action of a new skill, continue from the last one (smooth skills, issue 16).
             ``[32, 33, 34]`` hides it (the decoder cannot lean on copying the previous action; skill boundaries
             then jump).
+        closed_loop_training: decode each training window step by step, the decoder seeing its own decoded action
+            of the step before in the previous-action slots (`OWN_ACTION_SLOTS`) from the window's second step on,
+            as it runs in the env (the first step sees the logged previous action, as a new skill sees the last
+            applied one). False: every step sees the logged previous action (teacher forcing); such a decoder
+            learns to copy it, ignores the latent and the state (copycat), and in closed loop keeps whatever it
+            did last: a skill adversary behind a braking car does not brake (issue 16).
     """
 
     obs_dim: int = 100
@@ -53,6 +63,7 @@ class VAEConfig:
     decoder_hidden: tuple[int, ...] = (256, 256)
     beta: float = 0.01
     decoder_ignore: tuple[int, ...] = ()
+    closed_loop_training: bool = False
 
     def __post_init__(self) -> None:
         bad = [i for i in self.decoder_ignore if not 0 <= int(i) < self.obs_dim]
@@ -151,7 +162,24 @@ class SkillVAE(nn.Module):
         posterior mean and log-variance."""
         mu, logvar = self.encode(obs, actions)
         z = mu + torch.randn_like(mu) * torch.exp(0.5 * logvar) if sample else mu
-        return self.decode(obs, z), mu, logvar
+        decoded = self.decode_closed_loop(obs, z) if self.config.closed_loop_training else self.decode(obs, z)
+        return decoded, mu, logvar
+
+    def decode_closed_loop(self, obs: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
+        """Actions ``[B, T, action_dim]`` of windows ``obs [B, T, D]`` decoded step by step, each step after the first
+        seeing the decoded action of the step before in `OWN_ACTION_SLOTS` (gradients flow through it)."""
+        steps: list[torch.Tensor] = []
+        for t in range(obs.shape[1]):
+            o = obs[:, t]
+            if steps:
+                own = torch.zeros_like(o)
+                keep = torch.ones_like(o)
+                for slot, dim in OWN_ACTION_SLOTS:
+                    own[:, slot] = steps[-1][:, dim]
+                    keep[:, slot] = 0.0
+                o = o * keep + own
+            steps.append(self.decode(o, z))
+        return torch.stack(steps, dim=1)
 
     def recon_error(self, recon: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         """Per-window standardised squared error ``[B]``: sum over action dims, mean over steps."""
