@@ -307,6 +307,9 @@ def fit_skills(dataset: str | Path, out: str | Path, config: SkillsFitConfig, de
 
     t = time.perf_counter()
     held_out = _held_out_metrics(vae, priors, demos, rows, z, cond, config, out)
+    from seal.models.skills.braking_probe import braking_report
+
+    held_out["braking_probe"] = braking_report(vae, priors)  # closed loop: does a skill brake for a braking car?
     timings["metrics_s"] = round(time.perf_counter() - t, 1)
     metrics = {
         "dataset": str(dataset), "split": config.split, "out": str(out), "demos_path": str(demos_dir),
@@ -365,6 +368,10 @@ def format_summary(m: dict[str, Any]) -> str:
 
     for name, reach in (m.get("reach") or {}).items():  # absent in reports written before it existed
         lines.append(format_reach(name, reach))
+    if "braking_probe" in m:
+        from seal.models.skills.braking_probe import format_braking
+
+        lines.append(format_braking(m["braking_probe"]))
     e = m["embedding"]
     lines.append(f"embedding: PCA variance {e['explained_variance']}, prior mean distance "
                  f"{e.get('mean_distance_pooled_std')} pooled std; timings {m['timings']}")

@@ -72,6 +72,10 @@ def test_fit_skills_writes_loadable_models_and_metrics(
         cell = reach[f"noise_bound_{bound}"]
         assert -1 <= cell["hardest_braking"]["p10"] <= cell["hardest_braking"]["p90"] <= 1
         assert cell["hardest_braking"]["p50"] <= cell["strongest_throttle"]["p50"]
+    braking = result["braking_probe"]  # closed loop behind a braking car, both priors and the heuristic reference
+    assert set(braking) == {"probe", "noise_scale", "heuristic_driver", "benign_prior", "adversarial_prior"}
+    assert braking["heuristic_driver"]["contact_share"] == 0.0
+    assert 0.0 <= braking["adversarial_prior"]["contact_share"] <= 1.0
 
 
 def test_fit_then_eval_objective_give_the_same_held_out_report(
