@@ -102,7 +102,8 @@ def braking_scenario(probe: BrakingProbe | None = None) -> Scenario:
 def _episode(scenario: Scenario, behavior: AdversaryBehavior, seed: int, leader_actions: np.ndarray) -> Any:
     env = ScenarioEnv([scenario], config={"terminate_on_crash": True}, adversary=behavior)
     env.reset(seed=seed, options={"scenario_id": scenario.scenario_id})
-    t, done, info = CURRENT_STEP, False, {}
+    t, done = CURRENT_STEP, False
+    info: dict[str, Any] = {}
     while not done:
         _, _, terminated, truncated, info = env.step(leader_actions[min(t, len(leader_actions) - 1)])
         t += 1
@@ -130,7 +131,7 @@ def probe_braking(policy: StepPolicy | Policy, probe: BrakingProbe | None = None
         if hasattr(policy, "reset"):  # a skill policy: seeded per episode by the behaviour
             behavior = SkillSwitchBehavior(policy, switch_step=CURRENT_STEP, seed=seed)  # type: ignore[arg-type]
         else:
-            behavior = PolicyBehavior(policy)  # type: ignore[arg-type]
+            behavior = PolicyBehavior(policy)
         roll = _episode(scenario, behavior, seed, leader_actions)
         speed = np.hypot(roll.adv_track[:, 3], roll.adv_track[:, 4])
         lead = np.hypot(roll.ego_track[:, 3], roll.ego_track[:, 4])
