@@ -1,17 +1,17 @@
 """Closed-loop braking probe: does a skill policy brake for a car braking ahead of it?
 
-One hand-built scene (`braking_scenario`): a straight two-lane road; the leader (the scenario's ego, replayed from
-its log) drives at ``speed_mps`` and brakes at ``leader_decel_mps2`` from ``brake_after_s`` after the current step;
-the follower (the adversary) starts ``gap_m`` behind it (bumper to bumper) at the same speed and is driven from the
-current step by the policy under test, from its own observation. A driver of the logged traffic brakes; the clean
-heuristic driver keeps its gap and stops without contact. `probe_braking` reports the follower's mean acceleration
-over the ``window_s`` after the leader starts braking, the share of seeds that end in contact and the speed at which
-the follower runs into the leader.
+One hand-built scene (`braking_scenario`): a straight three-lane road, both cars in the middle lane; the leader
+(the scenario's ego, replayed from its log) drives at ``speed_mps`` and brakes at ``leader_decel_mps2`` from
+``brake_after_s`` after the current step; the follower (the adversary) starts ``gap_m`` behind it (bumper to
+bumper) at the same speed and is driven from the current step by the policy under test, from its own observation.
+The clean heuristic driver keeps its gap and stops without contact. `probe_braking` reports the follower's mean
+acceleration over the ``window_s`` after the leader starts braking, the share of seeds that end in contact and the
+speed at which the follower runs into the leader.
 
-Why it exists (issue 16): the SEAL adversary's collision speed against a braking ego is a realism measure of Table
-6.2, and a skill decoder taught with the logged previous action (teacher forcing) learns to copy it and in closed
-loop does not start braking (`seal.models.skills.vae.VAEConfig.closed_loop_training`). The reach of
-`seal.models.skills.reach` measures a skill's first action only and cannot show this.
+Why it exists (issue 16): the SEAL adversary's collision speed is a realism measure of Table 6.2, and against the
+heuristic ego its fast contacts are an adversary running into a slower ego from behind. The reach of
+`seal.models.skills.reach` measures a skill's first action only and cannot show whether a skill brakes over its
+horizon; this probe runs the skills in closed loop, as the adversary drives them.
 """
 
 from __future__ import annotations
@@ -33,6 +33,8 @@ from seal.models.skills.realnvp import ConditionalRealNVP
 from seal.models.skills.vae import SkillVAE
 
 LANE_WIDTH_M = 4.0
+N_LANES = 3
+"""Lanes of the probe's road (as the generated highways have 3-4); both cars drive in the middle one, at y = 0."""
 CAR_LENGTH_M, CAR_WIDTH_M = 5.0, 2.0
 
 
@@ -85,10 +87,9 @@ def braking_scenario(probe: BrakingProbe | None = None) -> Scenario:
     """The probe's scene (module docstring): agent 0 is the braking leader (the ego), agent 1 the follower."""
     p = probe or BrakingProbe()
     lanes = tuple(
-        LaneSpec(lane_id=f"a:b:{i}", centerline=np.array([[-100.0, i * LANE_WIDTH_M], [900.0, i * LANE_WIDTH_M]]),
-                 width_m=LANE_WIDTH_M, line_types=("continuous" if i == 1 else "striped",
-                                                   "continuous" if i == 0 else "striped"))
-        for i in range(2)
+        LaneSpec(lane_id=f"a:b:{i}", centerline=np.array([[-100.0, y], [900.0, y]]), width_m=LANE_WIDTH_M,
+                 line_types=("continuous" if i == N_LANES - 1 else "striped", "continuous" if i == 0 else "striped"))
+        for i, y in enumerate(LANE_WIDTH_M * (np.arange(N_LANES) - 1))
     )
     road = RoadDescription(layout="polylines", lanes=lanes, params={"probe": "braking"})
     brake_step = CURRENT_STEP + round(p.brake_after_s / DT_S)

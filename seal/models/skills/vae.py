@@ -50,9 +50,13 @@ class VAEConfig:
         closed_loop_training: decode each training window step by step, the decoder seeing its own decoded action
             of the step before in the previous-action slots (`OWN_ACTION_SLOTS`) from the window's second step on,
             as it runs in the env (the first step sees the logged previous action, as a new skill sees the last
-            applied one). False: every step sees the logged previous action (teacher forcing); such a decoder
-            learns to copy it, ignores the latent and the state (copycat), and in closed loop keeps whatever it
-            did last: a skill adversary behind a braking car does not brake (issue 16).
+            applied one). False (default): every step sees the logged previous action (teacher forcing), which a
+            decoder can copy; in closed loop it then keeps whatever it did last (given a zero previous action, the
+            standard fit's decoded acceleration hardly depends on the skill). Measured on the session-60 pool
+            (README, "Skills in closed loop"): the adversarial prior's skills brake behind a braking car in one of
+            two such fits (`seal.models.skills.braking_probe`), the benign prior's in neither; against the heuristic
+            ego SEAL gets more realistic (mean WD 0.143 -> 0.135) with slower contacts (4.40 -> 4.17 m/s), against a
+            TD3 ego less realistic (0.072 -> 0.109) with faster ones (6.52 -> 6.97), so the default stays.
     """
 
     obs_dim: int = 100
