@@ -51,8 +51,9 @@ class VAEConfig:
             of the step before in the previous-action slots (`OWN_ACTION_SLOTS`) from the window's second step on,
             as it runs in the env (the first step sees the logged previous action, as a new skill sees the last
             applied one). False (default): every step sees the logged previous action (teacher forcing), which a
-            decoder can copy; in closed loop it then keeps whatever it did last (given a zero previous action, the
-            standard fit's decoded acceleration hardly depends on the skill). Measured on the session-60 pool
+            decoder can copy, so the skill latent matters little: from a zero previous action on 500 logged states,
+            the std over z ~ N(0, I) of the decoded acceleration is 0.07 m/s^2 on the first step and 0.30 averaged
+            over the 10-step skill, against 0.47 / 0.90 with closed-loop training. Measured on the session-60 pool
             (README, "Skills in closed loop"): the adversarial prior's skills brake behind a braking car in one of
             two such fits (`seal.models.skills.braking_probe`), the benign prior's in neither; against the heuristic
             ego SEAL gets more realistic (mean WD 0.143 -> 0.135) with slower contacts (4.40 -> 4.17 m/s), against a
