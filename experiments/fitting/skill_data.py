@@ -74,6 +74,17 @@ class EgoRolloutConfig:
         return {**asdict(self), "egos": list(self.egos)}
 
 
+def _source_identity(params: dict[str, Any]) -> dict[str, Any]:
+    """A source file's stored settings as `DemoConfig.to_dict` writes them now: files written when every source
+    recorded every setting stay reusable (other parameters, e.g. the ego roll-outs', are returned as they are)."""
+    if params.get("source") not in DEMO_SOURCES:
+        return params
+    try:
+        return DemoConfig.from_dict(params).to_dict()
+    except (TypeError, ValueError):
+        return params
+
+
 def _reuse(path: Path, params: dict[str, Any], ids: list[str]) -> Demonstrations | None:
     if not path.exists():
         return None
@@ -82,7 +93,7 @@ def _reuse(path: Path, params: dict[str, Any], ids: list[str]) -> Demonstrations
     except ValueError as exc:
         logger.info(f"demonstrations: {path} cannot be reused ({exc}); rebuilding")
         return None
-    if demos.params == params and list(dict.fromkeys(demos.scenario_ids.tolist())) == ids:
+    if _source_identity(demos.params) == params and list(dict.fromkeys(demos.scenario_ids.tolist())) == ids:
         logger.info(f"demonstrations: reusing {path} ({demos.n_segments} segments, {demos.n_rows} steps)")
         return demos
     logger.info(f"demonstrations: {path} was built from other scenarios or settings")

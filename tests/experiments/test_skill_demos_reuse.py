@@ -44,3 +44,18 @@ def test_a_shared_file_with_other_settings_is_left_alone(tmp_path: Path) -> None
     assert path == shared / NAME and demos is None
     path, demos = _find(NAME, other.to_dict(), ids, shared, None)
     assert path == shared / NAME and demos is None
+
+
+def test_a_file_that_recorded_every_setting_is_still_reused(tmp_path: Path) -> None:
+    """Before a source's identity held only the settings it uses, every file recorded all of them."""
+    from dataclasses import asdict
+
+    cfg = DemoConfig(source="log", start_step=0, end_step=30)
+    scenario = sf.lane_change_scenario()
+    old_params = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(cfg).items()}
+    assert old_params != cfg.to_dict()
+    Demonstrations.concat([roll_out_demonstrations(scenario, cfg)], old_params).save(tmp_path / NAME)
+    path, demos = _find(NAME, cfg.to_dict(), [scenario.scenario_id], tmp_path, None)
+    assert path == tmp_path / NAME and demos is not None
+    other = DemoConfig(source="log", start_step=0, end_step=20)  # a setting the source uses still tells them apart
+    assert _find(NAME, other.to_dict(), [scenario.scenario_id], tmp_path, None)[1] is None
