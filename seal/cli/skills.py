@@ -46,7 +46,8 @@ def register(tree: CommandTree) -> None:
     p.add_argument("--split", default=None, help="split to learn from (default train)")
     p.add_argument("--limit", type=positive_int("--limit"), default=None, help="use only the first N scenarios")
     p.add_argument("--demos", default=None,
-                   help="folder of the demonstrations files to build or reuse (default OUT)")
+                   help="folder of the demonstrations files to reuse or build (default OUT); a file there that was "
+                        "built with other settings is left as it is and this fit builds its own in OUT")
     p.add_argument("--workers", type=positive_int("--workers"), default=None,
                    help="processes for the demonstrations (default 2)")
     p.set_defaults(func=cmd_fit_skills)
