@@ -101,7 +101,8 @@ def braking_scenario(probe: BrakingProbe | None = None) -> Scenario:
 
 
 def _episode(scenario: Scenario, behavior: AdversaryBehavior, seed: int, leader_actions: np.ndarray) -> Any:
-    env = ScenarioEnv([scenario], config={"terminate_on_crash": True}, adversary=behavior)
+    # The leader stops at the end of its logged route: no arrival, so a follower that closes in later still counts.
+    env = ScenarioEnv([scenario], config={"terminate_on_crash": True, "success_completion": 2.0}, adversary=behavior)
     env.reset(seed=seed, options={"scenario_id": scenario.scenario_id})
     t, done = CURRENT_STEP, False
     info: dict[str, Any] = {}

@@ -54,8 +54,9 @@ class VAEConfig:
             decoder can copy, so the skill latent matters little: from a zero previous action on 500 logged states,
             the std over z ~ N(0, I) of the decoded acceleration is 0.07 m/s^2 on the first step and 0.30 averaged
             over the 10-step skill, against 0.47 / 0.90 with closed-loop training. Measured on the session-60 pool
-            (README, "Skills in closed loop"): the adversarial prior's skills brake behind a braking car in one of
-            two such fits (`seal.models.skills.braking_probe`), the benign prior's in neither; against the heuristic
+            (README, "Skills in closed loop"): the adversarial prior's skills start braking behind a braking car
+            in one of two such fits (`seal.models.skills.braking_probe`; still too late), the benign prior's in
+            neither; against the heuristic
             ego SEAL gets more realistic (mean WD 0.143 -> 0.135) with slower contacts (4.40 -> 4.17 m/s), against a
             TD3 ego less realistic (0.072 -> 0.109) with faster ones (6.52 -> 6.97), so the default stays.
     """
