@@ -41,6 +41,14 @@ def test_a_follower_that_never_brakes_hits_at_the_closing_speed_of_the_kinematic
     assert result["contact_speed_mps"] == pytest.approx(12.6, abs=0.8)
 
 
+def test_a_follower_braking_too_little_still_hits_after_the_leader_has_stopped() -> None:
+    # -1.2 m/s^2 from the start: contact ~5.3 s in, after the leader stopped at the end of its route (no arrival
+    # may end the episode first), at a closing speed of 20 - 1.2 * 5.3 = 13.6 m/s minus the leader's last ~0.
+    result = probe_braking(_Constant(-0.2), BrakingProbe(seeds=1))
+    assert result["contact_share"] == 1.0 and result["accel_mps2"] == pytest.approx(-1.2, abs=0.1)
+    assert 11.0 < result["contact_speed_mps"] < 15.0
+
+
 def test_hard_braking_and_the_heuristic_driver_avoid_contact() -> None:
     hard = probe_braking(_Constant(-1.0), BrakingProbe(seeds=1))
     assert hard["contact_share"] == 0.0 and hard["contact_speed_mps"] == 0.0
