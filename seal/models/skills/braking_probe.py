@@ -23,6 +23,7 @@ import numpy as np
 
 from seal.core.road import LaneSpec, RoadDescription
 from seal.core.scenario import CURRENT_STEP, DT_S, N_STEPS, Scenario
+from seal.core.scenario import speed as track_speed  # 'speed' is a local name below
 from seal.envs.behaviors import AdversaryBehavior, Policy, PolicyBehavior
 from seal.envs.heuristic import HeuristicDriver
 from seal.envs.kinematics import recover_actions
@@ -135,8 +136,7 @@ def probe_braking(policy: StepPolicy | Policy, probe: BrakingProbe | None = None
         else:
             behavior = PolicyBehavior(policy)
         roll = _episode(scenario, behavior, seed, leader_actions)
-        speed = np.hypot(roll.adv_track[:, 3], roll.adv_track[:, 4])
-        lead = np.hypot(roll.ego_track[:, 3], roll.ego_track[:, 4])
+        speed, lead = track_speed(roll.adv_track), track_speed(roll.ego_track)
         end = max(min(k1, roll.last_step), k0 + 1)
         accel.append((speed[end] - speed[k0]) / ((end - k0) * DT_S))
         hit = [step for step, other in roll.ego_crashes if other == scenario.adv_id]

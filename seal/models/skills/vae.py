@@ -56,9 +56,9 @@ class VAEConfig:
             over the 10-step skill, against 0.47 / 0.90 with closed-loop training. Measured on the session-60 pool
             (README, "Skills in closed loop"): the adversarial prior's skills start braking behind a braking car
             in one of two such fits (`seal.models.skills.braking_probe`; still too late), the benign prior's in
-            neither; against the heuristic
-            ego SEAL gets more realistic (mean WD 0.143 -> 0.135) with slower contacts (4.40 -> 4.17 m/s), against a
-            TD3 ego less realistic (0.072 -> 0.109) with faster ones (6.52 -> 6.97), so the default stays.
+            neither; against the heuristic ego SEAL gets more realistic (mean WD 0.143 -> 0.135) with slower
+            contacts (4.40 -> 4.17 m/s), against a TD3 ego less realistic (0.072 -> 0.109) with faster ones (6.52 ->
+            6.97), so the default stays.
     """
 
     obs_dim: int = 100
@@ -174,16 +174,11 @@ class SkillVAE(nn.Module):
     def decode_closed_loop(self, obs: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
         """Actions ``[B, T, action_dim]`` of windows ``obs [B, T, D]`` decoded step by step, each step after the first
         seeing the decoded action of the step before in `OWN_ACTION_SLOTS` (gradients flow through it)."""
-        steps: list[torch.Tensor] = []
-        for t in range(obs.shape[1]):
-            o = obs[:, t]
-            if steps:
-                own = torch.zeros_like(o)
-                keep = torch.ones_like(o)
-                for slot, dim in OWN_ACTION_SLOTS:
-                    own[:, slot] = steps[-1][:, dim]
-                    keep[:, slot] = 0.0
-                o = o * keep + own
+        slots, dims = [slot for slot, _ in OWN_ACTION_SLOTS], [dim for _, dim in OWN_ACTION_SLOTS]
+        steps = [self.decode(obs[:, 0], z)]
+        for t in range(1, obs.shape[1]):
+            o = obs[:, t].clone()
+            o[:, slots] = steps[-1][:, dims]
             steps.append(self.decode(o, z))
         return torch.stack(steps, dim=1)
 
