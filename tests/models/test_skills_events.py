@@ -142,6 +142,27 @@ def test_window_labels_striker_victim_sources_and_near_misses() -> None:
     assert ((both.segment == 3) & (both.label == BENIGN)).sum() == 51
 
 
+
+def test_avoided_only_keeps_the_near_misses_broken_off_and_drops_what_led_to_contact() -> None:
+    # Segment 0 (log): struck near miss at 30, then touched at 38 (within 2H): left out, and its lead-up is not benign.
+    # Segment 1 (log): struck near miss at 30 and no contact: adversarial. Segment 2 (heuristic): struck collision at
+    # 40: left out. Segment 3 (log): struck near miss at 20, a collision only at 55 (more than 2H later): avoided.
+    d = _demos([60, 60, 60, 60], [LOG, LOG, HEURISTIC, LOG],
+               [(0, 30, NEAR_MISS_EVENT, 1), (0, 38, COLLISION_EVENT, 1), (1, 30, NEAR_MISS_EVENT, 1),
+                (2, 40, COLLISION_EVENT, 1), (3, 20, NEAR_MISS_EVENT, 1), (3, 55, COLLISION_EVENT, 1)])
+    spec = WindowSpec(horizon=10, avoided_only=True)
+    w = d.windows(spec)
+    rows = lambda seg, label: (w.row[(w.segment == seg) & (w.label == label)] - d.seg_row[seg]).tolist()  # noqa: E731
+    assert rows(0, ADVERSARIAL) == [] and rows(0, BENIGN) == list(range(10)) + list(range(38, 51))
+    assert rows(1, ADVERSARIAL) == list(range(10, 30)) and rows(1, BENIGN) == list(range(10)) + list(range(30, 51))
+    assert not (w.segment == 2).any()
+    assert rows(3, ADVERSARIAL) == list(range(0, 20)) and rows(3, BENIGN) == list(range(20, 35))
+    # The default rule counts every struck event.
+    every = d.windows(WindowSpec(horizon=10))
+    assert ((every.segment == 2) & (every.label == ADVERSARIAL)).sum() == 20
+    with pytest.raises(ValueError, match="avoided_only needs near_misses"):
+        WindowSpec(avoided_only=True, near_misses=False)
+
 def test_log_demonstrations_reproduce_the_log_and_label_its_rear_end() -> None:
     road = sf.straight_road(2)
     scenario = sf.make_scenario(road, [_constant(0.0, 20.0).astype(np.float32),

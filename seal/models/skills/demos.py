@@ -247,11 +247,19 @@ class WindowSpec:
     ``benign_sources`` (clean driving: by default only the logged traffic's own drivers), else unused (the noisy
     heuristic and the closed-loop adversaries give adversarial windows only).
 
+    With ``avoided_only`` the adversarial events are the struck near misses that the agent got out of: no collision of
+    its segment within ``lead_steps`` after the near miss. Its collisions and the near misses that ended in one are
+    left out, and so are the windows leading to them (neither adversarial nor benign). Why (issue 16): most struck
+    collisions of the heuristic demonstrations are impaired drivers that hardly brake, so skills learned from them
+    close in and do not brake; a driver who forced a near miss and broke it off closes in and then brakes or swerves.
+
     Attributes:
         horizon: window length (steps), the skill horizon (10 = 1 s).
         lead_steps: adversarial windows start at most this many steps before the struck event (None: 2 x horizon,
             the thesis' 2H).
         near_misses: near misses count as events (collisions always do).
+        avoided_only: only the struck near misses not followed by a collision of the agent within ``lead_steps``
+            count (see above); needs ``near_misses``.
         drop_steps: windows ending within this many steps of an out-of-road end are dropped (the demonstrator
             lost the road, not a skill).
         stride: step between window starts (1: every window).
@@ -261,6 +269,7 @@ class WindowSpec:
     horizon: int = 10
     lead_steps: int | None = None
     near_misses: bool = True
+    avoided_only: bool = False
     drop_steps: int = 20
     stride: int = 1
     benign_sources: tuple[str, ...] = ("log",)
@@ -273,6 +282,8 @@ class WindowSpec:
             raise ValueError(f"WindowSpec: lead_steps must be >= 1 or null, got {self.lead_steps}")
         if int(self.drop_steps) < 0:
             raise ValueError(f"WindowSpec: drop_steps must be >= 0, got {self.drop_steps}")
+        if self.avoided_only and not self.near_misses:
+            raise ValueError("WindowSpec: avoided_only needs near_misses (it keeps only avoided near misses)")
         bad = [s for s in self.benign_sources if s not in SOURCES]
         if bad:
             raise ValueError(f"WindowSpec: benign_sources {bad} are not among {SOURCES}")
@@ -322,17 +333,21 @@ def label_windows(demos: Demonstrations, spec: WindowSpec) -> Windows:
     start_step = np.asarray(demos.seg_start_step, dtype=np.int64)[seg] + local
     gap = seg_len[seg] - (local + h)
     adversarial = np.zeros(total, dtype=bool)
+    left_out = np.zeros(total, dtype=bool)  # windows leading to a struck event that `avoided_only` leaves out
     struck = demos.ev_striker & ((demos.ev_kind != NEAR_MISS_EVENT) | spec.near_misses)
+    counted = _avoided_near_misses(demos, spec.lead) if spec.avoided_only else np.ones_like(struck)
     # Per struck event, the windows of its segment: windows are grouped by segment, so a segment's windows are the
     # range first[s] .. first[s] + counts[s].
     for e in np.flatnonzero(struck).tolist():
         s = int(demos.ev_seg[e])
         sl = slice(int(first[s]), int(first[s] + counts[s]))
-        adversarial[sl] |= adversarial_start_mask(start_step[sl], np.full(int(counts[s]), int(demos.ev_step[e])),
-                                                  h, spec.lead)
+        before = adversarial_start_mask(start_step[sl], np.full(int(counts[s]), int(demos.ev_step[e])), h, spec.lead)
+        target = adversarial if counted[e] else left_out
+        target[sl] |= before
+    left_out &= ~adversarial
     dropped = (reason[seg] == OUT_OF_ROAD) & (gap < spec.drop_steps) & ~adversarial
     benign_src = np.isin(np.asarray(demos.seg_source)[seg], [SOURCES.index(n) for n in spec.benign_sources])
-    unused = ~adversarial & ~dropped & ~benign_src
+    unused = ~adversarial & ~dropped & (~benign_src | left_out)
     keep = ~dropped & ~unused
     label = np.where(adversarial, ADVERSARIAL, BENIGN).astype(np.int8)
     return Windows(row=(seg_row[seg] + local)[keep], segment=seg[keep], label=label[keep],
@@ -360,3 +375,17 @@ def split_by_scenario(
     is_val[perm[:n_val]] = True
     val = is_val[np.asarray(seg_scenario)[windows.segment]]
     return windows.subset(~val), windows.subset(val)
+
+
+def _avoided_near_misses(demos: Demonstrations, lead_steps: int) -> np.ndarray:
+    """``[E]`` bool: event ``e`` is a near miss and its segment has no collision in ``(step, step + lead_steps]``."""
+    ev_seg = np.asarray(demos.ev_seg, dtype=np.int64)
+    ev_step = np.asarray(demos.ev_step, dtype=np.int64)
+    is_near = np.asarray(demos.ev_kind) == NEAR_MISS_EVENT
+    # The first collision of the same segment after each event: collisions keyed by (segment, step), sorted.
+    span = int(ev_step.max(initial=0)) + int(lead_steps) + 2
+    coll_key = np.sort(ev_seg[~is_near] * span + ev_step[~is_near])
+    nxt = np.searchsorted(coll_key, ev_seg * span + ev_step, side="right")
+    nxt_key = coll_key[np.minimum(nxt, coll_key.size - 1)] if coll_key.size else np.full(ev_seg.shape, -1)
+    followed = (nxt < coll_key.size) & (nxt_key // span == ev_seg) & (nxt_key % span - ev_step <= int(lead_steps))
+    return is_near & ~followed
